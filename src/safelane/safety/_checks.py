@@ -1,0 +1,91 @@
+"""Input validation and backend selection for the public safety functions.
+
+Every public function names its inputs; a bad one raises ``ValueError`` saying which argument, which value,
+where in the batch and what range was expected — never a NumPy error from deep inside the math.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Iterable, Mapping
+
+import numpy as np
+
+from ._backend import ARRAY, SCALAR
+
+_SCALAR_TYPES = (int, float, bool, np.floating, np.integer, np.bool_)
+
+
+def _is_scalar(value: object) -> bool:
+    return isinstance(value, _SCALAR_TYPES) or (isinstance(value, np.ndarray) and value.ndim == 0)
+
+
+def _describe_bad(name: str, arr: np.ndarray, bad: np.ndarray, what: str) -> ValueError:
+    idx = np.unravel_index(int(np.argmax(bad)), arr.shape) if arr.ndim else ()
+    where = f" at index {tuple(int(i) for i in idx)}" if arr.ndim else ""
+    value = arr[idx] if arr.ndim else arr[()]
+    return ValueError(f"{name} must be {what}; got {value!r}{where}")
+
+
+def prepare(
+    fields: Mapping[str, object],
+    *,
+    nonneg: Iterable[str] = (),
+    bools: Iterable[str] = (),
+    upper: Mapping[str, float] | None = None,
+):
+    """Validate named inputs and pick the backend.
+
+    Returns ``(xp, values, shape)``: ``SCALAR`` with Python floats/bools when every input is a scalar,
+    otherwise ``ARRAY`` with float64/bool arrays and their broadcast ``shape``.
+    """
+    nonneg = frozenset(nonneg)
+    bools = frozenset(bools)
+    upper = upper or {}
+    if all(_is_scalar(v) for v in fields.values()):
+        out: dict[str, object] = {}
+        for name, raw in fields.items():
+            if name in bools:
+                out[name] = bool(raw)
+                continue
+            value = float(raw)
+            if not math.isfinite(value):
+                raise ValueError(f"{name} must be finite; got {value!r}")
+            if name in nonneg and value < 0.0:
+                raise ValueError(f"{name} must be >= 0; got {value!r}")
+            if name in upper and value > upper[name]:
+                raise ValueError(f"{name} must be <= {upper[name]}; got {value!r}")
+            out[name] = value
+        return SCALAR, out, ()
+
+    arrays: dict[str, np.ndarray] = {}
+    for name, raw in fields.items():
+        try:
+            arr = np.asarray(raw, dtype=bool if name in bools else np.float64)
+        except (TypeError, ValueError) as exc:
+            raise ValueError(f"{name} must be numeric array-like; got {raw!r}") from exc
+        if name not in bools:
+            finite = np.isfinite(arr)
+            if not finite.all():
+                raise _describe_bad(name, arr, ~finite, "finite")
+            if name in nonneg and (arr < 0.0).any():
+                raise _describe_bad(name, arr, arr < 0.0, ">= 0")
+            if name in upper and (arr > upper[name]).any():
+                raise _describe_bad(name, arr, arr > upper[name], f"<= {upper[name]}")
+        arrays[name] = arr
+    try:
+        shape = np.broadcast_shapes(*(a.shape for a in arrays.values()))
+    except ValueError as exc:
+        shapes = ", ".join(f"{n}{a.shape}" for n, a in arrays.items())
+        raise ValueError(f"input shapes do not broadcast together: {shapes}") from exc
+    return ARRAY, arrays, shape
+
+
+def finish(xp, shape, value, dtype=np.float64):
+    """Return a backend result as a NumPy scalar (batch shape ``()``) or an array of the batch shape."""
+    if xp is SCALAR:
+        return dtype(value)
+    arr = np.asarray(value, dtype=dtype)
+    if arr.shape != shape:
+        arr = np.broadcast_to(arr, shape).copy()
+    return arr

@@ -1,0 +1,184 @@
+"""Worst-case deceleration propagated down the connected leader chain (paper Eqs. 1–4).
+
+Symbols: ``L_i`` is the i-th leader ahead of the ego in the target lane (``L1`` nearest); ``L1..LN`` are
+connected and promise to brake no harder than ``a_m_d`` unless their own safety requires more;
+``L(N+1)`` is not connected and is assumed to brake at the mechanical limit ``a_x_d``.
+
+Correction to the paper (see ``docs/safety.md``): the first case of Eq. 2 reads
+``z = 3 (v_{i-1} − v_i)² / (2 (p_i − p_{i-1} − p_m)) + a_{x,i,d}``. Setting the gap at the equal-speed instant
+to ``p_m`` gives ``z = (v_{i-1} − v_i)² / (2 D) + a_{x,i,d}`` with ``D = p_i − p_{i-1} − p_m``; the factor 3
+comes from a sign error in the ``z t²/2`` term of Eq. 1 at ``t = (v_{i-1} − v_i)/(z − a_{x,i,d})``. The case is
+also chosen here by where the minimum gap really occurs (a condition on known quantities), not by the
+paper's condition, which involves the unknown ``z``.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..params import Params
+from ._backend import ARRAY, INF, SCALAR
+from ._checks import finish, prepare
+
+
+def min_follow_decel(xp, slack, v_f, v_l, a_l):
+    """Smallest constant deceleration ``z`` keeping a follower ``slack`` metres clear of its margin.
+
+    ``slack = p_l − p_f − p_m`` (> 0), follower speed ``v_f``, leader speed ``v_l``, leader braking at ``a_l``
+    until it stops; both vehicles stop rather than reverse. The gap is smallest either when the speeds
+    become equal while both still move (only possible if ``v_f > v_l``) or when both have stopped:
+
+    * equal speeds while moving: ``z_A = a_l + (v_f − v_l)² / (2 slack)``, which applies exactly when at
+      ``z_A`` the equal-speed time ``2 slack / (v_f − v_l)`` comes before the leader stops, i.e.
+      ``2 slack a_l <= v_l (v_f − v_l)``;
+    * both stopped: ``z_B = v_f² / (2 slack + v_l² / a_l)``.
+
+    Returns ``z`` (``inf`` when ``slack <= 0``).
+    """
+    lead_stop2 = 2.0 * xp.stop_dist(v_l, a_l)  # v_l² / a_l
+    z_b = xp.div(v_f * v_f, 2.0 * slack + lead_stop2, 0.0)
+    dv = v_f - v_l
+    z_a = a_l + xp.div(dv * dv, 2.0 * slack, INF)
+    interior = (dv > 0.0) & (2.0 * slack * a_l <= v_l * dv)
+    return xp.where(slack > 0.0, xp.where(interior, z_a, z_b), INF)
+
+
+@dataclass(frozen=True)
+class ChainResult:
+    """Worst-case decelerations of a leader chain.
+
+    Attributes:
+        decel: ``(..., N+1)`` worst-case deceleration of ``L1..L(N+1)`` (the last is ``a_x_d``).
+        required: ``(..., N)`` minimum deceleration ``z`` that ``L1..LN`` need to stay clear of the vehicle
+            ahead (``inf`` where the gap is already at or below the margin).
+        unsafe: ``(...)`` True where some ``L_i`` cannot be shown to stay clear of ``L(i+1)`` (gap at or
+            below its margin, or ``z > a_x_d``); ``l1_decel`` is then ``a_x_d``.
+        l1_decel: ``(...)`` worst-case deceleration of ``L1`` for the ego's analysis.
+    """
+
+    decel: np.ndarray
+    required: np.ndarray
+    unsafe: np.ndarray
+    l1_decel: np.ndarray
+
+
+def leader_chain(p, v, promise_decel, params: Params, *, human_driven=None) -> ChainResult:
+    """Propagate the worst case from ``L(N+1)`` up to ``L1`` (Eqs. 1–3, corrected).
+
+    Args:
+        p, v: ``(..., N+1)`` positions [m] and speeds [m/s] of ``L1..L(N+1)``, ordered front-last
+            (``p[..., i+1] > p[..., i]`` in normal traffic).
+        promise_decel: ``(..., N)`` promised maximum deceleration ``a_m_d`` of ``L1..LN`` (``<= a_x_d``).
+        params: physical limits.
+        human_driven: optional ``(..., N)`` bool; a connected human-driven ``L_i`` keeps ``p_m_human``
+            (paper footnote 1) to the vehicle ahead instead of ``p_m``.
+
+    ``L_i`` brakes at ``max(a_m_d_i, z_i)``: its promise, or the least it needs (an expected violation).
+    The loop runs over the chain, not the batch: each link depends on the one ahead (a scan).
+    """
+    p = _as_chain("p", p)
+    v = _as_chain("v", v)
+    n_links = p.shape[-1] - 1
+    if p.shape[-1] < 1:
+        raise ValueError(f"p must have at least one vehicle (L(N+1)) on its last axis; got shape {p.shape}")
+    if v.shape != p.shape:
+        raise ValueError(f"v must have the same shape as p {p.shape}; got {v.shape}")
+    promise = _as_chain("promise_decel", promise_decel)
+    if promise.shape[-1] != n_links:
+        raise ValueError(
+            f"promise_decel must have N={n_links} entries on its last axis (one per connected leader); "
+            f"got shape {promise.shape}"
+        )
+    if (v < 0).any():
+        raise ValueError(f"v must be >= 0; got {v[v < 0].flat[0]!r}")
+    if (promise < 0).any() or (promise > params.a_x_d).any():
+        bad = promise[(promise < 0) | (promise > params.a_x_d)].flat[0]
+        raise ValueError(f"promise_decel must lie in [0, a_x_d={params.a_x_d}]; got {bad!r}")
+    if human_driven is None:
+        human = np.zeros(promise.shape, dtype=bool)
+    else:
+        human = np.asarray(human_driven, dtype=bool)
+        if human.shape[-1:] != (n_links,):
+            raise ValueError(f"human_driven must have N={n_links} entries on its last axis; got {human.shape}")
+    try:
+        batch = np.broadcast_shapes(p.shape[:-1], promise.shape[:-1], human.shape[:-1])
+    except ValueError as exc:
+        raise ValueError(
+            f"batch shapes do not broadcast: p{p.shape}, promise_decel{promise.shape}, human_driven{human.shape}"
+        ) from exc
+
+    xp = SCALAR if batch == () else ARRAY
+    if xp is SCALAR:
+        cols = (p.tolist(), v.tolist(), promise.tolist(), human.tolist())
+    else:
+        cols = tuple(np.moveaxis(np.broadcast_to(a, (*batch, a.shape[-1])), -1, 0) for a in (p, v, promise, human))
+    with np.errstate(all="ignore"):
+        decel, required, unsafe = _propagate(xp, *cols, params, n_links)
+    l1 = xp.where(unsafe, params.a_x_d, decel[0])
+    stack = (lambda xs: np.asarray(xs, dtype=np.float64)) if xp is SCALAR else (lambda xs: np.stack(xs, -1))
+    required_arr = stack(required) if n_links else np.zeros((*batch, 0))
+    return ChainResult(
+        decel=stack(decel),
+        required=required_arr,
+        unsafe=finish(xp, batch, unsafe, np.bool_),
+        l1_decel=finish(xp, batch, l1),
+    )
+
+
+def _propagate(xp, p, v, promise, human, params: Params, n_links: int):
+    decel = [params.a_x_d]  # L(N+1), not connected: mechanical worst case
+    required = []
+    unsafe = False
+    a_ahead = params.a_x_d
+    for i in range(n_links - 1, -1, -1):
+        margin = xp.where(human[i], params.p_m_human, params.p_m)
+        slack = p[i + 1] - p[i] - margin
+        z = min_follow_decel(xp, slack, v[i], v[i + 1], a_ahead)
+        unsafe = unsafe | (z > params.a_x_d)
+        a_ahead = xp.minimum(xp.maximum(promise[i], z), params.a_x_d)
+        decel.insert(0, a_ahead)
+        required.insert(0, z)
+    return decel, required, unsafe
+
+
+def worst_case_leader_decel(p, v, promise_decel, params: Params, *, human_driven=None):
+    """Worst-case deceleration of ``L1`` (paper Eqs. 1–3, corrected). See :func:`leader_chain`.
+
+    Returns ``(...)`` float64; ``a_x_d`` when ``N = 0`` or when a collision ahead cannot be ruled out.
+    """
+    return leader_chain(p, v, promise_decel, params, human_driven=human_driven).l1_decel
+
+
+def leader_position(p, v, decel, t, params: Params):
+    """Position of a leader braking at ``decel`` from ``(p, v)`` after ``t`` seconds, stopping at rest (Eq. 4).
+
+    All arguments broadcast; ``decel`` in ``[0, a_x_d]``, ``v >= 0``, ``t >= 0``.
+    """
+    xp, a, shape = prepare(
+        {"p": p, "v": v, "decel": decel, "t": t},
+        nonneg=("v", "decel", "t"),
+        upper={"decel": params.a_x_d},
+    )
+    with np.errstate(all="ignore"):
+        out = braked_position(xp, a["p"], a["v"], a["decel"], a["t"])
+    return finish(xp, shape, out)
+
+
+def braked_position(xp, p, v, decel, t):
+    """Unchecked core of :func:`leader_position` (backend-generic)."""
+    tt = xp.minimum(t, xp.stop_time(v, decel))
+    return p + v * tt - 0.5 * decel * tt * tt
+
+
+def _as_chain(name: str, value) -> np.ndarray:
+    try:
+        arr = np.asarray(value, dtype=np.float64)
+    except (TypeError, ValueError) as exc:
+        raise ValueError(f"{name} must be a numeric array; got {value!r}") from exc
+    if arr.ndim == 0:
+        raise ValueError(f"{name} must have a vehicle axis (last axis); got a scalar")
+    if not np.isfinite(arr).all():
+        raise ValueError(f"{name} must be finite; got {arr[~np.isfinite(arr)].flat[0]!r}")
+    return arr

@@ -1,0 +1,156 @@
+"""Longitudinal evasion behind the worst-case braking leader ``L1`` (paper Eqs. 6–8, Figure 3).
+
+Over the lateral evasion time ``[0, T]`` (``T = t_y_f``) the ego must keep ``p_1(t) − p(t) >= p_m`` while
+staying as far ahead as possible (the follower is behind it). The profile has three phases: accelerate
+at ``a_x_a`` on ``[0, t_x1]``; brake at ``a_x_d`` until either its speed meets ``L1``'s while ``L1`` still
+moves (then it *follows* ``L1``, braking at ``a_x_1_d`` at a constant gap) or it stops; ``t_x2`` ends the
+braking phase. The gap is concave while the ego accelerates and non-increasing while it brakes faster
+than ``L1``, so its minimum over ``[0, T]`` is at ``0``, ``t_x1``, ``min(t_x2, T)`` or ``T`` — all checked.
+
+``t_x1`` is the largest switch time whose minimum gap is ``>= 0``; the minimum gap is non-increasing in
+``t_x1``, so this is well defined. The candidates are the closed forms of Eq. 7 — one per place the
+binding gap can be (Figure 3):
+
+* case (a), still braking at ``T``: ``t_x1 = T − sqrt(T² − (a_x_d T² + 2R)/(a_x_a + a_x_d))`` with
+  ``R = p_1(T) − p_m − p − v T`` (the paper's first case, correct);
+* case (b), ego stops after ``L1`` has: ``t_x1 = −v/a_x_a + sqrt((v/a_x_a)² − (v² + 2 a_x_d (p + p_m −
+  p_1^stop))/((a_x_a + a_x_d) a_x_a))`` (the paper's second case, correct);
+* cases (c)/(d), speed matched with moving ``L1``: ``t_x1 = (−w + sqrt(w² − 2 k C_2))/k``, ``w = v − v_1``,
+  ``k = a_x_a + a_x_1_d`` (the paper prints this formula twice; it is the same for both cases because the gap
+  is frozen from ``t_x2`` on whether or not ``L1`` stops before ``T``).
+
+The paper selects the case by conditions that involve the unknown ``t_x1`` (and mixes ``t_y_f`` with
+``t_x1``); here each candidate is clipped to ``[0, T]``, its minimum gap evaluated exactly, and the largest
+feasible one kept — which by monotonicity is the exact optimum. ``T`` itself (accelerate throughout) is a
+candidate too, and full braking from ``t = 0`` (``t_x1 = 0``) failing means no evasion exists.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..params import Params
+from ._backend import INF
+from ._checks import finish, prepare
+from .chain import braked_position
+
+#: Gaps within this many metres of the margin count as satisfied (float round-off of the closed forms).
+FEASIBILITY_TOL_M = 1e-9
+
+
+def profile(xp, u, p, v, p1, v1, a1, prm: Params):
+    """Switch state of the profile with acceleration phase ``[0, u]``: ``(V, t2, match)``."""
+    a_d = prm.a_x_d
+    V = v + prm.a_x_a * u
+    l1_stop = xp.stop_time(v1, a1)
+    rel = V - xp.maximum(v1 - a1 * u, 0.0)  # ego minus L1 speed at u
+    m = a_d - a1
+    t_match = u + xp.where(rel == 0.0, 0.0, xp.div(rel, m, INF))
+    match = (rel >= 0.0) & (t_match <= l1_stop)
+    t2 = xp.where(match, t_match, u + V / a_d)
+    return V, t2, match
+
+
+def ego_position(xp, t, p, v, u, V, t2, match, p1, v1, a1, prm: Params):
+    """Ego position on the evasion profile at ``t`` (exact; valid for any ``t >= 0``)."""
+    ta = xp.minimum(t, u)
+    pos = p + v * ta + 0.5 * prm.a_x_a * ta * ta
+    tb = xp.maximum(xp.minimum(t, t2) - u, 0.0)
+    pos = pos + V * tb - 0.5 * prm.a_x_d * tb * tb
+    t_late = xp.maximum(t, t2)
+    follow = braked_position(xp, p1, v1, a1, t_late) - braked_position(xp, p1, v1, a1, t2)
+    return pos + xp.where(match, follow, 0.0)
+
+
+def ego_speed(xp, t, v, u, V, t2, match, v1, a1, prm: Params):
+    """Ego speed on the evasion profile at ``t``."""
+    ta = xp.minimum(t, u)
+    tb = xp.maximum(xp.minimum(t, t2) - u, 0.0)
+    own = v + prm.a_x_a * ta - prm.a_x_d * tb
+    l1_speed = xp.maximum(v1 - a1 * t, 0.0)
+    return xp.where(match & (t > t2), l1_speed, xp.maximum(own, 0.0))
+
+
+def leader_gap_min(xp, u, T, d0, p, v, p1, v1, a1, margin, prm: Params):
+    """Minimum over ``[0, T]`` of ``p_1(t) − p(t) − margin`` for switch time ``u`` (exact)."""
+    V, t2, match = profile(xp, u, p, v, p1, v1, a1, prm)
+    gmin = d0
+    for t in (u, xp.minimum(t2, T), T):
+        gap = braked_position(xp, p1, v1, a1, t) - ego_position(xp, t, p, v, u, V, t2, match, p1, v1, a1, prm)
+        gmin = xp.minimum(gmin, gap - margin)
+    return gmin
+
+
+def longitudinal_core(xp, p, v, p1, v1, a1, T, margin, prm: Params, tol: float = FEASIBILITY_TOL_M):
+    """Backend-generic core. Returns ``(feasible, u, V, t2, match, gap_min)``."""
+    a_a, a_d = prm.a_x_a, prm.a_x_d
+    d0 = p1 - p - margin
+    s = a_a + a_d
+    big_r = braked_position(xp, p1, v1, a1, T) - margin - p - v * T
+    u_a = T - xp.sqrt(T * T - (a_d * T * T + 2.0 * big_r) / s)
+    p1_stop = p1 + xp.stop_dist(v1, a1)
+    u_b = -v / a_a + xp.sqrt((v / a_a) ** 2 - (v * v + 2.0 * a_d * (p + margin - p1_stop)) / (s * a_a))
+    w = v - v1
+    k = a_a + a1
+    u_c = (-w + xp.sqrt(w * w - k * (w * w - 2.0 * (a_d - a1) * d0) / s)) / k
+    best = 0.0 * T
+    best_gap = leader_gap_min(xp, best, T, d0, p, v, p1, v1, a1, margin, prm)
+    feasible = best_gap >= -tol
+    for cand in (u_a, u_b, u_c, T):
+        cand = xp.clip(cand, 0.0, T)
+        g = leader_gap_min(xp, cand, T, d0, p, v, p1, v1, a1, margin, prm)
+        better = (g >= -tol) & (cand >= best)
+        best = xp.where(better, cand, best)
+        best_gap = xp.where(better, g, best_gap)
+    V, t2, match = profile(xp, best, p, v, p1, v1, a1, prm)
+    return feasible, best, V, t2, match, best_gap
+
+
+@dataclass(frozen=True)
+class LongitudinalEvasion:
+    """Result of :func:`longitudinal_evasion` (arrays of the batch shape).
+
+    ``case``: 0 accelerate throughout (``t_x1 = T``); 1–4 the four cases of the paper's Figure 3 —
+    1 still braking at ``T``, 2 stopped before ``T`` (``L1`` stopped first), 3 following ``L1`` which still
+    moves at ``T``, 4 following ``L1`` to a stop before ``T``; −1 infeasible.
+    """
+
+    feasible: np.ndarray
+    t_x1: np.ndarray
+    t_x2: np.ndarray
+    case: np.ndarray
+    min_gap: np.ndarray
+
+
+def longitudinal_evasion(ego_px, ego_vx, l1_p, l1_v, l1_decel, t_y_f, params: Params):
+    """Optimal accelerate–brake–follow evasion profile behind ``L1`` on ``[0, t_y_f]`` (Eqs. 6–8).
+
+    Args (all broadcast): ego position/speed, ``L1`` position/speed and worst-case deceleration
+    (``[0, a_x_d]``), evasion horizon ``t_y_f >= 0``.
+
+    Returns :class:`LongitudinalEvasion`; ``min_gap`` is the smallest ``p_1 − p`` over ``[0, t_y_f]``.
+    """
+    xp, a, shape = prepare(
+        {"ego_px": ego_px, "ego_vx": ego_vx, "l1_p": l1_p, "l1_v": l1_v, "l1_decel": l1_decel, "t_y_f": t_y_f},
+        nonneg=("ego_vx", "l1_v", "l1_decel", "t_y_f"),
+        upper={"l1_decel": params.a_x_d},
+    )
+    p, v, p1, v1, a1, T = (a[k] for k in ("ego_px", "ego_vx", "l1_p", "l1_v", "l1_decel", "t_y_f"))
+    with np.errstate(all="ignore"):
+        feasible, u, _V, t2, match, gap = longitudinal_core(xp, p, v, p1, v1, a1, T, params.p_m, params)
+        l1_stop = xp.stop_time(v1, a1)
+        case = xp.where(
+            u >= T,
+            0,
+            xp.where(t2 >= T, 1, xp.where(match, xp.where(l1_stop >= T, 3, 4), 2)),
+        )
+        case = xp.where(feasible, case, -1)
+    return LongitudinalEvasion(
+        feasible=finish(xp, shape, feasible, np.bool_),
+        t_x1=finish(xp, shape, u),
+        t_x2=finish(xp, shape, xp.minimum(t2, T)),
+        case=finish(xp, shape, case, np.int8),
+        min_gap=finish(xp, shape, gap + params.p_m),
+    )
