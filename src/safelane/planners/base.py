@@ -1,0 +1,82 @@
+"""The nominal-planner interface: ``(observation) -> (a_x, a_y)`` over a batch.
+
+A nominal planner proposes accelerations; the safety supervisor (:mod:`safelane.sim.supervisor`) decides
+whether they are executed. Planners never see the true type of the follower or the worst case; they see
+what the ego senses plus what V2X adds.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Protocol, runtime_checkable
+
+import numpy as np
+
+from ..params import Params
+
+#: Names of the 8 state features of ASP-DAC'23, in order.
+STATE_FEATURES = ("p_x", "p_y", "v_x", "v_y", "p_x_l", "v_x_l", "p_x_f", "v_x_f")
+
+
+@dataclass(frozen=True)
+class Observation:
+    """What the ego knows at a control step; every array has the batch shape ``(B,)`` unless noted.
+
+    Attributes:
+        p_x, p_y, v_x, v_y: ego state (absolute; ``p_y`` from the original lane centre).
+        p_x_l, v_x_l: ``L1`` position and speed (sensed).
+        p_x_f, v_x_f: follower position and speed (sensed).
+        l1_plan: ``(B, H)`` ``L1``'s planned accelerations over the next ``H`` control periods from its V2X
+            message; zeros (constant-speed prediction) when ``L1`` is not connected or the variant ignores it.
+        l1_connected, f_connected: whether that information came over V2X.
+        completed: the lane change has completed (centre across the lane boundary).
+        t: simulation time [s] (scalar).
+    """
+
+    p_x: np.ndarray
+    p_y: np.ndarray
+    v_x: np.ndarray
+    v_y: np.ndarray
+    p_x_l: np.ndarray
+    v_x_l: np.ndarray
+    p_x_f: np.ndarray
+    v_x_f: np.ndarray
+    l1_plan: np.ndarray
+    l1_connected: np.ndarray
+    f_connected: np.ndarray
+    completed: np.ndarray
+    t: float = 0.0
+
+    def state_matrix(self) -> np.ndarray:
+        """The 8 ASP-DAC'23 features ``(B, 8)`` in :data:`STATE_FEATURES` order (absolute values)."""
+        return np.stack([getattr(self, name) for name in STATE_FEATURES], axis=-1)
+
+
+@runtime_checkable
+class NominalPlanner(Protocol):
+    """Anything callable as ``planner(obs, params) -> (a_x, a_y)`` on a batch."""
+
+    def __call__(self, obs: Observation, params: Params) -> tuple[np.ndarray, np.ndarray]: ...
+
+
+@dataclass(frozen=True)
+class ExpertPlanner:
+    """Rule-based teacher/baseline planner.
+
+    Longitudinal: a PD law placing the ego in the middle of the F–L1 gap at L1's speed.
+    Lateral: a critically damped PD law toward the target-lane centre ``y = w_l`` (natural frequency
+    ``omega``), which gives a smooth lane change; both clipped to the mechanical limits.
+    """
+
+    k_p: float = 0.3
+    k_v: float = 0.8
+    omega: float = 0.65
+
+    def __call__(self, obs: Observation, params: Params) -> tuple[np.ndarray, np.ndarray]:
+        mid = 0.5 * (obs.p_x_l + obs.p_x_f)
+        a_x = self.k_p * (mid - obs.p_x) + self.k_v * (obs.v_x_l - obs.v_x)
+        a_y = self.omega**2 * (params.lane_width - obs.p_y) - 2.0 * self.omega * obs.v_y
+        return (
+            np.clip(a_x, -params.a_x_d, params.a_x_a),
+            np.clip(a_y, -params.a_y_m, params.a_y_m),
+        )
