@@ -1,0 +1,20 @@
+"""The ``safelane`` command: one Typer app, one module per subcommand."""
+
+from __future__ import annotations
+
+import typer
+
+app = typer.Typer(
+    name="safelane",
+    help="Safe lane changing for connected autonomous vehicles in mixed traffic.",
+    no_args_is_help=True,
+    add_completion=False,
+)
+
+
+def _register() -> None:
+    # Each subcommand module adds itself to `app`; imports are local so `--help` stays fast.
+    from . import check  # noqa: F401
+
+
+_register()
