@@ -12,6 +12,11 @@ app = typer.Typer(
 )
 
 
+@app.callback()
+def _main() -> None:
+    """Safe lane changing for connected autonomous vehicles in mixed traffic."""
+
+
 def _register() -> None:
     # Each subcommand module adds itself to `app`; imports are local so `--help` stays fast.
     from . import check  # noqa: F401
