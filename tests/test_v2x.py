@@ -355,12 +355,6 @@ def test_chain_arrays_padding_is_neutral():
     _each_row_alone_matches(chain_arrays(scenarios, NOW, PARAMS), scenarios)
 
 
-@pytest.mark.xfail(
-    raises=ValueError,
-    strict=False,
-    reason="safety.chain.leader_chain fails for batch shapes != () with N >= 1: np.stack of the scalar a_x_d "
-    "(L(N+1)'s decel) with (B,) arrays — a bug in chain.py, not in v2x",
-)
 def test_chain_arrays_feed_the_batched_safety_engine():
     scenarios = [connected_platoon(), stale_second_leader(), connected_platoon()[:1], connected_platoon()[:3]]
     batch = chain_arrays(scenarios, NOW, PARAMS)

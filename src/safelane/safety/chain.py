@@ -117,7 +117,10 @@ def leader_chain(p, v, promise_decel, params: Params, *, human_driven=None) -> C
     with np.errstate(all="ignore"):
         decel, required, unsafe = _propagate(xp, *cols, params, n_links)
     l1 = xp.where(unsafe, params.a_x_d, decel[0])
-    stack = (lambda xs: np.asarray(xs, dtype=np.float64)) if xp is SCALAR else (lambda xs: np.stack(xs, -1))
+    if xp is SCALAR:
+        stack = lambda xs: np.asarray(xs, dtype=np.float64)  # noqa: E731
+    else:
+        stack = lambda xs: np.stack(np.broadcast_arrays(*xs), -1)  # noqa: E731
     required_arr = stack(required) if n_links else np.zeros((*batch, 0))
     return ChainResult(
         decel=stack(decel),
