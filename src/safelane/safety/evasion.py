@@ -15,6 +15,7 @@ every admissible profile does.
 
 from __future__ import annotations
 
+import dataclasses
 import enum
 from dataclasses import dataclass
 
@@ -110,6 +111,20 @@ class EvasionPlan:
             lat = (self.t_y_switch, self.y_acc_1, self.y_acc_2, self.t_y_end)
             py, vy = lateral_state(ARRAY, t, self.ego_py, self.ego_vy, *lat)
         return px, py, vx, vy
+
+    def where(self, mask, other: EvasionPlan) -> EvasionPlan:
+        """Element-wise choice: this plan where ``mask`` is True, ``other`` elsewhere."""
+        chosen = {
+            f.name: np.where(mask, getattr(self, f.name), getattr(other, f.name))
+            for f in dataclasses.fields(self)
+            if f.name != "params"
+        }
+        return EvasionPlan(**chosen, params=self.params)
+
+    def take(self, idx) -> EvasionPlan:
+        """Rows ``idx`` of a batched plan."""
+        rows = {f.name: getattr(self, f.name)[idx] for f in dataclasses.fields(self) if f.name != "params"}
+        return EvasionPlan(**rows, params=self.params)
 
     def position(self, t):
         """Planned ego ``(p_x, p_y)`` at time ``t``."""
@@ -304,6 +319,13 @@ def plan_evasion(
     )
     with np.errstate(all="ignore"):
         exists, parts = evasion_core(xp, *args, params)
+    return plan_from_core(xp, shape, args, exists, parts, lead_margin, follow_margin, params, chain_unsafe)
+
+
+def plan_from_core(xp, shape, args, exists, parts, lead_margin, follow_margin, params: Params, chain_unsafe=False):
+    """Assemble an :class:`EvasionPlan` from :func:`evasion_core`'s inputs and outputs (used by the simulator,
+    which calls the unchecked core on states it built itself)."""
+    with np.errstate(all="ignore"):
         reason = (
             xp.where(parts["lead_ok"], 0, int(Reason.LEADER_INFEASIBLE))
             + xp.where(parts["lead_ok"], xp.where(parts["follow_ok"], 0, int(Reason.FOLLOWER_TOO_CLOSE)), 0)
