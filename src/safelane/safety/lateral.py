@@ -22,6 +22,9 @@ import numpy as np
 from ..params import Params
 from ._checks import finish, prepare
 
+#: Intrusions up to this many metres beyond ``y_s`` count as none (round-off of the exact return profile).
+LATERAL_TOL_M = 1e-9
+
 
 def lateral_core(xp, p_y, v_y, params: Params):
     """Backend-generic core: returns ``(t_y_f, t_1, acc_1, acc_2, t_end)``.
@@ -32,7 +35,8 @@ def lateral_core(xp, p_y, v_y, params: Params):
     a = params.a_y_m
     e = p_y - params.y_safe
     s = e + v_y * abs(v_y) / (2.0 * a)
-    nothing = (e <= 0.0) & ((v_y <= 0.0) | (s <= 0.0))
+    # Within LATERAL_TOL_M of the line counts as back: the return profile lands on y_s up to round-off.
+    nothing = (e <= LATERAL_TOL_M) & ((v_y <= 0.0) | (s <= LATERAL_TOL_M))
     above = s > 0.0  # disjoint from `nothing`
     r = xp.sqrt(a * e + 0.5 * v_y * v_y)
     t_bb = (v_y + 2.0 * r) / a

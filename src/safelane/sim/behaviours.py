@@ -1,0 +1,123 @@
+"""Behaviour models of the target-lane vehicles (each small, documented and parameterised).
+
+* **L(N+1)** (not connected): constant speed, then sudden braking at ``a_x_N+1_d`` from ``brake_start_s``
+  until it stops.
+* **Connected L_i**: its own driving task is to hold its initial speed (a P law clipped to the promise
+  ``[−a_m_d, a_m_a]``); when the actual state of ``L(i+1)`` needs more to keep its margin, it takes the minimal
+  safe deceleration of Eqs. 2–3 on actual states, assuming ``L(i+1)`` keeps its current deceleration (an
+  *expected* violation). Decisions are resolved front to back within a period (perfect V2X coordination).
+  *Unexpected* violation: with probability ``p_v`` per period, independently per connected vehicle, it brakes
+  at ``U[z_i, a_x_N+1_d]`` for that period (paper §4.2).
+* **Follower F** (see :func:`follower_accel`): collaborative or aggressive, always a *responsible* follower of
+  L1 and — collaborative from the ego's signal at ``t = 0``, aggressive once the lane change completes — of
+  the ego.
+
+A responsible follower picks the largest acceleration ``a <= a_wanted`` such that after one period at ``a`` it
+can still keep its margin by braking at ``a_x_d`` while the vehicle ahead brakes at its worst case
+(RSS's proper response with a one-period response time); if none exists it brakes at ``a_x_d``.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ..params import Params
+from ..safety._backend import ARRAY
+from ..safety.chain import min_follow_decel
+from .kinematics import advance, stop_time
+
+_BISECTION_STEPS = 12
+
+
+def pair_min_gap(slack, v_f, a_f, v_l, a_l, dt):
+    """Exact minimum over ``[0, dt]`` of ``x_l − x_f − margin`` for two constant-acceleration motions with
+    stopping, given the initial ``slack = x_l − x_f − margin``."""
+    ts_f, ts_l = stop_time(v_f, a_f, dt), stop_time(v_l, a_l, dt)
+    dv, da = v_l - v_f, a_f - a_l
+    tau = np.where(da != 0.0, dv / np.where(da != 0.0, da, 1.0), 0.0)
+    best = slack
+    for t in (ts_f, ts_l, np.clip(tau, 0.0, dt), np.full_like(ts_f, dt)):
+        xf, _ = advance(0.0, v_f, a_f, t)
+        xl, _ = advance(slack, v_l, a_l, t)
+        best = np.minimum(best, xl - xf)
+    return best
+
+
+def responsible_ok(a, slack, v_f, v_l, lead_decel, prm: Params):
+    """True where accelerating at ``a`` for one period still lets the follower keep its margin by braking at
+    ``a_x_d`` afterwards, with the vehicle ahead braking at ``lead_decel`` from now on."""
+    dt = prm.dt
+    in_period = pair_min_gap(slack, v_f, a, v_l, -lead_decel, dt) >= 0.0
+    xf, vf = advance(0.0, v_f, a, dt)
+    xl, vl = advance(slack, v_l, -lead_decel, dt)
+    with np.errstate(all="ignore"):
+        z = min_follow_decel(ARRAY, xl - xf, vf, vl, lead_decel)
+    return in_period & (z <= prm.a_x_d)
+
+
+def responsible_accel(a_wanted, slack, v_f, v_l, lead_decel, prm: Params):
+    """Largest ``a`` in ``[−a_x_d, a_wanted]`` passing :func:`responsible_ok` (bisection, conservative side);
+    ``−a_x_d`` when none does."""
+    lo = np.full(np.shape(a_wanted), -prm.a_x_d)
+    hi = np.asarray(a_wanted, dtype=float)
+    ok_hi = responsible_ok(hi, slack, v_f, v_l, lead_decel, prm)
+    for _ in range(_BISECTION_STEPS):
+        mid = 0.5 * (lo + hi)
+        ok = responsible_ok(mid, slack, v_f, v_l, lead_decel, prm)
+        lo = np.where(ok, mid, lo)
+        hi = np.where(ok, hi, mid)
+    return np.where(ok_hi, a_wanted, lo)
+
+
+def leader_accels(x, v, valid, connected, human, promise_decel, promise_accel, v_desired,
+                  n_connected, decel_last, braking, violating, violate_pick, prm: Params):
+    """Accelerations of L1..L(N+1) for this period, ``(B, K)`` with index 0 (F) left at 0.
+
+    ``braking``: (B,) L(N+1) is braking this period. ``violating``: (B, K) bool, an unexpected violation this
+    period; ``violate_pick``: (B, K) uniforms placing its deceleration in ``U[z_i, a_x_N+1_d]``.
+    """
+    bsz, k = x.shape
+    acc = np.zeros((bsz, k))
+    last = n_connected + 1
+    for i in range(k - 1, 0, -1):  # front to back: each link reacts to the one ahead (a scan, not a batch loop)
+        is_last = last == i
+        a_last = np.where(braking, -decel_last, 0.0)
+        if i + 1 < k:
+            margin = np.where(human[:, i], prm.p_m_human, prm.p_m)
+            slack = x[:, i + 1] - x[:, i] - margin
+            ahead_decel = np.maximum(-acc[:, i + 1], 0.0)
+            with np.errstate(all="ignore"):
+                z = min_follow_decel(ARRAY, slack, v[:, i], v[:, i + 1], ahead_decel)
+            z = np.minimum(z, prm.a_x_d)
+        else:
+            z = np.zeros(bsz)
+        task = np.clip(0.5 * (v_desired[:, i] - v[:, i]), -promise_decel[:, i], promise_accel[:, i])
+        a_conn = np.minimum(task, -z)
+        lo, hi = np.minimum(z, decel_last), np.maximum(z, decel_last)
+        a_conn = np.where(violating[:, i], -(lo + violate_pick[:, i] * (hi - lo)), a_conn)
+        acc[:, i] = np.where(is_last, a_last, np.where(connected[:, i] & valid[:, i] & (i <= n_connected), a_conn, 0.0))
+    return acc
+
+
+def follower_accel(f_x, f_v, l1_x, l1_v, ego_x, ego_vx, aggressive, completed, gap0, prm: Params,
+                   open_decel: float, open_gap_m: float):
+    """Follower acceleration for this period.
+
+    * collaborative: once the ego signals (``t = 0``) it opens the gap a little — brakes at ``open_decel``
+      until the gap to the ego has grown by ``open_gap_m``, then matches the ego's speed — and follows the
+      ego responsibly (brakes as needed, up to ``a_x_d``) whenever the ego is ahead of it;
+    * aggressive: until the lane change completes, closes the gap to L1 (PD law on the gap to ``p_m``,
+      up to ``a_x_a``), ignoring the ego; afterwards it follows the ego responsibly.
+    Both always follow L1 responsibly (L1's worst case: ``a_x_d``).
+    """
+    gap_ego = ego_x - f_x
+    collab_nominal = np.where(
+        gap_ego < gap0 + open_gap_m, -open_decel, np.clip(ego_vx - f_v, -open_decel, open_decel)
+    )
+    gap_l1 = l1_x - f_x
+    aggr_nominal = np.clip(0.5 * (gap_l1 - prm.p_m - 1.0) + 1.5 * (l1_v - f_v), -prm.a_x_d, prm.a_x_a)
+    wanted = np.where(aggressive, aggr_nominal, collab_nominal)
+    a = responsible_accel(wanted, gap_l1 - prm.p_m, f_v, l1_v, prm.a_x_d, prm)
+    follows_ego = (gap_ego > 0.0) & (~aggressive | completed)
+    a_ego = responsible_accel(a, gap_ego - prm.p_m, f_v, ego_vx, prm.a_x_d, prm)
+    return np.where(follows_ego, a_ego, a)

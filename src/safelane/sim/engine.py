@@ -1,0 +1,350 @@
+"""The batched closed-loop simulator: one state of arrays, a Python loop over time steps only.
+
+``simulate`` runs one experiment cell; ``simulate_batch`` runs any :class:`ScenarioBatch` (a whole grid of
+cells is just a bigger batch). Every period: observe → assess F → worst-case analysis by variant → nominal
+planner → supervisor → other vehicles act → exact integration → continuous-time collision checks.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Literal
+
+import numpy as np
+import pandas as pd
+from pydantic import BaseModel, ConfigDict, Field
+
+from ..params import Params
+from ..planners.base import ExpertPlanner, NominalPlanner, Observation
+from ..planners.variants import VARIANT_NAMES, VARIANTS
+from ..safety._backend import ARRAY
+from ..safety.chain import leader_chain
+from ..safety.evasion import EvasionPlan, evasion_core, plan_from_core
+from ..safety.lateral import LATERAL_TOL_M
+from . import assessment as assess
+from .behaviours import follower_accel, leader_accels, responsible_accel
+from .kinematics import Motion, crossing_knots, gap_extrema, windowed_gap_extrema
+from .rng import counter_normal, counter_uniform
+from .scenario import ScenarioBatch, ScenarioConfig, paper_scenarios
+from .supervisor import ABORT, HESITATE, PROCEED, check_candidate, hesitate_lateral, plan_motion, select_motion
+
+
+class SimConfig(BaseModel):
+    """Settings of a simulation run (not of the scenario distribution)."""
+
+    model_config = ConfigDict(frozen=True, extra="forbid", allow_inf_nan=False)
+
+    horizon_s: float = Field(10.0, gt=0.0, description="Simulated time [s] (our assumption; the paper's is unstated).")
+    brake_start_s: float = Field(0.0, ge=0.0, description="When L(N+1) starts its sudden braking [s] (paper: t = 0).")
+    assessment: Literal["observed", "truth"] = Field(
+        "observed", description="'truth' replaces the aggressiveness assessment by F's true type."
+    )
+    sensor_noise_std: float = Field(0.0, ge=0.0, description="Std of the ego's speed measurements of F, L1 [m/s].")
+    assess_window: int = Field(5, ge=2, description="Observations in the assessment's slope window.")
+    assess_threshold: float = Field(0.2, gt=0.0, description="Relative-acceleration evidence threshold [m/s²].")
+    follower_open_decel: float = Field(0.5, ge=0.0, description="Collaborative F's gap-opening deceleration [m/s²].")
+    follower_open_gap_m: float = Field(3.0, ge=0.0, description="How much a collaborative F opens the gap [m].")
+    l1_plan_steps: int = Field(10, ge=1, description="Periods of L1's planned acceleration shared over V2X.")
+    supervised: bool = Field(True, description="False runs the nominal planner without the safety supervisor.")
+
+
+@dataclass(frozen=True)
+class SimState:
+    """Everything that evolves; arrays have the batch on the leading axis."""
+
+    t: float
+    step: int
+    ego: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]  # x, y, vx, vy
+    x: np.ndarray  # (B, K) target-lane vehicles
+    v: np.ndarray
+    acc: np.ndarray  # accelerations applied in the last period
+    completed: np.ndarray
+    t_complete: np.ndarray
+    plan: EvasionPlan
+    plan_t0: np.ndarray
+    belief: assess.AssessmentState
+    collided: np.ndarray
+    violated: np.ndarray
+    leader_collided: np.ndarray
+    leader_violated: np.ndarray
+    min_gap_f: np.ndarray
+    min_gap_l1: np.ndarray
+    counts: np.ndarray  # (B, 3) proceed / hesitate / abort
+
+
+@dataclass
+class SimResult:
+    """Per-scenario table, optional per-step trace and recorded observations."""
+
+    table: pd.DataFrame
+    trace: pd.DataFrame | None = None
+    observations: list[Observation] = field(default_factory=list)
+
+    def summary(self) -> pd.DataFrame:
+        from .metrics import summarize
+
+        return summarize(self.table)
+
+
+def simulate(planner: str = "CV_all", n_leaders: int = 5, decel: float = 5.0, samples: int = 1000, seed: int = 0,
+             *, p_v: float = 0.0, params: Params | None = None, config: SimConfig | None = None,
+             scenario: ScenarioConfig | None = None, nominal: NominalPlanner | None = None, trace: bool = False,
+             record_observations: bool = False, progress: bool = False) -> SimResult:
+    """Simulate one experiment cell of the paper's sampler.
+
+    Example: ``simulate("CV_all", n_leaders=5, decel=5.0, samples=1000, seed=0).summary()``.
+    """
+    rng = np.random.default_rng(seed)
+    batch = paper_scenarios(planner, n_leaders, decel, samples, rng, scenario, p_v=p_v)
+    return simulate_batch(batch, seed=seed, params=params, config=config, nominal=nominal, trace=trace,
+                          record_observations=record_observations, progress=progress)
+
+
+def simulate_batch(batch: ScenarioBatch, seed: int = 0, *, params: Params | None = None,
+                   config: SimConfig | None = None, nominal: NominalPlanner | None = None, trace: bool = False,
+                   record_observations: bool = False, progress: bool = False, trace_limit: int = 16) -> SimResult:
+    """Run every scenario of ``batch`` in closed loop; see :class:`SimResult`."""
+    prm = params or Params()
+    cfg = config or SimConfig()
+    nominal = nominal or ExpertPlanner()
+    _check_batch(batch, prm)
+    sim = _Sim(batch, seed, prm, cfg, nominal)
+    state = sim.initial_state()
+    n_steps = round(cfg.horizon_s / prm.dt)
+    rows, observations = [], []
+    steps = range(n_steps)
+    if progress:
+        from rich.progress import track
+
+        steps = track(steps, description=f"simulating {len(batch)} scenarios", transient=True)
+    for _ in steps:
+        state, obs, behaviour = sim.step(state)
+        if record_observations:
+            observations.append(obs)
+        if trace:
+            rows.append(sim.trace_rows(state, behaviour, trace_limit))
+    table = sim.table(state)
+    trace_df = pd.concat(rows, ignore_index=True) if trace and rows else None
+    return SimResult(table=table, trace=trace_df, observations=observations)
+
+
+class _Sim:
+    """Holds the constant per-scenario arrays; ``step`` is a pure function of the state."""
+
+    def __init__(self, batch: ScenarioBatch, seed: int, prm: Params, cfg: SimConfig, nominal: NominalPlanner):
+        self.b, self.seed, self.prm, self.cfg, self.nominal = batch, seed, prm, cfg, nominal
+        variants = [VARIANTS[name] for name in VARIANT_NAMES]
+        self.uses_chain = np.array([v.uses_chain for v in variants])[batch.variant]
+        self.uses_f_v2x = np.array([v.uses_follower_v2x for v in variants])[batch.variant]
+        self.uses_assessment = np.array([v.uses_assessment for v in variants])[batch.variant]
+        k = batch.x.shape[1]
+        slots = np.arange(1, k)
+        self.chain_promise = np.where(
+            slots[None, :] <= batch.n_connected[:, None], batch.promise_decel[:, 1:], prm.a_x_d
+        )[:, :-1]
+        self.chain_human = (batch.human[:, 1:] & (slots[None, :] <= batch.n_connected[:, None]))[:, :-1]
+        self.gap0 = batch.ego_x - batch.x[:, 0]
+        self.v_desired = batch.v.copy()
+
+    def initial_state(self) -> SimState:
+        b, prm = self.b, self.prm
+        n = len(b)
+        # The plan held at t = 0: from the initial state under the most conservative assumptions.
+        args = (b.ego_x, b.ego_y, b.ego_vx, b.ego_vy, b.x[:, 1], b.v[:, 1], np.full(n, prm.a_x_d), b.x[:, 0],
+                b.v[:, 0], np.ones(n, bool), prm.p_m, prm.p_m)
+        with np.errstate(all="ignore"):
+            exists, parts = evasion_core(ARRAY, *args, prm)
+        plan = plan_from_core(ARRAY, (n,), args, exists, parts, prm.p_m, prm.p_m, prm)
+        return SimState(
+            t=0.0, step=0, ego=(b.ego_x.copy(), b.ego_y.copy(), b.ego_vx.copy(), b.ego_vy.copy()),
+            x=b.x.copy(), v=b.v.copy(), acc=np.zeros_like(b.x), completed=np.zeros(n, bool),
+            t_complete=np.full(n, np.nan), plan=plan, plan_t0=np.zeros(n),
+            belief=assess.AssessmentState.start(n, self.cfg.assess_window),
+            collided=np.zeros(n, bool), violated=np.zeros(n, bool), leader_collided=np.zeros(n, bool),
+            leader_violated=np.zeros(n, bool), min_gap_f=np.full(n, np.inf), min_gap_l1=np.full(n, np.inf),
+            counts=np.zeros((n, 3), np.int64),
+        )
+
+    def observe(self, s: SimState) -> Observation:
+        b = self.b
+        ex, ey, evx, evy = s.ego
+        l1_plan = np.where(
+            (self.uses_chain & (b.n_connected >= 1))[:, None], s.acc[:, 1:2], 0.0
+        ) * np.ones((1, self.cfg.l1_plan_steps))
+        return Observation(p_x=ex, p_y=ey, v_x=evx, v_y=evy, p_x_l=s.x[:, 1], v_x_l=s.v[:, 1], p_x_f=s.x[:, 0],
+                           v_x_f=s.v[:, 0], l1_plan=l1_plan, l1_connected=b.connected[:, 1],
+                           f_connected=b.connected[:, 0], completed=s.completed, t=s.t)
+
+    def worst_case(self, s: SimState, belief: assess.AssessmentState):
+        """L1's worst-case deceleration and F's assumed type, from the information each variant uses."""
+        b, prm = self.b, self.prm
+        chain = leader_chain(s.x[:, 1:], s.v[:, 1:], self.chain_promise, prm, human_driven=self.chain_human)
+        l1_decel = np.where(self.uses_chain, chain.l1_decel, prm.a_x_d)
+        assessed = b.follower_aggressive if self.cfg.assessment == "truth" else belief.aggressive
+        trusted = self.uses_f_v2x & b.connected[:, 0]
+        f_aggr = np.where(trusted, False, np.where(self.uses_assessment, assessed, True))
+        return l1_decel, f_aggr
+
+    def step(self, s: SimState):
+        b, prm, cfg = self.b, self.prm, self.cfg
+        dt = prm.dt
+        ex, ey, evx, evy = s.ego
+        obs = self.observe(s)
+        noise = cfg.sensor_noise_std * counter_normal(self.seed, b.scenario_id, s.step, 0)
+        belief = assess.update(s.belief, s.v[:, 0] - s.v[:, 1] + noise, s.t, dt, cfg.assess_threshold)
+        l1_decel, f_aggr = self.worst_case(s, belief)
+        a_x, a_y = self.nominal(obs, prm)
+        a_x = np.clip(np.asarray(a_x, float), -prm.a_x_d, prm.a_x_a)
+        a_y = np.clip(np.asarray(a_y, float), -prm.a_y_m, prm.a_y_m)
+        l1x, l1v, fx, fv = s.x[:, 1], s.v[:, 1], s.x[:, 0], s.v[:, 0]
+
+        active = ~s.completed
+        if cfg.supervised:
+            go = check_candidate(ex, ey, evx, evy, a_x, a_y, l1x, l1v, l1_decel, fx, fv, f_aggr, prm)
+            a_yh = hesitate_lateral(evy, prm)
+            wait = check_candidate(ex, ey, evx, evy, a_x, a_yh, l1x, l1v, l1_decel, fx, fv, f_aggr, prm)
+            behaviour = np.where(go.ok, PROCEED, np.where(wait.ok, HESITATE, ABORT))
+        else:
+            go = wait = None
+            behaviour = np.full(len(b), PROCEED)
+        behaviour = np.where(active, behaviour, -1)
+
+        # Post-completion: centre in the target lane, follow L1 responsibly under its worst case.
+        a_x_post = responsible_accel(a_x, l1x - ex - prm.p_m, evx, l1v, l1_decel, prm)
+        a_y_post = np.clip(0.8 * (prm.lane_width - ey) - 1.6 * evy, -prm.a_y_m, prm.a_y_m)
+        ax_cmd = np.where(active, a_x, a_x_post)
+        ay_cmd = np.where(active, np.where(behaviour == HESITATE, hesitate_lateral(evy, prm), a_y), a_y_post)
+        lon = Motion.constant(ex, evx, ax_cmd, dt)
+        lat = Motion.free(ey, evy, ay_cmd, dt)
+        aborting = behaviour == ABORT
+        if aborting.any():
+            age = s.t - s.plan_t0
+            p_lon, p_lat = plan_motion(s.plan, age, dt)
+            lon, lat = select_motion(aborting, p_lon, lon), select_motion(aborting, p_lat, lat)
+
+        acc = self.others_accels(s, ex, evx)
+        others = Motion.constant(s.x, s.v, acc, dt)
+        new = self.check_and_advance(s, lon, lat, others, behaviour, go, wait, acc, belief)
+        return new, obs, behaviour
+
+    def others_accels(self, s: SimState, ex, evx):
+        b, prm, cfg = self.b, self.prm, self.cfg
+        k = s.x.shape[1]
+        slots = np.arange(k)
+        violating = counter_uniform(self.seed, b.scenario_id[:, None], s.step, slots[None, :], 7) < b.p_v[:, None]
+        pick = counter_uniform(self.seed, b.scenario_id[:, None], s.step, slots[None, :], 8)
+        braking = np.full(len(b), s.t + 1e-9 >= cfg.brake_start_s)
+        acc = leader_accels(s.x, s.v, b.valid, b.connected, b.human, b.promise_decel, b.promise_accel,
+                            self.v_desired, b.n_connected, b.decel_last, braking, violating, pick, prm)
+        acc[:, 0] = follower_accel(s.x[:, 0], s.v[:, 0], s.x[:, 1], s.v[:, 1], ex, evx, b.follower_aggressive,
+                                   s.completed, self.gap0, prm, cfg.follower_open_decel, cfg.follower_open_gap_m)
+        return acc
+
+    def check_and_advance(self, s, lon, lat, others, behaviour, go, wait, acc, belief) -> SimState:
+        b, prm = self.b, self.prm
+        dt = prm.dt
+        valid = b.valid
+        lon_b = Motion(*(getattr(lon, f)[:, None, :] for f in ("t", "x", "v", "acc")))
+        lat_b = Motion(*(getattr(lat, f)[:, None, :] for f in ("t", "x", "v", "acc")))
+        # Exact: gaps only count at the instants the ego is in the conflict zone / overlaps laterally.
+        conflict_level = prm.y_safe + LATERAL_TOL_M
+        overlap_level = prm.lane_width - prm.vehicle_width
+        c_min, c_max = windowed_gap_extrema(lon_b, others, lat_b, crossing_knots(lat_b, conflict_level), conflict_level)
+        o_min, o_max = windowed_gap_extrema(lon_b, others, lat_b, crossing_knots(lat_b, overlap_level), overlap_level)
+        length = prm.vehicle_length
+        collided = (valid & (o_min < length) & (o_max > -length)).any(1)
+        violated = (valid & (c_min < prm.p_m - 1e-9) & (c_max > -prm.p_m + 1e-9)).any(1)
+        min_gap_f = np.minimum(s.min_gap_f, -c_max[:, 0])
+        min_gap_l1 = np.minimum(s.min_gap_l1, c_min[:, 1])
+
+        behind = Motion(*(getattr(others, f)[:, :-1] for f in ("t", "x", "v", "acc")))
+        ahead = Motion(*(getattr(others, f)[:, 1:] for f in ("t", "x", "v", "acc")))
+        pair_min, _ = gap_extrema(behind, ahead)
+        pair_valid = valid[:, 1:] & valid[:, :-1]
+        margin = np.where(b.human[:, :-1], prm.p_m_human, prm.p_m)
+        leader_collided = (pair_valid & (pair_min < prm.vehicle_length)).any(1)
+        leader_violated = (pair_valid & (pair_min < margin - 1e-9)).any(1)
+
+        ex1, evx1 = lon.end
+        ey1, evy1 = lat.end
+        x1, v1 = others.end
+        if go is not None:
+            chosen = np.where(behaviour == PROCEED, go.completing, wait.completing & (behaviour == HESITATE))
+            new_plan = go.plan.where(behaviour == PROCEED, wait.plan.where(behaviour == HESITATE, s.plan))
+        else:
+            chosen = ey1 >= prm.y_boundary
+            new_plan = s.plan
+        completed_now = ~s.completed & chosen
+        replanned = (behaviour == PROCEED) | (behaviour == HESITATE)
+        counts = s.counts + np.stack([behaviour == k for k in (PROCEED, HESITATE, ABORT)], 1)
+        return SimState(
+            t=s.t + dt, step=s.step + 1, ego=(ex1, ey1, evx1, evy1), x=x1, v=v1, acc=acc,
+            completed=s.completed | completed_now,
+            t_complete=np.where(completed_now, s.t + dt, s.t_complete),
+            plan=new_plan, plan_t0=np.where(replanned, s.t + dt, s.plan_t0), belief=belief,
+            collided=s.collided | collided, violated=s.violated | violated,
+            leader_collided=s.leader_collided | leader_collided, leader_violated=s.leader_violated | leader_violated,
+            min_gap_f=min_gap_f, min_gap_l1=min_gap_l1, counts=counts,
+        )
+
+    def table(self, s: SimState) -> pd.DataFrame:
+        b = self.b
+        truth = b.follower_aggressive
+        belief = s.belief.aggressive
+        return pd.DataFrame({
+            "scenario_id": b.scenario_id,
+            "planner": np.asarray(VARIANT_NAMES)[b.variant],
+            "n_leaders": b.n_connected,
+            "decel": b.decel_last,
+            "p_v": b.p_v,
+            "success": s.completed & ~s.collided,
+            "collision": s.collided,
+            "safety_violation": s.violated,
+            "leader_collision": s.leader_collided,
+            "leader_violation": s.leader_violated,
+            "completed": s.completed,
+            "completion_time_s": s.t_complete,
+            "min_gap_follower_m": np.where(np.isinf(s.min_gap_f), np.nan, s.min_gap_f),
+            "min_gap_leader_m": np.where(np.isinf(s.min_gap_l1), np.nan, s.min_gap_l1),
+            "n_proceed": s.counts[:, 0],
+            "n_hesitate": s.counts[:, 1],
+            "n_abort": s.counts[:, 2],
+            "follower_connected": b.connected[:, 0],
+            "follower_aggressive": truth,
+            "assessed_aggressive": belief,
+            "assessment_correct": belief == truth,
+            "assessment_time_s": s.belief.first_collaborative_s,
+        })
+
+    def trace_rows(self, s: SimState, behaviour, limit: int) -> pd.DataFrame:
+        n = min(limit, len(self.b))
+        ex, ey, evx, evy = s.ego
+        return pd.DataFrame({
+            "scenario_id": self.b.scenario_id[:n],
+            "planner": np.asarray(VARIANT_NAMES)[self.b.variant[:n]],
+            "t": s.t, "ego_x": ex[:n], "ego_y": ey[:n], "ego_vx": evx[:n], "ego_vy": evy[:n],
+            "behaviour": behaviour[:n], "f_x": s.x[:n, 0], "f_v": s.v[:n, 0], "l1_x": s.x[:n, 1],
+            "l1_v": s.v[:n, 1], "completed": s.completed[:n], "violated": s.violated[:n], "collided": s.collided[:n],
+        })
+
+
+def _check_batch(batch: ScenarioBatch, prm: Params) -> None:
+    if len(batch) == 0:
+        raise ValueError("the scenario batch is empty")
+    if batch.x.shape[1] < 2:
+        raise ValueError("each scenario needs a follower and at least one leader (K >= 2)")
+    if (batch.decel_last > prm.a_x_d + 1e-12).any():
+        worst = float(batch.decel_last.max())
+        # Allowed, but outside the paper's assumptions: say so rather than silently promising safety.
+        import warnings
+
+        warnings.warn(
+            f"a_x_N+1_d={worst} exceeds params.a_x_d={prm.a_x_d}: L(N+1) brakes harder than the worst case the "
+            "safety analysis assumes, so collisions are possible", stacklevel=3,
+        )
+    for name in ("ego_vx",):
+        if (getattr(batch, name) < 0).any():
+            raise ValueError(f"{name} must be >= 0")
+    if (batch.v < 0).any():
+        raise ValueError("vehicle speeds v must be >= 0")
+

@@ -1,0 +1,149 @@
+"""Exact motion within one control period and the exact extrema of gaps between two motions.
+
+Every vehicle's longitudinal acceleration is piecewise constant; a braking vehicle stops and stays at rest
+(speed never goes negative). A *motion* over one period ``[0, dt]`` is stored as knots: times
+``t (..., K+1)`` from 0 to ``dt``, positions/speeds at the knots and one acceleration per segment. Gap
+extrema between two motions are exact: on each interval of the merged knots the gap is one quadratic, so
+its extrema lie at the knots or at the vertex.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+
+def stop_time(v, a, horizon):
+    """Time at which a vehicle at speed ``v >= 0`` with acceleration ``a`` stops, capped at ``horizon``."""
+    braking = a < 0.0
+    safe = np.where(braking, -a, 1.0)
+    return np.where(braking, np.minimum(v / safe, horizon), horizon)
+
+
+def advance(x, v, a, dt):
+    """Exact state after ``dt`` at constant acceleration ``a``, stopping at rest: ``(x', v')``."""
+    ts = stop_time(v, a, dt)
+    return x + v * ts + 0.5 * a * ts * ts, np.where(ts < dt, 0.0, np.maximum(v + a * dt, 0.0))
+
+
+@dataclass(frozen=True)
+class Motion:
+    """Piecewise-constant-acceleration motion over one period (knots on the last axis)."""
+
+    t: np.ndarray  # (..., K+1) knot times, ascending, t[..., 0] = 0, t[..., -1] = dt
+    x: np.ndarray  # (..., K+1) positions at the knots
+    v: np.ndarray  # (..., K+1) speeds at the knots
+    acc: np.ndarray  # (..., K) acceleration on each segment
+
+    @classmethod
+    def constant(cls, x, v, a, dt) -> Motion:
+        """Constant acceleration with stopping: knots ``0, t_stop, dt``."""
+        x, v, a = np.broadcast_arrays(np.asarray(x, float), np.asarray(v, float), np.asarray(a, float))
+        ts = stop_time(v, a, dt)
+        xs = x + v * ts + 0.5 * a * ts * ts
+        vs = np.where(ts < dt, 0.0, np.maximum(v + a * ts, 0.0))
+        t = np.stack([np.zeros_like(ts), ts, np.full_like(ts, dt)], -1)
+        # After the stop knot the vehicle is at rest (or, if it never stops, the stop knot is dt itself).
+        acc = np.stack([a, np.zeros_like(a)], -1)
+        return cls(t=t, x=np.stack([x, xs, xs], -1), v=np.stack([v, vs, vs], -1), acc=acc)
+
+    @classmethod
+    def free(cls, x, v, a, dt) -> Motion:
+        """Constant acceleration without stopping (lateral motion): knots ``0, dt``."""
+        x, v, a = np.broadcast_arrays(np.asarray(x, float), np.asarray(v, float), np.asarray(a, float))
+        t = np.stack([np.zeros_like(x), np.full_like(x, dt)], -1)
+        x1, v1 = x + v * dt + 0.5 * a * dt * dt, v + a * dt
+        return cls(t=t, x=np.stack([x, x1], -1), v=np.stack([v, v1], -1), acc=a[..., None])
+
+    @classmethod
+    def from_samples(cls, t, x, v) -> Motion:
+        """Knots from exact samples of a piecewise-constant-acceleration motion whose switches are knots."""
+        span = np.diff(t, axis=-1)
+        acc = np.where(span > 0.0, np.diff(v, axis=-1) / np.where(span > 0.0, span, 1.0), 0.0)
+        return cls(t=t, x=x, v=v, acc=acc)
+
+    def at(self, tq):
+        """Exact ``(x, v)`` at query times ``tq (..., Q)`` (broadcast against the motion's batch)."""
+        inner = self.t[..., 1:-1]
+        seg = (inner[..., None, :] <= tq[..., :, None]).sum(-1)
+        seg, t = np.broadcast_arrays(seg, tq)
+        batch = seg.shape[:-1]
+
+        def pick(arr):
+            return np.take_along_axis(np.broadcast_to(arr, (*batch, arr.shape[-1])), seg, -1)
+
+        tau = t - pick(self.t)
+        a = pick(self.acc)
+        return pick(self.x) + pick(self.v) * tau + 0.5 * a * tau * tau, pick(self.v) + a * tau
+
+    @property
+    def end(self):
+        return self.x[..., -1], self.v[..., -1]
+
+
+def gap_extrema(behind: Motion, ahead: Motion):
+    """Exact ``(min, max)`` over the period of ``ahead.x(t) − behind.x(t)``."""
+    batch = np.broadcast_shapes(behind.t.shape[:-1], ahead.t.shape[:-1])
+    parts = [np.broadcast_to(m.t, (*batch, m.t.shape[-1])) for m in (behind, ahead)]
+    knots = np.sort(np.concatenate(parts, -1), -1)
+    xa, va = ahead.at(knots)
+    xb, vb = behind.at(knots)
+    return _extrema(knots, xa - xb, va - vb)
+
+
+def extrema(m: Motion):
+    """Exact ``(min, max)`` of ``m.x`` over the period."""
+    return _extrema(m.t, m.x, m.v)
+
+
+def _extrema(knots, d, dv):
+    span = np.diff(knots, axis=-1)
+    rel_acc = np.where(span > 0.0, np.diff(dv, axis=-1) / np.where(span > 0.0, span, 1.0), 0.0)
+    d0, dv0 = d[..., :-1], dv[..., :-1]
+    tau = np.where(rel_acc != 0.0, -dv0 / np.where(rel_acc != 0.0, rel_acc, 1.0), -1.0)
+    inside = (tau > 0.0) & (tau < span)
+    vertex = d0 + dv0 * tau + 0.5 * rel_acc * tau * tau
+    lo = np.minimum(d.min(-1), np.where(inside & (rel_acc > 0.0), vertex, np.inf).min(-1))
+    hi = np.maximum(d.max(-1), np.where(inside & (rel_acc < 0.0), vertex, -np.inf).max(-1))
+    return lo, hi
+
+
+def crossing_knots(m: Motion, level: float) -> np.ndarray:
+    """``m``'s knots plus every instant where ``m.x`` crosses ``level`` (sorted; unused slots repeat a knot).
+
+    Between consecutive returned knots ``m.x − level`` has a constant sign.
+    """
+    t0, span = m.t[..., :-1], np.diff(m.t, axis=-1)
+    y0, v0, a = m.x[..., :-1] - level, m.v[..., :-1], m.acc
+    disc = v0 * v0 - 2.0 * a * y0
+    root = np.sqrt(np.maximum(disc, 0.0))
+    quad = (a != 0.0) & (disc >= 0.0)
+    safe_a = np.where(a != 0.0, a, 1.0)
+    lin = (a == 0.0) & (v0 != 0.0)
+    r1 = np.where(quad, (-v0 - root) / safe_a, np.where(lin, -y0 / np.where(v0 != 0.0, v0, 1.0), -1.0))
+    r2 = np.where(quad, (-v0 + root) / safe_a, -1.0)
+    extra = [np.where((r > 0.0) & (r < span), t0 + r, t0) for r in (r1, r2)]
+    return np.sort(np.concatenate([m.t, *extra], -1), -1)
+
+
+def windowed_gap_extrema(behind: Motion, ahead: Motion, lateral: Motion, lateral_knots, level: float):
+    """Exact ``(min, max)`` of ``ahead.x − behind.x`` over the instants of the period where ``lateral.x > level``
+    (``(inf, −inf)`` where there are none). ``lateral_knots`` comes from :func:`crossing_knots`."""
+    batch = np.broadcast_shapes(behind.t.shape[:-1], ahead.t.shape[:-1], lateral_knots.shape[:-1])
+    parts = [np.broadcast_to(k, (*batch, k.shape[-1])) for k in (behind.t, ahead.t, lateral_knots)]
+    knots = np.sort(np.concatenate(parts, -1), -1)
+    mid = 0.5 * (knots[..., :-1] + knots[..., 1:])
+    active = lateral.at(mid)[0] > level
+    xa, va = ahead.at(knots)
+    xb, vb = behind.at(knots)
+    d, dv = xa - xb, va - vb
+    span = np.diff(knots, axis=-1)
+    rel_acc = np.where(span > 0.0, np.diff(dv, axis=-1) / np.where(span > 0.0, span, 1.0), 0.0)
+    d0, dv0, d1 = d[..., :-1], dv[..., :-1], d[..., 1:]
+    tau = np.where(rel_acc != 0.0, -dv0 / np.where(rel_acc != 0.0, rel_acc, 1.0), -1.0)
+    inside = (tau > 0.0) & (tau < span)
+    vertex = d0 + dv0 * tau + 0.5 * rel_acc * tau * tau
+    seg_min = np.minimum(np.minimum(d0, d1), np.where(inside & (rel_acc > 0.0), vertex, np.inf))
+    seg_max = np.maximum(np.maximum(d0, d1), np.where(inside & (rel_acc < 0.0), vertex, -np.inf))
+    return np.where(active, seg_min, np.inf).min(-1), np.where(active, seg_max, -np.inf).max(-1)

@@ -1,0 +1,161 @@
+"""Scenario batches: initial states and per-scenario settings, padded to one vehicle axis.
+
+Target-lane vehicles live on one axis of length ``K``: index 0 is the follower F, 1..N the connected leaders
+L1..LN, N+1 the first non-connected leader L(N+1); indices beyond are padding (``valid`` False). Vehicles
+beyond L(N+1) are not simulated. The ego starts at the origin of the original lane (``x = 0``, ``y = 0``).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, fields
+
+import numpy as np
+from pydantic import BaseModel, ConfigDict, Field
+
+from ..planners.variants import VARIANT_NAMES, get_variant
+
+
+class ScenarioConfig(BaseModel):
+    """Scenario distribution. Defaults are the paper's sampler (§4.1)."""
+
+    model_config = ConfigDict(frozen=True, extra="forbid", allow_inf_nan=False)
+
+    ego_speed: tuple[float, float] = Field((29.0, 31.0), description="Ego speed range U[lo, hi] [m/s] (paper).")
+    traffic_speed: float = Field(30.0, ge=0.0, description="Speed of F and the leaders [m/s] (paper).")
+    gap: tuple[float, float] = Field((17.0, 22.0), description="Inter-vehicle distance δp ~ U[lo, hi] [m] (paper).")
+    promise_decel: float = Field(0.5, ge=0.0, description="Promised max deceleration a_m_d [m/s²] (paper).")
+    promise_accel: float = Field(0.5, ge=0.0, description="Promised max acceleration a_m_a [m/s²] (our assumption).")
+    follower_connected_share: float = Field(
+        1.0, ge=0.0, le=1.0, description="Share of connected (hence collaborative) followers (paper: F connected)."
+    )
+    follower_aggressive_share: float = Field(
+        0.5, ge=0.0, le=1.0, description="Share of aggressive followers among non-connected ones (our assumption)."
+    )
+    human_share: float = Field(0.0, ge=0.0, le=1.0, description="Share of human-driven connected leaders.")
+
+
+@dataclass(frozen=True)
+class ScenarioBatch:
+    """Initial conditions and settings of ``B`` scenarios (leading axis)."""
+
+    ego_x: np.ndarray  # (B,)
+    ego_y: np.ndarray
+    ego_vx: np.ndarray
+    ego_vy: np.ndarray
+    x: np.ndarray  # (B, K) target-lane vehicles
+    v: np.ndarray
+    valid: np.ndarray
+    connected: np.ndarray
+    human: np.ndarray
+    promise_decel: np.ndarray  # (B, K)
+    promise_accel: np.ndarray
+    n_connected: np.ndarray  # (B,) N
+    follower_aggressive: np.ndarray  # (B,) true type of F
+    decel_last: np.ndarray  # (B,) a_x_N+1_d, the sudden braking of L(N+1)
+    p_v: np.ndarray  # (B,) unexpected promise-violation probability per connected vehicle and period
+    variant: np.ndarray  # (B,) index into VARIANT_NAMES
+    scenario_id: np.ndarray  # (B,) stable id: keys per-scenario random draws
+
+    def __len__(self) -> int:
+        return len(self.ego_x)
+
+    def take(self, idx) -> ScenarioBatch:
+        """Rows ``idx`` (a slice, index array or mask) as a new batch."""
+        return ScenarioBatch(**{f.name: getattr(self, f.name)[idx] for f in fields(self)})
+
+
+def paper_scenarios(
+    planner: str, n_leaders: int, decel: float, samples: int, rng: np.random.Generator,
+    config: ScenarioConfig | None = None, first_id: int = 0, p_v: float = 0.0,
+) -> ScenarioBatch:
+    """The paper's sampler: ego speed U[29, 31], F and leaders at 30 m/s, one δp ~ U[17, 22] per scenario
+    (F at −δp, L_i at i·δp), promise ``a_m_d = 0.5``; L1..LN connected, L(N+1) not."""
+    cfg = config or ScenarioConfig()
+    _check_cell(planner, n_leaders, decel, samples, p_v)
+    k = n_leaders + 2
+    gap = rng.uniform(*cfg.gap, size=samples)
+    ego_vx = rng.uniform(*cfg.ego_speed, size=samples)
+    f_connected = rng.uniform(size=samples) < cfg.follower_connected_share
+    f_aggressive = ~f_connected & (rng.uniform(size=samples) < cfg.follower_aggressive_share)
+    human = np.zeros((samples, k), bool)
+    human[:, 1 : n_leaders + 1] = rng.uniform(size=(samples, n_leaders)) < cfg.human_share
+    slots = np.arange(k)
+    connected = (slots >= 1) & (slots <= n_leaders)
+    connected = np.broadcast_to(connected, (samples, k)).copy()
+    connected[:, 0] = f_connected
+    return ScenarioBatch(
+        ego_x=np.zeros(samples),
+        ego_y=np.zeros(samples),
+        ego_vx=ego_vx,
+        ego_vy=np.zeros(samples),
+        x=np.where(slots == 0, -1.0, slots.astype(float)) * gap[:, None],
+        v=np.full((samples, k), cfg.traffic_speed),
+        valid=np.ones((samples, k), bool),
+        connected=connected,
+        human=human,
+        promise_decel=np.full((samples, k), cfg.promise_decel),
+        promise_accel=np.full((samples, k), cfg.promise_accel),
+        n_connected=np.full(samples, n_leaders),
+        follower_aggressive=f_aggressive,
+        decel_last=np.full(samples, float(decel)),
+        p_v=np.full(samples, float(p_v)),
+        variant=np.full(samples, VARIANT_NAMES.index(planner)),
+        scenario_id=np.arange(first_id, first_id + samples, dtype=np.int64),
+    )
+
+
+def penetration_scenarios(
+    planner: str, penetration: float, decel: float, samples: int, rng: np.random.Generator,
+    config: ScenarioConfig | None = None, max_leaders: int = 10, first_id: int = 0, p_v: float = 0.0,
+) -> ScenarioBatch:
+    """The general sampler: each leader (up to ``max_leaders + 1``) and F is connected with probability
+    ``penetration``; N is the index of the first non-connected leader; a non-connected F is aggressive with
+    ``follower_aggressive_share``; connected leaders are human-driven with ``human_share``."""
+    if not 0.0 <= penetration <= 1.0:
+        raise ValueError(f"penetration must lie in [0, 1]; got {penetration!r}")
+    cfg = config or ScenarioConfig()
+    conn = rng.uniform(size=(samples, max_leaders + 1)) < penetration
+    conn[:, -1] = False  # at most max_leaders connected: the last slot is always L(N+1)
+    n = np.argmin(conn, axis=1)  # first non-connected leader
+    parts = [
+        paper_scenarios(planner, int(nv), decel, int((n == nv).sum()), rng, cfg.model_copy(
+            update={"follower_connected_share": penetration}), first_id=0, p_v=p_v)
+        for nv in np.unique(n)
+    ]
+    batch = concat(parts)
+    order = np.argsort(np.concatenate([np.flatnonzero(n == nv) for nv in np.unique(n)]), kind="stable")
+    batch = batch.take(order)
+    return ScenarioBatch(**{**{f.name: getattr(batch, f.name) for f in fields(batch)},
+                            "scenario_id": np.arange(first_id, first_id + samples, dtype=np.int64)})
+
+
+def concat(batches: list[ScenarioBatch]) -> ScenarioBatch:
+    """Stack batches row-wise, padding the vehicle axis (padding is invalid and never simulated)."""
+    k = max(b.x.shape[1] for b in batches)
+    out = {}
+    for f in fields(ScenarioBatch):
+        parts = []
+        for b in batches:
+            a = getattr(b, f.name)
+            if a.ndim == 2 and a.shape[1] < k:
+                pad = np.repeat(a[:, -1:], k - a.shape[1], axis=1)
+                if f.name in ("valid", "connected", "human"):
+                    pad = np.zeros_like(pad)
+                elif f.name == "x":
+                    pad = pad + 1e6 * np.arange(1, k - a.shape[1] + 1)
+                a = np.concatenate([a, pad], axis=1)
+            parts.append(a)
+        out[f.name] = np.concatenate(parts)
+    return ScenarioBatch(**out)
+
+
+def _check_cell(planner: str, n_leaders: int, decel: float, samples: int, p_v: float = 0.0) -> None:
+    get_variant(planner)
+    if not 0.0 <= p_v <= 1.0:
+        raise ValueError(f"p_v (promise-violation rate) must lie in [0, 1]; got {p_v!r}")
+    if not isinstance(n_leaders, int | np.integer) or n_leaders < 0:
+        raise ValueError(f"n_leaders must be a non-negative integer; got {n_leaders!r}")
+    if not np.isfinite(decel) or decel <= 0:
+        raise ValueError(f"decel (a_x_N+1_d) must be a positive finite number; got {decel!r}")
+    if not isinstance(samples, int | np.integer) or samples < 1:
+        raise ValueError(f"samples must be a positive integer; got {samples!r}")

@@ -1,0 +1,115 @@
+"""The runtime safety supervisor (paper §3.1): proceed, hesitate, or abort — every control period.
+
+Each period, in strictly decreasing preference:
+
+1. **proceed** — apply the nominal planner's ``(a_x, a_y)`` for one period, predicting L1 and F at their worst
+   case over it (L1 braking at its worst-case deceleration, F at ``+a_x_a`` if assumed aggressive, ``−a_x_d``
+   if collaborative); accept if a safe evasion exists from the predicted state;
+2. **hesitate** — the same with the lateral acceleration that drives the lateral speed to zero;
+3. **abort** — execute the evasion plan verified in an earlier period, exactly.
+
+Invariant: the ego always holds a verified plan. Two checks go beyond the paper's text, both needed for the
+invariant to hold in continuous time:
+
+* *within the period*: while the ego is in the conflict zone at any instant of the period, both worst-case gaps
+  must stay ``>= p_m`` during the period itself (exact minimum), not only at its ends;
+* *completion guard*: a step that would take the ego's centre across the lane boundary commits the ego to the
+  target lane, so instead of an evasion back it requires that the ego can keep ``p_m`` behind L1's worst case
+  and a worst-case F can keep ``p_m`` behind the ego, both by braking at no more than ``a_x_d``.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..params import Params
+from ..safety._backend import ARRAY
+from ..safety.chain import min_follow_decel
+from ..safety.evasion import EvasionPlan, evasion_core, plan_from_core
+from ..safety.lateral import LATERAL_TOL_M
+from ..safety.longitudinal import FEASIBILITY_TOL_M
+from .behaviours import pair_min_gap
+from .kinematics import Motion, advance, extrema
+
+PROCEED, HESITATE, ABORT, COMPLETED = 0, 1, 2, 3
+BEHAVIOURS = ("proceed", "hesitate", "abort", "completed")
+
+
+@dataclass(frozen=True)
+class Verdict:
+    """Outcome of checking one candidate action for every scenario of the batch."""
+
+    ok: np.ndarray
+    completing: np.ndarray
+    plan: EvasionPlan
+
+
+def check_candidate(ego_x, ego_y, ego_vx, ego_vy, a_x, a_y, l1_x, l1_v, l1_decel, f_x, f_v, f_aggressive,
+                    prm: Params) -> Verdict:
+    """Is applying ``(a_x, a_y)`` for one period safe under the worst case? Returns the verdict and the plan
+    verified from the predicted state (time origin at the end of the period)."""
+    dt, tol = prm.dt, FEASIBILITY_TOL_M
+    ex, evx = advance(ego_x, ego_vx, a_x, dt)
+    ey = ego_y + ego_vy * dt + 0.5 * a_y * dt * dt
+    evy = ego_vy + a_y * dt
+    lx, lv = advance(l1_x, l1_v, -l1_decel, dt)
+    a_f = np.where(f_aggressive, prm.a_x_a, -prm.a_x_d)
+    fx, fv = advance(f_x, f_v, a_f, dt)
+
+    conflict = extrema(Motion.free(ego_y, ego_vy, a_y, dt))[1] > prm.y_safe + LATERAL_TOL_M
+    gap_l = pair_min_gap(l1_x - ego_x - prm.p_m, ego_vx, a_x, l1_v, -l1_decel, dt)
+    gap_f = pair_min_gap(ego_x - f_x - prm.p_m, f_v, a_f, ego_vx, a_x, dt)
+    period_ok = ~conflict | ((gap_l >= -tol) & (gap_f >= -tol))
+
+    completing = ey >= prm.y_boundary
+    with np.errstate(all="ignore"):
+        z_l = min_follow_decel(ARRAY, lx - ex - prm.p_m, evx, lv, l1_decel)
+        z_f = min_follow_decel(ARRAY, ex - fx - prm.p_m, fv, evx, prm.a_x_d)
+        args = (ex, ey, evx, evy, lx, lv, l1_decel, fx, fv, f_aggressive, prm.p_m, prm.p_m)
+        exists, parts = evasion_core(ARRAY, *args, prm)
+    guard = (z_l <= prm.a_x_d) & (z_f <= prm.a_x_d)
+    plan = plan_from_core(ARRAY, np.shape(ex), args, exists, parts, prm.p_m, prm.p_m, prm)
+    ok = period_ok & np.where(completing, guard, exists)
+    return Verdict(ok=ok, completing=completing, plan=plan)
+
+
+def hesitate_lateral(ego_vy, prm: Params):
+    """Lateral acceleration driving the lateral speed to zero within a period (as far as ``a_y_m`` allows)."""
+    return np.clip(-ego_vy / prm.dt, -prm.a_y_m, prm.a_y_m)
+
+
+def plan_motion(plan: EvasionPlan, age, dt: float):
+    """Exact longitudinal and lateral :class:`Motion` of the ego executing ``plan`` on ``[age, age + dt]``.
+
+    Knots: the period's ends and every switch of the plan inside it (``t_x1``, end of braking, L1's stop,
+    ``t_y_f``, the lateral switch and end), so each segment has constant accelerations.
+    """
+    l1_stop = np.where(plan.l1_decel > 0.0, plan.l1_v / np.where(plan.l1_decel > 0.0, plan.l1_decel, 1.0), np.inf)
+    switches = [plan.t_x1, plan.t_brake_end, l1_stop, plan.t_y_f, plan.t_y_switch, plan.t_y_end]
+    rel = [np.clip(s - age, 0.0, dt) for s in switches]
+    knots = np.sort(np.stack([np.zeros_like(age), *rel, np.full_like(age, dt)], -1), -1)
+    px, py, vx, vy = plan.take((..., None)).state(age[..., None] + knots)
+    return Motion.from_samples(knots, px, vx), Motion.from_samples(knots, py, vy)
+
+
+def pad_knots(m: Motion, n_knots: int) -> Motion:
+    """Repeat the last knot so motions with different knot counts can be selected element-wise."""
+    extra = n_knots - m.t.shape[-1]
+    if extra <= 0:
+        return m
+
+    def rep(a, last_value=None):
+        tail = np.repeat(a[..., -1:], extra, -1) if last_value is None else np.full((*a.shape[:-1], extra), 0.0)
+        return np.concatenate([a, tail], -1)
+
+    return Motion(t=rep(m.t), x=rep(m.x), v=rep(m.v), acc=rep(m.acc, 0.0))
+
+
+def select_motion(mask, a: Motion, b: Motion) -> Motion:
+    """``a`` where ``mask`` else ``b`` (knot counts padded to match)."""
+    n = max(a.t.shape[-1], b.t.shape[-1])
+    a, b = pad_knots(a, n), pad_knots(b, n)
+    m = mask[..., None]
+    return Motion(*(np.where(m, getattr(a, f), getattr(b, f)) for f in ("t", "x", "v", "acc")))
