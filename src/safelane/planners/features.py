@@ -1,0 +1,104 @@
+"""Feature map of the neural planners: :class:`Observation` → model input ``(B, F)``.
+
+ASP-DAC'23 feeds its networks the absolute 8-vector ``[p_x, p_y, v_x, v_y, p_x_l, v_x_l, p_x_f, v_x_f]``. Absolute
+longitudinal positions carry no information (the problem is invariant to a shift along the road) and make the
+input distribution depend on how long a scenario has run, so the map below uses ego-relative quantities instead,
+plus what connectivity adds: ``L1``'s planned speed change over the next seconds from ``obs.l1_plan``.
+
+===============  ======  ==================================================================================
+name             unit    definition
+===============  ======  ==================================================================================
+``p_y``          m       ego lateral centre position (original-lane centre 0, target-lane centre ``w_l``)
+``v_y``          m/s     ego lateral speed, positive toward the target lane
+``v_x``          m/s     ego speed (absolute: braking distances depend on it)
+``gap_l``        m       ``p_x_l − p_x``: centre distance to ``L1`` (positive when ``L1`` is ahead)
+``gap_f``        m       ``p_x − p_x_f``: centre distance to the follower (positive when it is behind)
+``dv_l``         m/s     ``v_x_l − v_x``: positive when ``L1`` pulls away
+``dv_f``         m/s     ``v_x_f − v_x``: positive when the follower closes in
+``l1_dv_<k>s``   m/s     ``L1``'s planned speed change after ``k`` s, ``k`` in :data:`PLAN_TIMES_S`
+                         (``dt · Σ`` of the plan); 0 = constant-speed prediction, the value a
+                         non-connected ``L1`` (or a plan that ends earlier) gets
+``f_connected``  –       1.0 when the follower is connected (then assumed collaborative), else 0.0
+===============  ======  ==================================================================================
+
+``L1``'s planned speed is not allowed below zero (a plan that brakes to a stop stops). Changing the names, order
+or meaning of the features changes :data:`FEATURES_VERSION`; saved models record both and refuse to load against
+a different feature map (:mod:`safelane.planners.nn`).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ..params import Params
+from .base import Observation
+
+#: Horizons [s] at which ``L1``'s planned speed change is sampled.
+PLAN_TIMES_S = (1.0, 2.0, 3.0, 4.0)
+
+#: Model input names, in column order.
+FEATURE_NAMES: tuple[str, ...] = (
+    "p_y",
+    "v_y",
+    "v_x",
+    "gap_l",
+    "gap_f",
+    "dv_l",
+    "dv_f",
+    *(f"l1_dv_{k:g}s" for k in PLAN_TIMES_S),
+    "f_connected",
+)
+
+#: Bumped whenever :data:`FEATURE_NAMES` or the meaning of a column changes.
+FEATURES_VERSION = 1
+
+
+def plan_speed_change(l1_plan: np.ndarray, v_x_l: np.ndarray, dt: float, times_s=PLAN_TIMES_S) -> np.ndarray:
+    """``L1``'s planned speed change [m/s] after each of ``times_s`` [s], shape ``(B, len(times_s))``.
+
+    ``l1_plan`` ``(B, H)`` holds planned accelerations [m/s²] for the next ``H`` control periods of ``dt`` [s];
+    beyond the plan ``L1`` keeps its speed. The planned speed ``v_x_l + dt·cumsum(plan)`` is floored at zero,
+    so the change is at least ``−v_x_l``. An empty plan (``H = 0``) gives zeros.
+    """
+    plan = np.asarray(l1_plan, dtype=np.float64)
+    if plan.ndim != 2:
+        raise ValueError(f"l1_plan must have shape (B, H), got {plan.shape}")
+    batch, horizon = plan.shape
+    v0 = np.asarray(v_x_l, dtype=np.float64)
+    out = np.zeros((batch, len(times_s)))
+    if horizon == 0:
+        return out
+    dv = dt * np.cumsum(plan, axis=1)
+    for j, t in enumerate(times_s):
+        steps = min(round(t / dt), horizon)
+        if steps > 0:
+            out[:, j] = np.maximum(dv[:, steps - 1], -v0)
+    return out
+
+
+def features(obs: Observation, params: Params) -> np.ndarray:
+    """The model input ``(B, F)`` float64 for a batch of observations, columns as in :data:`FEATURE_NAMES`.
+
+    Every per-vehicle field of ``obs`` must have shape ``(B,)`` and ``obs.l1_plan`` shape ``(B, H)``;
+    ``params.dt`` is the period of the plan.
+    """
+    p_x = np.asarray(obs.p_x, dtype=np.float64)
+    if p_x.ndim != 1:
+        raise ValueError(f"Observation fields must have shape (B,), got p_x with shape {p_x.shape}")
+    v_x = np.asarray(obs.v_x, dtype=np.float64)
+    cols = [
+        np.asarray(obs.p_y, dtype=np.float64),
+        np.asarray(obs.v_y, dtype=np.float64),
+        v_x,
+        obs.p_x_l - p_x,
+        p_x - obs.p_x_f,
+        obs.v_x_l - v_x,
+        obs.v_x_f - v_x,
+    ]
+    plan = plan_speed_change(obs.l1_plan, obs.v_x_l, params.dt)
+    out = np.empty((p_x.shape[0], len(FEATURE_NAMES)))
+    for j, col in enumerate(cols):
+        out[:, j] = col
+    out[:, len(cols) : len(cols) + plan.shape[1]] = plan
+    out[:, -1] = np.asarray(obs.f_connected, dtype=np.float64)
+    return out
