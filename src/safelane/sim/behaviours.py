@@ -57,20 +57,39 @@ def responsible_ok(a, slack, v_f, v_l, lead_decel, prm: Params):
 
 def responsible_accel(a_wanted, slack, v_f, v_l, lead_decel, prm: Params):
     """Largest ``a`` in ``[−a_x_d, a_wanted]`` passing :func:`responsible_ok` (bisection, conservative side);
-    ``−a_x_d`` when none does."""
-    lo = np.full(np.shape(a_wanted), -prm.a_x_d)
-    hi = np.asarray(a_wanted, dtype=float)
-    ok_hi = responsible_ok(hi, slack, v_f, v_l, lead_decel, prm)
-    for _ in range(_BISECTION_STEPS):
-        mid = 0.5 * (lo + hi)
-        ok = responsible_ok(mid, slack, v_f, v_l, lead_decel, prm)
-        lo = np.where(ok, mid, lo)
-        hi = np.where(ok, hi, mid)
-    return np.where(ok_hi, a_wanted, lo)
+    ``−a_x_d`` when none does. Only the rows where ``a_wanted`` itself fails are bisected."""
+    a_wanted, slack, v_f, v_l, lead_decel = np.broadcast_arrays(
+        *(np.asarray(a, dtype=float) for a in (a_wanted, slack, v_f, v_l, lead_decel))
+    )
+    out = a_wanted.copy()
+    rows = np.flatnonzero(~responsible_ok(a_wanted, slack, v_f, v_l, lead_decel, prm))
+    if rows.size:
+        args = (slack[rows], v_f[rows], v_l[rows], lead_decel[rows])
+        lo, hi = np.full(rows.size, -prm.a_x_d), a_wanted[rows]
+        for _ in range(_BISECTION_STEPS):
+            mid = 0.5 * (lo + hi)
+            ok = responsible_ok(mid, *args, prm)
+            lo, hi = np.where(ok, mid, lo), np.where(ok, hi, mid)
+        out[rows] = lo
+    return out
 
 
-def leader_accels(x, v, valid, connected, human, promise_decel, promise_accel, v_desired,
-                  n_connected, decel_last, braking, violating, violate_pick, prm: Params):
+def leader_accels(
+    x,
+    v,
+    valid,
+    connected,
+    human,
+    promise_decel,
+    promise_accel,
+    v_desired,
+    n_connected,
+    decel_last,
+    braking,
+    violating,
+    violate_pick,
+    prm: Params,
+):
     """Accelerations of L1..L(N+1) for this period, ``(B, K)`` with index 0 (F) left at 0.
 
     ``braking``: (B,) L(N+1) is braking this period. ``violating``: (B, K) bool, an unexpected violation this
@@ -99,8 +118,9 @@ def leader_accels(x, v, valid, connected, human, promise_decel, promise_accel, v
     return acc
 
 
-def follower_accel(f_x, f_v, l1_x, l1_v, ego_x, ego_vx, aggressive, completed, gap0, prm: Params,
-                   open_decel: float, open_gap_m: float):
+def follower_accel(
+    f_x, f_v, l1_x, l1_v, ego_x, ego_vx, aggressive, completed, gap0, prm: Params, open_decel: float, open_gap_m: float
+):
     """Follower acceleration for this period.
 
     * collaborative: once the ego signals (``t = 0``) it opens the gap a little — brakes at ``open_decel``
@@ -111,9 +131,7 @@ def follower_accel(f_x, f_v, l1_x, l1_v, ego_x, ego_vx, aggressive, completed, g
     Both always follow L1 responsibly (L1's worst case: ``a_x_d``).
     """
     gap_ego = ego_x - f_x
-    collab_nominal = np.where(
-        gap_ego < gap0 + open_gap_m, -open_decel, np.clip(ego_vx - f_v, -open_decel, open_decel)
-    )
+    collab_nominal = np.where(gap_ego < gap0 + open_gap_m, -open_decel, np.clip(ego_vx - f_v, -open_decel, open_decel))
     gap_l1 = l1_x - f_x
     aggr_nominal = np.clip(0.5 * (gap_l1 - prm.p_m - 1.0) + 1.5 * (l1_v - f_v), -prm.a_x_d, prm.a_x_a)
     wanted = np.where(aggressive, aggr_nominal, collab_nominal)

@@ -7,6 +7,7 @@ planner → supervisor → other vehicles act → exact integration → continuo
 
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass, field
 from typing import Literal
 
@@ -23,7 +24,8 @@ from ..safety.evasion import EvasionPlan, evasion_core, plan_from_core
 from ..safety.lateral import LATERAL_TOL_M
 from . import assessment as assess
 from .behaviours import follower_accel, leader_accels, responsible_accel
-from .kinematics import Motion, crossing_knots, gap_extrema, windowed_gap_extrema
+from .checks import ego_checks, lane_checks
+from .kinematics import Motion
 from .rng import counter_normal, counter_uniform
 from .scenario import ScenarioBatch, ScenarioConfig, paper_scenarios
 from .supervisor import ABORT, HESITATE, PROCEED, check_candidate, hesitate_lateral, plan_motion, select_motion
@@ -86,23 +88,52 @@ class SimResult:
         return summarize(self.table)
 
 
-def simulate(planner: str = "CV_all", n_leaders: int = 5, decel: float = 5.0, samples: int = 1000, seed: int = 0,
-             *, p_v: float = 0.0, params: Params | None = None, config: SimConfig | None = None,
-             scenario: ScenarioConfig | None = None, nominal: NominalPlanner | None = None, trace: bool = False,
-             record_observations: bool = False, progress: bool = False) -> SimResult:
+def simulate(
+    planner: str = "CV_all",
+    n_leaders: int = 5,
+    decel: float = 5.0,
+    samples: int = 1000,
+    seed: int = 0,
+    *,
+    p_v: float = 0.0,
+    params: Params | None = None,
+    config: SimConfig | None = None,
+    scenario: ScenarioConfig | None = None,
+    nominal: NominalPlanner | None = None,
+    trace: bool = False,
+    record_observations: bool = False,
+    progress: bool = False,
+) -> SimResult:
     """Simulate one experiment cell of the paper's sampler.
 
     Example: ``simulate("CV_all", n_leaders=5, decel=5.0, samples=1000, seed=0).summary()``.
     """
     rng = np.random.default_rng(seed)
     batch = paper_scenarios(planner, n_leaders, decel, samples, rng, scenario, p_v=p_v)
-    return simulate_batch(batch, seed=seed, params=params, config=config, nominal=nominal, trace=trace,
-                          record_observations=record_observations, progress=progress)
+    return simulate_batch(
+        batch,
+        seed=seed,
+        params=params,
+        config=config,
+        nominal=nominal,
+        trace=trace,
+        record_observations=record_observations,
+        progress=progress,
+    )
 
 
-def simulate_batch(batch: ScenarioBatch, seed: int = 0, *, params: Params | None = None,
-                   config: SimConfig | None = None, nominal: NominalPlanner | None = None, trace: bool = False,
-                   record_observations: bool = False, progress: bool = False, trace_limit: int = 16) -> SimResult:
+def simulate_batch(
+    batch: ScenarioBatch,
+    seed: int = 0,
+    *,
+    params: Params | None = None,
+    config: SimConfig | None = None,
+    nominal: NominalPlanner | None = None,
+    trace: bool = False,
+    record_observations: bool = False,
+    progress: bool = False,
+    trace_limit: int = 16,
+) -> SimResult:
     """Run every scenario of ``batch`` in closed loop; see :class:`SimResult`."""
     prm = params or Params()
     cfg = config or SimConfig()
@@ -150,30 +181,65 @@ class _Sim:
         b, prm = self.b, self.prm
         n = len(b)
         # The plan held at t = 0: from the initial state under the most conservative assumptions.
-        args = (b.ego_x, b.ego_y, b.ego_vx, b.ego_vy, b.x[:, 1], b.v[:, 1], np.full(n, prm.a_x_d), b.x[:, 0],
-                b.v[:, 0], np.ones(n, bool), prm.p_m, prm.p_m)
+        args = (
+            b.ego_x,
+            b.ego_y,
+            b.ego_vx,
+            b.ego_vy,
+            b.x[:, 1],
+            b.v[:, 1],
+            np.full(n, prm.a_x_d),
+            b.x[:, 0],
+            b.v[:, 0],
+            np.ones(n, bool),
+            prm.p_m,
+            prm.p_m,
+        )
         with np.errstate(all="ignore"):
             exists, parts = evasion_core(ARRAY, *args, prm)
         plan = plan_from_core(ARRAY, (n,), args, exists, parts, prm.p_m, prm.p_m, prm)
         return SimState(
-            t=0.0, step=0, ego=(b.ego_x.copy(), b.ego_y.copy(), b.ego_vx.copy(), b.ego_vy.copy()),
-            x=b.x.copy(), v=b.v.copy(), acc=np.zeros_like(b.x), completed=np.zeros(n, bool),
-            t_complete=np.full(n, np.nan), plan=plan, plan_t0=np.zeros(n),
+            t=0.0,
+            step=0,
+            ego=(b.ego_x.copy(), b.ego_y.copy(), b.ego_vx.copy(), b.ego_vy.copy()),
+            x=b.x.copy(),
+            v=b.v.copy(),
+            acc=np.zeros_like(b.x),
+            completed=np.zeros(n, bool),
+            t_complete=np.full(n, np.nan),
+            plan=plan,
+            plan_t0=np.zeros(n),
             belief=assess.AssessmentState.start(n, self.cfg.assess_window),
-            collided=np.zeros(n, bool), violated=np.zeros(n, bool), leader_collided=np.zeros(n, bool),
-            leader_violated=np.zeros(n, bool), min_gap_f=np.full(n, np.inf), min_gap_l1=np.full(n, np.inf),
+            collided=np.zeros(n, bool),
+            violated=np.zeros(n, bool),
+            leader_collided=np.zeros(n, bool),
+            leader_violated=np.zeros(n, bool),
+            min_gap_f=np.full(n, np.inf),
+            min_gap_l1=np.full(n, np.inf),
             counts=np.zeros((n, 3), np.int64),
         )
 
     def observe(self, s: SimState) -> Observation:
         b = self.b
         ex, ey, evx, evy = s.ego
-        l1_plan = np.where(
-            (self.uses_chain & (b.n_connected >= 1))[:, None], s.acc[:, 1:2], 0.0
-        ) * np.ones((1, self.cfg.l1_plan_steps))
-        return Observation(p_x=ex, p_y=ey, v_x=evx, v_y=evy, p_x_l=s.x[:, 1], v_x_l=s.v[:, 1], p_x_f=s.x[:, 0],
-                           v_x_f=s.v[:, 0], l1_plan=l1_plan, l1_connected=b.connected[:, 1],
-                           f_connected=b.connected[:, 0], completed=s.completed, t=s.t)
+        l1_plan = np.where((self.uses_chain & (b.n_connected >= 1))[:, None], s.acc[:, 1:2], 0.0) * np.ones(
+            (1, self.cfg.l1_plan_steps)
+        )
+        return Observation(
+            p_x=ex,
+            p_y=ey,
+            v_x=evx,
+            v_y=evy,
+            p_x_l=s.x[:, 1],
+            v_x_l=s.v[:, 1],
+            p_x_f=s.x[:, 0],
+            v_x_f=s.v[:, 0],
+            l1_plan=l1_plan,
+            l1_connected=b.connected[:, 1],
+            f_connected=b.connected[:, 0],
+            completed=s.completed,
+            t=s.t,
+        )
 
     def worst_case(self, s: SimState, belief: assess.AssessmentState):
         """L1's worst-case deceleration and F's assumed type, from the information each variant uses."""
@@ -199,21 +265,37 @@ class _Sim:
         l1x, l1v, fx, fv = s.x[:, 1], s.v[:, 1], s.x[:, 0], s.v[:, 0]
 
         active = ~s.completed
+        behaviour = np.where(active, PROCEED, -1)
+        completing = np.zeros(len(b), bool)
+        new_plan = s.plan
+        a_yh = hesitate_lateral(evy, prm)
         if cfg.supervised:
-            go = check_candidate(ex, ey, evx, evy, a_x, a_y, l1x, l1v, l1_decel, fx, fv, f_aggr, prm)
-            a_yh = hesitate_lateral(evy, prm)
-            wait = check_candidate(ex, ey, evx, evy, a_x, a_yh, l1x, l1v, l1_decel, fx, fv, f_aggr, prm)
-            behaviour = np.where(go.ok, PROCEED, np.where(wait.ok, HESITATE, ABORT))
+            # The supervisor runs only where the lane change is under way; hesitate only where proceed failed.
+            rows = np.flatnonzero(active)
+            for code, lateral in ((PROCEED, a_y), (HESITATE, a_yh)):
+                if rows.size == 0:
+                    break
+                verdict = check_candidate(
+                    *(a[rows] for a in (ex, ey, evx, evy, a_x, lateral, l1x, l1v, l1_decel, fx, fv, f_aggr)), prm
+                )
+                ok_rows = rows[verdict.ok]
+                behaviour[ok_rows] = code
+                completing[ok_rows] = verdict.completing[verdict.ok]
+                new_plan = _set_rows(new_plan, ok_rows, verdict.plan.take(verdict.ok))
+                rows = rows[~verdict.ok]
+            behaviour[rows] = ABORT
         else:
-            go = wait = None
-            behaviour = np.full(len(b), PROCEED)
-        behaviour = np.where(active, behaviour, -1)
+            completing = active & (ey + evy * dt + 0.5 * a_y * dt * dt >= prm.y_boundary)
 
         # Post-completion: centre in the target lane, follow L1 responsibly under its worst case.
-        a_x_post = responsible_accel(a_x, l1x - ex - prm.p_m, evx, l1v, l1_decel, prm)
-        a_y_post = np.clip(0.8 * (prm.lane_width - ey) - 1.6 * evy, -prm.a_y_m, prm.a_y_m)
-        ax_cmd = np.where(active, a_x, a_x_post)
-        ay_cmd = np.where(active, np.where(behaviour == HESITATE, hesitate_lateral(evy, prm), a_y), a_y_post)
+        done = np.flatnonzero(s.completed)
+        ax_cmd = a_x.copy()
+        ay_cmd = np.where(behaviour == HESITATE, a_yh, a_y)
+        if done.size:
+            ax_cmd[done] = responsible_accel(
+                a_x[done], (l1x - ex - prm.p_m)[done], evx[done], l1v[done], l1_decel[done], prm
+            )
+            ay_cmd[done] = np.clip(0.8 * (prm.lane_width - ey[done]) - 1.6 * evy[done], -prm.a_y_m, prm.a_y_m)
         lon = Motion.constant(ex, evx, ax_cmd, dt)
         lat = Motion.free(ey, evy, ay_cmd, dt)
         aborting = behaviour == ABORT
@@ -224,7 +306,7 @@ class _Sim:
 
         acc = self.others_accels(s, ex, evx)
         others = Motion.constant(s.x, s.v, acc, dt)
-        new = self.check_and_advance(s, lon, lat, others, behaviour, go, wait, acc, belief)
+        new = self.check_and_advance(s, lon, lat, others, behaviour, completing, new_plan, acc, belief)
         return new, obs, behaviour
 
     def others_accels(self, s: SimState, ex, evx):
@@ -234,98 +316,143 @@ class _Sim:
         violating = counter_uniform(self.seed, b.scenario_id[:, None], s.step, slots[None, :], 7) < b.p_v[:, None]
         pick = counter_uniform(self.seed, b.scenario_id[:, None], s.step, slots[None, :], 8)
         braking = np.full(len(b), s.t + 1e-9 >= cfg.brake_start_s)
-        acc = leader_accels(s.x, s.v, b.valid, b.connected, b.human, b.promise_decel, b.promise_accel,
-                            self.v_desired, b.n_connected, b.decel_last, braking, violating, pick, prm)
-        acc[:, 0] = follower_accel(s.x[:, 0], s.v[:, 0], s.x[:, 1], s.v[:, 1], ex, evx, b.follower_aggressive,
-                                   s.completed, self.gap0, prm, cfg.follower_open_decel, cfg.follower_open_gap_m)
+        acc = leader_accels(
+            s.x,
+            s.v,
+            b.valid,
+            b.connected,
+            b.human,
+            b.promise_decel,
+            b.promise_accel,
+            self.v_desired,
+            b.n_connected,
+            b.decel_last,
+            braking,
+            violating,
+            pick,
+            prm,
+        )
+        acc[:, 0] = follower_accel(
+            s.x[:, 0],
+            s.v[:, 0],
+            s.x[:, 1],
+            s.v[:, 1],
+            ex,
+            evx,
+            b.follower_aggressive,
+            s.completed,
+            self.gap0,
+            prm,
+            cfg.follower_open_decel,
+            cfg.follower_open_gap_m,
+        )
         return acc
 
-    def check_and_advance(self, s, lon, lat, others, behaviour, go, wait, acc, belief) -> SimState:
-        b, prm = self.b, self.prm
+    def check_and_advance(self, s, lon, lat, others, behaviour, completing, new_plan, acc, belief) -> SimState:
+        prm = self.prm
         dt = prm.dt
-        valid = b.valid
-        lon_b = Motion(*(getattr(lon, f)[:, None, :] for f in ("t", "x", "v", "acc")))
-        lat_b = Motion(*(getattr(lat, f)[:, None, :] for f in ("t", "x", "v", "acc")))
-        # Exact: gaps only count at the instants the ego is in the conflict zone / overlaps laterally.
         conflict_level = prm.y_safe + LATERAL_TOL_M
         overlap_level = prm.lane_width - prm.vehicle_width
-        c_min, c_max = windowed_gap_extrema(lon_b, others, lat_b, crossing_knots(lat_b, conflict_level), conflict_level)
-        o_min, o_max = windowed_gap_extrema(lon_b, others, lat_b, crossing_knots(lat_b, overlap_level), overlap_level)
-        length = prm.vehicle_length
-        collided = (valid & (o_min < length) & (o_max > -length)).any(1)
-        violated = (valid & (c_min < prm.p_m - 1e-9) & (c_max > -prm.p_m + 1e-9)).any(1)
-        min_gap_f = np.minimum(s.min_gap_f, -c_max[:, 0])
-        min_gap_l1 = np.minimum(s.min_gap_l1, c_min[:, 1])
+        collided, violated, min_gap_f, min_gap_l1 = ego_checks(
+            self.b, prm, s, lon, lat, others, conflict_level, overlap_level
+        )
 
-        behind = Motion(*(getattr(others, f)[:, :-1] for f in ("t", "x", "v", "acc")))
-        ahead = Motion(*(getattr(others, f)[:, 1:] for f in ("t", "x", "v", "acc")))
-        pair_min, _ = gap_extrema(behind, ahead)
-        pair_valid = valid[:, 1:] & valid[:, :-1]
-        margin = np.where(b.human[:, :-1], prm.p_m_human, prm.p_m)
-        leader_collided = (pair_valid & (pair_min < prm.vehicle_length)).any(1)
-        leader_violated = (pair_valid & (pair_min < margin - 1e-9)).any(1)
+        leader_collided, leader_violated = lane_checks(self.b, prm, others)
 
         ex1, evx1 = lon.end
         ey1, evy1 = lat.end
         x1, v1 = others.end
-        if go is not None:
-            chosen = np.where(behaviour == PROCEED, go.completing, wait.completing & (behaviour == HESITATE))
-            new_plan = go.plan.where(behaviour == PROCEED, wait.plan.where(behaviour == HESITATE, s.plan))
-        else:
-            chosen = ey1 >= prm.y_boundary
-            new_plan = s.plan
-        completed_now = ~s.completed & chosen
+        completed_now = ~s.completed & completing
         replanned = (behaviour == PROCEED) | (behaviour == HESITATE)
         counts = s.counts + np.stack([behaviour == k for k in (PROCEED, HESITATE, ABORT)], 1)
         return SimState(
-            t=s.t + dt, step=s.step + 1, ego=(ex1, ey1, evx1, evy1), x=x1, v=v1, acc=acc,
+            t=s.t + dt,
+            step=s.step + 1,
+            ego=(ex1, ey1, evx1, evy1),
+            x=x1,
+            v=v1,
+            acc=acc,
             completed=s.completed | completed_now,
             t_complete=np.where(completed_now, s.t + dt, s.t_complete),
-            plan=new_plan, plan_t0=np.where(replanned, s.t + dt, s.plan_t0), belief=belief,
-            collided=s.collided | collided, violated=s.violated | violated,
-            leader_collided=s.leader_collided | leader_collided, leader_violated=s.leader_violated | leader_violated,
-            min_gap_f=min_gap_f, min_gap_l1=min_gap_l1, counts=counts,
+            plan=new_plan,
+            plan_t0=np.where(replanned, s.t + dt, s.plan_t0),
+            belief=belief,
+            collided=s.collided | collided,
+            violated=s.violated | violated,
+            leader_collided=s.leader_collided | leader_collided,
+            leader_violated=s.leader_violated | leader_violated,
+            min_gap_f=min_gap_f,
+            min_gap_l1=min_gap_l1,
+            counts=counts,
         )
 
     def table(self, s: SimState) -> pd.DataFrame:
         b = self.b
         truth = b.follower_aggressive
         belief = s.belief.aggressive
-        return pd.DataFrame({
-            "scenario_id": b.scenario_id,
-            "planner": np.asarray(VARIANT_NAMES)[b.variant],
-            "n_leaders": b.n_connected,
-            "decel": b.decel_last,
-            "p_v": b.p_v,
-            "success": s.completed & ~s.collided,
-            "collision": s.collided,
-            "safety_violation": s.violated,
-            "leader_collision": s.leader_collided,
-            "leader_violation": s.leader_violated,
-            "completed": s.completed,
-            "completion_time_s": s.t_complete,
-            "min_gap_follower_m": np.where(np.isinf(s.min_gap_f), np.nan, s.min_gap_f),
-            "min_gap_leader_m": np.where(np.isinf(s.min_gap_l1), np.nan, s.min_gap_l1),
-            "n_proceed": s.counts[:, 0],
-            "n_hesitate": s.counts[:, 1],
-            "n_abort": s.counts[:, 2],
-            "follower_connected": b.connected[:, 0],
-            "follower_aggressive": truth,
-            "assessed_aggressive": belief,
-            "assessment_correct": belief == truth,
-            "assessment_time_s": s.belief.first_collaborative_s,
-        })
+        return pd.DataFrame(
+            {
+                "scenario_id": b.scenario_id,
+                "planner": np.asarray(VARIANT_NAMES)[b.variant],
+                "n_leaders": b.n_connected,
+                "decel": b.decel_last,
+                "p_v": b.p_v,
+                "success": s.completed & ~s.collided,
+                "collision": s.collided,
+                "safety_violation": s.violated,
+                "leader_collision": s.leader_collided,
+                "leader_violation": s.leader_violated,
+                "completed": s.completed,
+                "completion_time_s": s.t_complete,
+                "min_gap_follower_m": np.where(np.isinf(s.min_gap_f), np.nan, s.min_gap_f),
+                "min_gap_leader_m": np.where(np.isinf(s.min_gap_l1), np.nan, s.min_gap_l1),
+                "n_proceed": s.counts[:, 0],
+                "n_hesitate": s.counts[:, 1],
+                "n_abort": s.counts[:, 2],
+                "follower_connected": b.connected[:, 0],
+                "follower_aggressive": truth,
+                "assessed_aggressive": belief,
+                "assessment_correct": belief == truth,
+                "assessment_time_s": s.belief.first_collaborative_s,
+            }
+        )
 
     def trace_rows(self, s: SimState, behaviour, limit: int) -> pd.DataFrame:
         n = min(limit, len(self.b))
         ex, ey, evx, evy = s.ego
-        return pd.DataFrame({
-            "scenario_id": self.b.scenario_id[:n],
-            "planner": np.asarray(VARIANT_NAMES)[self.b.variant[:n]],
-            "t": s.t, "ego_x": ex[:n], "ego_y": ey[:n], "ego_vx": evx[:n], "ego_vy": evy[:n],
-            "behaviour": behaviour[:n], "f_x": s.x[:n, 0], "f_v": s.v[:n, 0], "l1_x": s.x[:n, 1],
-            "l1_v": s.v[:n, 1], "completed": s.completed[:n], "violated": s.violated[:n], "collided": s.collided[:n],
-        })
+        return pd.DataFrame(
+            {
+                "scenario_id": self.b.scenario_id[:n],
+                "planner": np.asarray(VARIANT_NAMES)[self.b.variant[:n]],
+                "t": s.t,
+                "ego_x": ex[:n],
+                "ego_y": ey[:n],
+                "ego_vx": evx[:n],
+                "ego_vy": evy[:n],
+                "behaviour": behaviour[:n],
+                "f_x": s.x[:n, 0],
+                "f_v": s.v[:n, 0],
+                "l1_x": s.x[:n, 1],
+                "l1_v": s.v[:n, 1],
+                "completed": s.completed[:n],
+                "violated": s.violated[:n],
+                "collided": s.collided[:n],
+            }
+        )
+
+
+def _set_rows(plan: EvasionPlan, rows, sub: EvasionPlan) -> EvasionPlan:
+    """``plan`` with ``rows`` replaced by the rows of ``sub`` (same order)."""
+    if rows.size == 0:
+        return plan
+    out = {}
+    for f in dataclasses.fields(plan):
+        if f.name == "params":
+            continue
+        arr = getattr(plan, f.name).copy()
+        arr[rows] = getattr(sub, f.name)
+        out[f.name] = arr
+    return EvasionPlan(**out, params=plan.params)
 
 
 def _check_batch(batch: ScenarioBatch, prm: Params) -> None:
@@ -340,11 +467,11 @@ def _check_batch(batch: ScenarioBatch, prm: Params) -> None:
 
         warnings.warn(
             f"a_x_N+1_d={worst} exceeds params.a_x_d={prm.a_x_d}: L(N+1) brakes harder than the worst case the "
-            "safety analysis assumes, so collisions are possible", stacklevel=3,
+            "safety analysis assumes, so collisions are possible",
+            stacklevel=3,
         )
     for name in ("ego_vx",):
         if (getattr(batch, name) < 0).any():
             raise ValueError(f"{name} must be >= 0")
     if (batch.v < 0).any():
         raise ValueError("vehicle speeds v must be >= 0")
-

@@ -65,8 +65,14 @@ class ScenarioBatch:
 
 
 def paper_scenarios(
-    planner: str, n_leaders: int, decel: float, samples: int, rng: np.random.Generator,
-    config: ScenarioConfig | None = None, first_id: int = 0, p_v: float = 0.0,
+    planner: str,
+    n_leaders: int,
+    decel: float,
+    samples: int,
+    rng: np.random.Generator,
+    config: ScenarioConfig | None = None,
+    first_id: int = 0,
+    p_v: float = 0.0,
 ) -> ScenarioBatch:
     """The paper's sampler: ego speed U[29, 31], F and leaders at 30 m/s, one δp ~ U[17, 22] per scenario
     (F at −δp, L_i at i·δp), promise ``a_m_d = 0.5``; L1..LN connected, L(N+1) not."""
@@ -105,8 +111,15 @@ def paper_scenarios(
 
 
 def penetration_scenarios(
-    planner: str, penetration: float, decel: float, samples: int, rng: np.random.Generator,
-    config: ScenarioConfig | None = None, max_leaders: int = 10, first_id: int = 0, p_v: float = 0.0,
+    planner: str,
+    penetration: float,
+    decel: float,
+    samples: int,
+    rng: np.random.Generator,
+    config: ScenarioConfig | None = None,
+    max_leaders: int = 10,
+    first_id: int = 0,
+    p_v: float = 0.0,
 ) -> ScenarioBatch:
     """The general sampler: each leader (up to ``max_leaders + 1``) and F is connected with probability
     ``penetration``; N is the index of the first non-connected leader; a non-connected F is aggressive with
@@ -118,15 +131,27 @@ def penetration_scenarios(
     conn[:, -1] = False  # at most max_leaders connected: the last slot is always L(N+1)
     n = np.argmin(conn, axis=1)  # first non-connected leader
     parts = [
-        paper_scenarios(planner, int(nv), decel, int((n == nv).sum()), rng, cfg.model_copy(
-            update={"follower_connected_share": penetration}), first_id=0, p_v=p_v)
+        paper_scenarios(
+            planner,
+            int(nv),
+            decel,
+            int((n == nv).sum()),
+            rng,
+            cfg.model_copy(update={"follower_connected_share": penetration}),
+            first_id=0,
+            p_v=p_v,
+        )
         for nv in np.unique(n)
     ]
     batch = concat(parts)
     order = np.argsort(np.concatenate([np.flatnonzero(n == nv) for nv in np.unique(n)]), kind="stable")
     batch = batch.take(order)
-    return ScenarioBatch(**{**{f.name: getattr(batch, f.name) for f in fields(batch)},
-                            "scenario_id": np.arange(first_id, first_id + samples, dtype=np.int64)})
+    return ScenarioBatch(
+        **{
+            **{f.name: getattr(batch, f.name) for f in fields(batch)},
+            "scenario_id": np.arange(first_id, first_id + samples, dtype=np.int64),
+        }
+    )
 
 
 def concat(batches: list[ScenarioBatch]) -> ScenarioBatch:

@@ -46,8 +46,9 @@ class Verdict:
     plan: EvasionPlan
 
 
-def check_candidate(ego_x, ego_y, ego_vx, ego_vy, a_x, a_y, l1_x, l1_v, l1_decel, f_x, f_v, f_aggressive,
-                    prm: Params) -> Verdict:
+def check_candidate(
+    ego_x, ego_y, ego_vx, ego_vy, a_x, a_y, l1_x, l1_v, l1_decel, f_x, f_v, f_aggressive, prm: Params
+) -> Verdict:
     """Is applying ``(a_x, a_y)`` for one period safe under the worst case? Returns the verdict and the plan
     verified from the predicted state (time origin at the end of the period)."""
     dt, tol = prm.dt, FEASIBILITY_TOL_M

@@ -1,0 +1,69 @@
+"""Exact per-period safety bookkeeping: ego collisions / p_m violations and target-lane pair checks.
+
+Collisions are physical overlap of footprints (longitudinal ``|dx| < vehicle_length`` at an instant when the
+ego overlaps the target lane laterally); violations are ``|dx| < p_m`` at an instant when the ego is in the
+conflict zone. Both are evaluated in continuous time within the period.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ..params import Params
+from .kinematics import Motion, crossing_knots, extrema, gap_extrema, windowed_gap_extrema
+
+
+def _rows(m: Motion, rows) -> Motion:
+    return Motion(*(getattr(m, f)[rows] for f in ("t", "x", "v", "acc")))
+
+
+def ego_checks(
+    b, prm: Params, s, lon: Motion, lat: Motion, others: Motion, conflict_level: float, overlap_level: float
+):
+    """Exact ego collision / p_m-violation checks for the period, counted only at the instants the ego is
+    in the conflict zone (violations) or overlaps the target lane's vehicles laterally (collisions).
+
+    Only pairs that could come within ``p_m`` during the period are evaluated exactly (a bound on how far
+    a gap can move in one period filters the rest); the result is the same, faster.
+    """
+    dt = prm.dt
+    bsz, k = s.x.shape
+    _, y_max = extrema(lat)
+    d0 = s.x - s.ego[0][:, None]
+    a_bound = max(prm.a_x_a, prm.a_x_d) + np.abs(others.acc).max(-1)
+    reach = np.abs(s.v - s.ego[2][:, None]) * dt + 0.5 * a_bound * dt * dt
+    near = b.valid & (np.abs(d0) - reach < prm.p_m + 1e-6) & (y_max > conflict_level)[:, None]
+    r, c = np.nonzero(near)
+    c_min = np.full((bsz, k), np.inf)
+    c_max = np.full((bsz, k), -np.inf)
+    o_min, o_max = c_min.copy(), c_max.copy()
+    if r.size:
+        ego_lon, ego_lat = _rows(lon, r), _rows(lat, r)
+        other = Motion(*(getattr(others, f)[r, c] for f in ("t", "x", "v", "acc")))
+        for level, lo, hi in ((conflict_level, c_min, c_max), (overlap_level, o_min, o_max)):
+            knots = crossing_knots(ego_lat, level)
+            lo[r, c], hi[r, c] = windowed_gap_extrema(ego_lon, other, ego_lat, knots, level)
+    length = prm.vehicle_length
+    collided = ((o_min < length) & (o_max > -length)).any(1)
+    violated = ((c_min < prm.p_m - 1e-9) & (c_max > -prm.p_m + 1e-9)).any(1)
+    min_gap_f = np.minimum(s.min_gap_f, -c_max[:, 0])
+    min_gap_l1 = np.minimum(s.min_gap_l1, c_min[:, 1])
+    return collided, violated, min_gap_f, min_gap_l1
+
+
+def lane_checks(b, prm: Params, others: Motion):
+    """Exact collision / margin checks between consecutive target-lane vehicles (F–L1, L1–L2, …)."""
+    dt = prm.dt
+    x0, v0 = others.x[..., 0], others.v[..., 0]
+    gap0 = x0[:, 1:] - x0[:, :-1]
+    a_abs = np.abs(others.acc).max(-1)
+    reach = np.abs(v0[:, 1:] - v0[:, :-1]) * dt + 0.5 * (a_abs[:, 1:] + a_abs[:, :-1]) * dt * dt
+    margin = np.where(b.human[:, :-1], prm.p_m_human, prm.p_m)
+    near = b.valid[:, 1:] & b.valid[:, :-1] & (gap0 - reach < margin + 1e-6)
+    r, c = np.nonzero(near)
+    pair_min = np.full(gap0.shape, np.inf)
+    if r.size:
+        behind = Motion(*(getattr(others, f)[r, c] for f in ("t", "x", "v", "acc")))
+        ahead = Motion(*(getattr(others, f)[r, c + 1] for f in ("t", "x", "v", "acc")))
+        pair_min[r, c], _ = gap_extrema(behind, ahead)
+    return (pair_min < prm.vehicle_length).any(1), (pair_min < margin - 1e-9).any(1)
