@@ -50,15 +50,16 @@ def random_chains(rng: np.random.Generator, n: int, n_links: int, params: Params
     )
 
 
-def _seconds_per_call(fn, repeats: int) -> float:
-    """Median wall time of ``repeats`` calls (after one warm-up call)."""
+def _seconds_per_call(fn, repeats: int, budget_s: float = 0.2) -> float:
+    """Median over ``repeats`` rounds of the mean wall time of one call (after a warm-up call).
+
+    A round repeats the call until it has run for ``budget_s``, so small batches are timed over many calls.
+    """
+    start = time.perf_counter()
     fn()
-    times = []
-    for _ in range(repeats):
-        start = time.perf_counter()
-        fn()
-        times.append(time.perf_counter() - start)
-    return statistics.median(times)
+    number = max(1, int(budget_s / max(time.perf_counter() - start, 1e-9)))
+    rounds = timeit.repeat(fn, number=number, repeat=repeats)
+    return statistics.median(rounds) / number
 
 
 def _verdict(ok: bool) -> str:
@@ -76,8 +77,7 @@ def main() -> None:
     print("evasion_exists (full check: lateral Eq. 5, longitudinal Eqs. 6-8, follower Eq. 9)")
     for n in (1, 1_000, 1_000_000):
         states = random_states(rng, n, params)
-        calls = repeats if n >= 100_000 else max(repeats, 200_000 // n)
-        sec = _seconds_per_call(lambda s=states: evasion_exists(**s, params=params), calls)
+        sec = _seconds_per_call(lambda s=states: evasion_exists(**s, params=params), repeats)
         rate = n / sec
         line = f"  batch {n:>9,}: {rate / 1e6:8.3f} M checks/s  ({sec * 1e3:9.3f} ms per call)"
         if n == 1_000_000:

@@ -27,6 +27,46 @@ def _describe_bad(name: str, arr: np.ndarray, bad: np.ndarray, what: str) -> Val
     return ValueError(f"{name} must be {what}; got {value!r}{where}")
 
 
+def float_array(name: str, raw: object) -> np.ndarray:
+    """``raw`` as a float64 array; only real numbers (and booleans) are accepted — not strings, ``None``,
+    complex numbers or ragged lists."""
+    try:
+        arr = np.asarray(raw)
+    except (TypeError, ValueError) as exc:
+        raise ValueError(f"{name} must be numeric array-like; got {raw!r}") from exc
+    if arr.dtype.kind not in "biuf":
+        raise ValueError(f"{name} must be numeric array-like; got {raw!r}")
+    return arr.astype(np.float64, copy=False)
+
+
+_BOOL_WANTED = "a boolean (True/False or 0/1)"
+
+
+def bool_array(name: str, raw: object) -> np.ndarray:
+    """``raw`` as a bool array; booleans and the numbers 0 and 1 are accepted, anything else (NaN, 2, "yes") is
+    an error rather than silently true."""
+    try:
+        arr = np.asarray(raw)
+    except (TypeError, ValueError) as exc:
+        raise ValueError(f"{name} must be {_BOOL_WANTED} array-like; got {raw!r}") from exc
+    if arr.dtype == np.bool_:
+        return arr
+    if arr.dtype.kind not in "iuf":
+        raise ValueError(f"{name} must be {_BOOL_WANTED}; got {raw!r}")
+    bad = (arr != 0) & (arr != 1)  # NaN is unequal to both
+    if bad.any():
+        raise _describe_bad(name, arr, bad, _BOOL_WANTED)
+    return arr.astype(bool)
+
+
+def _scalar_bool(name: str, raw: object) -> bool:
+    if isinstance(raw, (bool, np.bool_)):
+        return bool(raw)
+    if raw == 0 or raw == 1:
+        return bool(raw)
+    raise ValueError(f"{name} must be {_BOOL_WANTED}; got {raw!r}")
+
+
 def prepare(
     fields: Mapping[str, object],
     *,
@@ -46,7 +86,7 @@ def prepare(
         out: dict[str, object] = {}
         for name, raw in fields.items():
             if name in bools:
-                out[name] = bool(raw)
+                out[name] = _scalar_bool(name, raw)
                 continue
             value = float(raw)
             if not math.isfinite(value):
@@ -60,18 +100,17 @@ def prepare(
 
     arrays: dict[str, np.ndarray] = {}
     for name, raw in fields.items():
-        try:
-            arr = np.asarray(raw, dtype=bool if name in bools else np.float64)
-        except (TypeError, ValueError) as exc:
-            raise ValueError(f"{name} must be numeric array-like; got {raw!r}") from exc
-        if name not in bools:
-            finite = np.isfinite(arr)
-            if not finite.all():
-                raise _describe_bad(name, arr, ~finite, "finite")
-            if name in nonneg and (arr < 0.0).any():
-                raise _describe_bad(name, arr, arr < 0.0, ">= 0")
-            if name in upper and (arr > upper[name]).any():
-                raise _describe_bad(name, arr, arr > upper[name], f"<= {upper[name]}")
+        if name in bools:
+            arrays[name] = bool_array(name, raw)
+            continue
+        arr = float_array(name, raw)
+        finite = np.isfinite(arr)
+        if not finite.all():
+            raise _describe_bad(name, arr, ~finite, "finite")
+        if name in nonneg and (arr < 0.0).any():
+            raise _describe_bad(name, arr, arr < 0.0, ">= 0")
+        if name in upper and (arr > upper[name]).any():
+            raise _describe_bad(name, arr, arr > upper[name], f"<= {upper[name]}")
         arrays[name] = arr
     try:
         shape = np.broadcast_shapes(*(a.shape for a in arrays.values()))

@@ -20,7 +20,7 @@ import numpy as np
 
 from ..params import Params
 from ._backend import ARRAY, INF, SCALAR
-from ._checks import finish, prepare
+from ._checks import bool_array, finish, float_array, prepare
 
 
 def min_follow_decel(xp, slack, v_f, v_l, a_l):
@@ -99,7 +99,7 @@ def leader_chain(p, v, promise_decel, params: Params, *, human_driven=None) -> C
     if human_driven is None:
         human = np.zeros(promise.shape, dtype=bool)
     else:
-        human = np.asarray(human_driven, dtype=bool)
+        human = bool_array("human_driven", human_driven)
         if human.shape[-1:] != (n_links,):
             raise ValueError(f"human_driven must have N={n_links} entries on its last axis; got {human.shape}")
     try:
@@ -120,7 +120,7 @@ def leader_chain(p, v, promise_decel, params: Params, *, human_driven=None) -> C
     if xp is SCALAR:
         stack = lambda xs: np.asarray(xs, dtype=np.float64)  # noqa: E731
     else:
-        stack = lambda xs: np.stack(np.broadcast_arrays(*xs), -1)  # noqa: E731
+        stack = lambda xs: np.stack([np.broadcast_to(x, batch) for x in xs], -1)  # noqa: E731
     required_arr = stack(required) if n_links else np.zeros((*batch, 0))
     return ChainResult(
         decel=stack(decel),
@@ -169,17 +169,19 @@ def leader_position(p, v, decel, t, params: Params):
     return finish(xp, shape, out)
 
 
-def braked_position(xp, p, v, decel, t):
-    """Unchecked core of :func:`leader_position` (backend-generic)."""
-    tt = xp.minimum(t, xp.stop_time(v, decel))
+def braked_position(xp, p, v, decel, t, t_stop=None):
+    """Unchecked core of :func:`leader_position` (backend-generic).
+
+    ``t_stop`` is ``xp.stop_time(v, decel)``; callers that evaluate one trajectory at many times pass it once.
+    """
+    if t_stop is None:
+        t_stop = xp.stop_time(v, decel)
+    tt = xp.minimum(t, t_stop)
     return p + v * tt - 0.5 * decel * tt * tt
 
 
 def _as_chain(name: str, value) -> np.ndarray:
-    try:
-        arr = np.asarray(value, dtype=np.float64)
-    except (TypeError, ValueError) as exc:
-        raise ValueError(f"{name} must be a numeric array; got {value!r}") from exc
+    arr = float_array(name, value)
     if arr.ndim == 0:
         raise ValueError(f"{name} must have a vehicle axis (last axis); got a scalar")
     if not np.isfinite(arr).all():

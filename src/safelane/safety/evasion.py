@@ -17,13 +17,14 @@ from __future__ import annotations
 
 import dataclasses
 import enum
+import math
 from dataclasses import dataclass
 
 import numpy as np
 
 from ..params import Params
 from ._backend import ARRAY
-from ._checks import finish, prepare
+from ._checks import bool_array, finish, float_array, prepare
 from .chain import braked_position
 from .lateral import lateral_core, lateral_state
 from .longitudinal import FEASIBILITY_TOL_M, ego_position, ego_speed, longitudinal_core
@@ -43,10 +44,11 @@ class Reason(enum.IntFlag):
     NOTHING_TO_EVADE = 8
 
 
-def follower_offset(xp, t, f_p, f_v, aggressive, prm: Params):
-    """Backend-generic core of :func:`follower_position`."""
+def follower_offset(xp, t, f_p, f_v, aggressive, prm: Params, f_stop=None):
+    """Backend-generic core of :func:`follower_position`; ``f_stop`` is the collaborative follower's stop time
+    ``xp.stop_time(f_v, a_x_d)``, computed here unless given."""
     aggressive_pos = f_p + f_v * t + 0.5 * prm.a_x_a * t * t
-    return xp.where(aggressive, aggressive_pos, braked_position(xp, f_p, f_v, prm.a_x_d, t))
+    return xp.where(aggressive, aggressive_pos, braked_position(xp, f_p, f_v, prm.a_x_d, t, f_stop))
 
 
 def follower_position(p, v, aggressive, t, params: Params):
@@ -96,10 +98,11 @@ class EvasionPlan:
 
         ``t`` broadcasts with the batch shape.
         """
-        t = np.asarray(t, dtype=np.float64)
+        t = float_array("t", t)
         if (t < 0).any() or not np.isfinite(t).all():
             raise ValueError(f"t must be finite and >= 0; got {t!r}")
         T = self.t_y_f
+        _check_broadcasts("t", t.shape, np.shape(T))
         lon = (self.ego_px, self.ego_vx, self.t_x1, self.v_switch, self.t_brake_end, self.follows_leader)
         p, v, u, V, t2, match = lon
         lead = (self.l1_p, self.l1_v, self.l1_decel)
@@ -166,11 +169,13 @@ def evasion_core(
         xp, ego_px, ego_vx, l1_p, l1_v, l1_decel, T, lead_margin, prm, tol
     )
     a_a, a_d = prm.a_x_a, prm.a_x_d
+    l1_stop = xp.stop_time(l1_v, l1_decel)
+    f_stop = xp.stop_time(f_v, a_d)
     candidates = (
         0.0 * T,
         u,
         t2,
-        f_v / a_d,
+        f_stop,
         xp.div(f_v - ego_vx, a_a + a_d, 0.0),
         xp.div(f_v - l1_v, a_d - l1_decel, 0.0),
         T,
@@ -178,8 +183,8 @@ def evasion_core(
     follow_gap = None
     for c in candidates:
         c = xp.clip(c, 0.0, T)
-        ego = ego_position(xp, c, ego_px, ego_vx, u, V, t2, match, l1_p, l1_v, l1_decel, prm)
-        gap = ego - follower_offset(xp, c, f_p, f_v, aggressive, prm) - follow_margin
+        ego = ego_position(xp, c, ego_px, ego_vx, u, V, t2, match, l1_p, l1_v, l1_decel, prm, l1_stop)
+        gap = ego - follower_offset(xp, c, f_p, f_v, aggressive, prm, f_stop) - follow_margin
         follow_gap = gap if follow_gap is None else xp.minimum(follow_gap, gap)
     follow_ok = follow_gap >= -tol
     nothing = T <= 0.0
@@ -276,9 +281,28 @@ def evasion_exists(
         leader_human,
         follower_human,
     )
+    if xp is ARRAY and math.prod(shape) > CHUNK:
+        return _exists_chunked(args, shape, params)
     with np.errstate(all="ignore"):
         exists, _ = evasion_core(xp, *args, params)
     return finish(xp, shape, exists, np.bool_)
+
+
+#: Batches larger than this many elements are checked ``CHUNK`` elements at a time. The core makes a few
+#: hundred element-wise temporaries; in chunks they stay in cache, and at 64 KiB each they stay below glibc's
+#: 128 KiB ``mmap`` threshold (larger blocks are mapped and unmapped, page fault by page fault, every time).
+#: That makes a batch of a million about twice as fast as one pass. The arithmetic is unchanged.
+CHUNK = 8192
+
+
+def _exists_chunked(args, shape, params: Params) -> np.ndarray:
+    flat = [a if a.ndim == 0 else np.broadcast_to(a, shape).reshape(-1) for a in args]
+    out = np.empty(math.prod(shape), dtype=bool)
+    with np.errstate(all="ignore"):
+        for start in range(0, out.size, CHUNK):
+            chunk = [a if a.ndim == 0 else a[start : start + CHUNK] for a in flat]
+            out[start : start + CHUNK], _ = evasion_core(ARRAY, *chunk, params)
+    return out.reshape(shape)
 
 
 def plan_evasion(
@@ -317,9 +341,19 @@ def plan_evasion(
         leader_human,
         follower_human,
     )
+    chain_unsafe = bool_array("chain_unsafe", chain_unsafe)
+    if _check_broadcasts("chain_unsafe", chain_unsafe.shape, shape) != shape:
+        raise ValueError(f"chain_unsafe of shape {chain_unsafe.shape} must broadcast to the batch shape {shape}")
     with np.errstate(all="ignore"):
         exists, parts = evasion_core(xp, *args, params)
     return plan_from_core(xp, shape, args, exists, parts, lead_margin, follow_margin, params, chain_unsafe)
+
+
+def _check_broadcasts(name: str, shape, batch_shape) -> tuple[int, ...]:
+    try:
+        return np.broadcast_shapes(shape, batch_shape)
+    except ValueError as exc:
+        raise ValueError(f"{name} of shape {shape} does not broadcast with the batch shape {batch_shape}") from exc
 
 
 def plan_from_core(xp, shape, args, exists, parts, lead_margin, follow_margin, params: Params, chain_unsafe=False):

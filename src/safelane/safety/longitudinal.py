@@ -40,11 +40,15 @@ from .chain import braked_position
 FEASIBILITY_TOL_M = 1e-9
 
 
-def profile(xp, u, p, v, p1, v1, a1, prm: Params):
-    """Switch state of the profile with acceleration phase ``[0, u]``: ``(V, t2, match)``."""
+def profile(xp, u, p, v, p1, v1, a1, prm: Params, l1_stop=None):
+    """Switch state of the profile with acceleration phase ``[0, u]``: ``(V, t2, match)``.
+
+    ``l1_stop`` is ``L1``'s stop time ``xp.stop_time(v1, a1)``, computed here unless given.
+    """
     a_d = prm.a_x_d
     V = v + prm.a_x_a * u
-    l1_stop = xp.stop_time(v1, a1)
+    if l1_stop is None:
+        l1_stop = xp.stop_time(v1, a1)
     rel = V - xp.maximum(v1 - a1 * u, 0.0)  # ego minus L1 speed at u
     m = a_d - a1
     t_match = u + xp.where(rel == 0.0, 0.0, xp.div(rel, m, INF))
@@ -53,14 +57,17 @@ def profile(xp, u, p, v, p1, v1, a1, prm: Params):
     return V, t2, match
 
 
-def ego_position(xp, t, p, v, u, V, t2, match, p1, v1, a1, prm: Params):
-    """Ego position on the evasion profile at ``t`` (exact; valid for any ``t >= 0``)."""
+def ego_position(xp, t, p, v, u, V, t2, match, p1, v1, a1, prm: Params, l1_stop=None):
+    """Ego position on the evasion profile at ``t`` (exact; valid for any ``t >= 0``); ``l1_stop`` as in
+    :func:`profile`."""
     ta = xp.minimum(t, u)
     pos = p + v * ta + 0.5 * prm.a_x_a * ta * ta
     tb = xp.maximum(xp.minimum(t, t2) - u, 0.0)
     pos = pos + V * tb - 0.5 * prm.a_x_d * tb * tb
     t_late = xp.maximum(t, t2)
-    follow = braked_position(xp, p1, v1, a1, t_late) - braked_position(xp, p1, v1, a1, t2)
+    if l1_stop is None:
+        l1_stop = xp.stop_time(v1, a1)
+    follow = braked_position(xp, p1, v1, a1, t_late, l1_stop) - braked_position(xp, p1, v1, a1, t2, l1_stop)
     return pos + xp.where(match, follow, 0.0)
 
 
@@ -73,14 +80,33 @@ def ego_speed(xp, t, v, u, V, t2, match, v1, a1, prm: Params):
     return xp.where(match & (t > t2), l1_speed, xp.maximum(own, 0.0))
 
 
-def leader_gap_min(xp, u, T, d0, p, v, p1, v1, a1, margin, prm: Params):
-    """Minimum over ``[0, T]`` of ``p_1(t) − p(t) − margin`` for switch time ``u`` (exact)."""
-    V, t2, match = profile(xp, u, p, v, p1, v1, a1, prm)
-    gmin = d0
-    for t in (u, xp.minimum(t2, T), T):
-        gap = braked_position(xp, p1, v1, a1, t) - ego_position(xp, t, p, v, u, V, t2, match, p1, v1, a1, prm)
-        gmin = xp.minimum(gmin, gap - margin)
-    return gmin
+def leader_gap_min(xp, u, T, d0, p, v, p1, v1, a1, margin, prm: Params, l1_stop=None, l1_at_T=None):
+    """Minimum over ``[0, T]`` of ``p_1(t) − p(t) − margin`` for switch time ``u <= T`` (exact).
+
+    ``l1_stop`` is as in :func:`profile` and ``l1_at_T`` is ``L1``'s position at ``T``; both are computed here
+    unless given. The gap is checked at ``0`` (``d0``), ``u``, ``min(t2, T)`` and ``T``. This is
+    :func:`ego_position` written out for those times, with the same arithmetic, to spare the hot path its
+    repeated terms: all three are ``>= u`` (so the acceleration phase is complete), and the following phase,
+    which starts at ``t2``, has contributed nothing yet at ``u`` or at ``min(t2, T)``.
+    """
+    if l1_stop is None:
+        l1_stop = xp.stop_time(v1, a1)
+    if l1_at_T is None:
+        l1_at_T = braked_position(xp, p1, v1, a1, T, l1_stop)
+    V, t2, match = profile(xp, u, p, v, p1, v1, a1, prm, l1_stop)
+    at_u = p + v * u + 0.5 * prm.a_x_a * u * u
+
+    def braking(t):
+        tb = xp.maximum(xp.minimum(t, t2) - u, 0.0)
+        return at_u + V * tb - 0.5 * prm.a_x_d * tb * tb
+
+    t_b = xp.minimum(t2, T)
+    l1_at_t2 = braked_position(xp, p1, v1, a1, t2, l1_stop)
+    follow = braked_position(xp, p1, v1, a1, xp.maximum(T, t2), l1_stop) - l1_at_t2
+    ego_at_T = braking(T) + xp.where(match, follow, 0.0)
+    gmin = xp.minimum(d0, (braked_position(xp, p1, v1, a1, u, l1_stop) - at_u) - margin)
+    gmin = xp.minimum(gmin, (braked_position(xp, p1, v1, a1, t_b, l1_stop) - braking(t_b)) - margin)
+    return xp.minimum(gmin, (l1_at_T - ego_at_T) - margin)
 
 
 def longitudinal_core(xp, p, v, p1, v1, a1, T, margin, prm: Params, tol: float = FEASIBILITY_TOL_M):
@@ -88,7 +114,9 @@ def longitudinal_core(xp, p, v, p1, v1, a1, T, margin, prm: Params, tol: float =
     a_a, a_d = prm.a_x_a, prm.a_x_d
     d0 = p1 - p - margin
     s = a_a + a_d
-    big_r = braked_position(xp, p1, v1, a1, T) - margin - p - v * T
+    l1_stop = xp.stop_time(v1, a1)  # hoisted with l1_at_T: every gap evaluation below reuses them
+    l1_at_T = braked_position(xp, p1, v1, a1, T, l1_stop)
+    big_r = l1_at_T - margin - p - v * T
     u_a = T - xp.sqrt(T * T - (a_d * T * T + 2.0 * big_r) / s)
     p1_stop = p1 + xp.stop_dist(v1, a1)
     u_b = -v / a_a + xp.sqrt((v / a_a) ** 2 - (v * v + 2.0 * a_d * (p + margin - p1_stop)) / (s * a_a))
@@ -96,15 +124,15 @@ def longitudinal_core(xp, p, v, p1, v1, a1, T, margin, prm: Params, tol: float =
     k = a_a + a1
     u_c = (-w + xp.sqrt(w * w - k * (w * w - 2.0 * (a_d - a1) * d0) / s)) / k
     best = 0.0 * T
-    best_gap = leader_gap_min(xp, best, T, d0, p, v, p1, v1, a1, margin, prm)
+    best_gap = leader_gap_min(xp, best, T, d0, p, v, p1, v1, a1, margin, prm, l1_stop, l1_at_T)
     feasible = best_gap >= -tol
     for cand in (u_a, u_b, u_c, T):
         cand = xp.clip(cand, 0.0, T)
-        g = leader_gap_min(xp, cand, T, d0, p, v, p1, v1, a1, margin, prm)
+        g = leader_gap_min(xp, cand, T, d0, p, v, p1, v1, a1, margin, prm, l1_stop, l1_at_T)
         better = (g >= -tol) & (cand >= best)
         best = xp.where(better, cand, best)
         best_gap = xp.where(better, g, best_gap)
-    V, t2, match = profile(xp, best, p, v, p1, v1, a1, prm)
+    V, t2, match = profile(xp, best, p, v, p1, v1, a1, prm, l1_stop)
     return feasible, best, V, t2, match, best_gap
 
 
