@@ -20,6 +20,7 @@ def _main() -> None:
 def _register() -> None:
     # Each subcommand module adds itself to `app`; imports are local so `--help` stays fast.
     from . import check  # noqa: F401
+    from . import train as _train  # noqa: F401
 
 
 _register()

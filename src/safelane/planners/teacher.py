@@ -7,9 +7,11 @@ whether the gap is open. Everything is vectorised over the batch; no Python loop
 
 Model. Each axis's acceleration is piecewise linear through knots at ``knot_times_s`` (held after the last
 knot), within the mechanical limits; the ego is a double integrator stepped exactly at ``params.dt``. ``L1``
-follows its V2X plan (``obs.l1_plan``; constant speed after it, speed floored at 0) and the follower keeps its
-speed. Cost, integrated over the horizon at ``eval_every · dt`` (``y`` lateral centre, ``x`` ego position,
-``g_l = x_l − x``, ``g_f = x − x_f``, ``ov ∈ [0, 1]`` the fraction of the ego's width overlapping the target lane):
+follows its V2X plan (``obs.l1_plan``; constant speed after it, speed floored at 0); the follower, by default,
+copies ``L1``'s speed changes (``follower_model="copies_l1"``: traffic behind a braking ``L1`` brakes too;
+``"constant_speed"`` is the pessimistic alternative). Cost, integrated over the horizon at ``eval_every · dt``
+(``y`` lateral centre, ``x`` ego position, ``g_l = x_l − x``, ``g_f = x − x_f``, ``ov ∈ [0, 1]`` the fraction of
+the ego's width overlapping the target lane):
 
 * progress ``w_lateral (y − w_l)²``, ``w_overshoot relu(y − w_l)²`` and, at the end, ``w_lateral_speed v_y²``;
 * safety in the target lane ``ov · [w_gap (relu(p_m + m_l − g_l)² + relu(p_m + m_f − g_f)²)
@@ -32,6 +34,7 @@ from __future__ import annotations
 
 import itertools
 from functools import cached_property
+from typing import Literal
 
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field, model_validator
@@ -57,7 +60,10 @@ class TeacherConfig(BaseModel):
     w_collision: float = Field(1000.0, ge=0.0, description="Weight of the squared shortfall below p_m.")
     margin_front_m: float = Field(2.0, ge=0.0, description="Desired gap to L1 beyond p_m [m].")
     margin_rear_m: float = Field(6.0, ge=0.0, description="Desired gap to a non-connected follower beyond p_m [m].")
-    margin_rear_connected_m: float = Field(3.0, ge=0.0, description="Same, connected (collaborative) follower [m].")
+    margin_rear_connected_m: float = Field(1.0, ge=0.0, description="Same, connected (collaborative) follower [m].")
+    follower_model: Literal["copies_l1", "constant_speed"] = Field(
+        "copies_l1", description="Predicted follower motion: L1's speed changes, or constant speed."
+    )
     w_centre: float = Field(0.02, ge=0.0, description="Weight of (x − x_target)² [1/(m² s)].")
     rear_share: float = Field(0.55, ge=0.0, le=1.0, description="x_target's share of the F→L1 distance.")
     w_speed: float = Field(0.05, ge=0.0, description="Weight of (v_x − v_l)² [s/m²].")
@@ -154,6 +160,9 @@ class OptimalControlTeacher:
         idx = np.round(t / prm.dt).astype(int) - 1
         x_l, v_l = p_path[:, idx], v_path[:, idx]
         x_f = -gap_f0[:, None] + v_f[:, None] * t
+        if cfg.follower_model == "copies_l1":
+            dv = np.maximum(v_path - v_l0[:, None], -v_f[:, None])  # F's speed change, floored at a stop
+            x_f = x_f + np.cumsum(0.5 * (np.concatenate([np.zeros((b, 1)), dv[:, :-1]], 1) + dv) * prm.dt, 1)[:, idx]
         margin_f = np.where(np.asarray(obs.f_connected, bool)[sl], cfg.margin_rear_connected_m, cfg.margin_rear_m)
         ctx = {
             "y0": (p_y[:, None] + v_y[:, None] * t)[:, None, :].astype(f32),
