@@ -133,12 +133,20 @@ def simulate_batch(
     record_observations: bool = False,
     progress: bool = False,
     trace_limit: int = 16,
+    workers: int = 1,
 ) -> SimResult:
-    """Run every scenario of ``batch`` in closed loop; see :class:`SimResult`."""
+    """Run every scenario of ``batch`` in closed loop; see :class:`SimResult`.
+
+    ``workers > 1`` splits the batch across processes; scenarios are independent and their random draws are
+    counter-based, so the table is identical to a single-process run (traces and observations need
+    ``workers=1``).
+    """
     prm = params or Params()
     cfg = config or SimConfig()
     nominal = nominal or ExpertPlanner()
     _check_batch(batch, prm)
+    if workers > 1 and len(batch) >= 2 * workers and not (trace or record_observations):
+        return _simulate_parallel(batch, seed, prm, cfg, nominal, workers)
     sim = _Sim(batch, seed, prm, cfg, nominal)
     state = sim.initial_state()
     n_steps = round(cfg.horizon_s / prm.dt)
@@ -157,6 +165,21 @@ def simulate_batch(
     table = sim.table(state)
     trace_df = pd.concat(rows, ignore_index=True) if trace and rows else None
     return SimResult(table=table, trace=trace_df, observations=observations)
+
+
+def _simulate_chunk(args) -> pd.DataFrame:
+    batch, seed, prm, cfg, nominal = args
+    return simulate_batch(batch, seed, params=prm, config=cfg, nominal=nominal).table
+
+
+def _simulate_parallel(batch, seed, prm, cfg, nominal, workers: int) -> SimResult:
+    from concurrent.futures import ProcessPoolExecutor
+
+    chunks = np.array_split(np.arange(len(batch)), workers)
+    jobs = [(batch.take(rows), seed, prm, cfg, nominal) for rows in chunks]
+    with ProcessPoolExecutor(max_workers=workers) as pool:
+        tables = list(pool.map(_simulate_chunk, jobs))
+    return SimResult(table=pd.concat(tables, ignore_index=True))
 
 
 class _Sim:

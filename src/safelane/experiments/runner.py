@@ -1,0 +1,72 @@
+"""Run registered experiments under a preset and summarise them per cell."""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+
+import numpy as np
+import pandas as pd
+from pydantic import BaseModel
+
+from ..planners.base import NominalPlanner
+from ..sim.engine import simulate_batch
+from ..sim.metrics import summarize
+from ..sim.scenario import ScenarioBatch, ScenarioConfig, paper_scenarios
+from .calibration import Preset, load_preset
+from .grid import run_cells
+from .registry import Fig5Config, get_experiment
+
+SUMMARY_KEYS = ("planner", "n_leaders", "decel", "p_v", "penetration")
+
+
+@dataclass
+class ExperimentResult:
+    """What one experiment produced: per-scenario table, per-cell summary, optional trace, wall time."""
+
+    name: str
+    config: BaseModel
+    table: pd.DataFrame | None
+    summary: pd.DataFrame | None
+    trace: pd.DataFrame | None
+    elapsed_s: float
+
+
+def run_experiment(
+    name: str,
+    config: BaseModel | None = None,
+    *,
+    preset: Preset | None = None,
+    seed: int = 0,
+    quick: bool = False,
+    workers: int = 1,
+    nominal: NominalPlanner | None = None,
+) -> ExperimentResult:
+    """Run the registered experiment ``name`` (its default or ``quick`` config unless ``config`` is given)."""
+    exp = get_experiment(name)
+    cfg = config or exp.default_config(quick)
+    preset = preset or load_preset("paper")
+    start = time.perf_counter()
+    if exp.cells is None:
+        trace = _trace_example(cfg, preset, seed, nominal)
+        return ExperimentResult(name, cfg, None, None, trace, time.perf_counter() - start)
+    cells = exp.cells(cfg)
+    table = run_cells(
+        cells, cfg.samples, seed, params=preset.params, config=preset.sim, nominal=nominal, workers=workers
+    )
+    summary = summarize(table, by=SUMMARY_KEYS)
+    return ExperimentResult(name, cfg, table, summary, None, time.perf_counter() - start)
+
+
+def _trace_example(cfg: Fig5Config, preset: Preset, seed: int, nominal) -> pd.DataFrame:
+    """One fixed scenario (ego speed and δp from the config) traced under every planner."""
+    parts = []
+    for planner in cfg.planners:
+        b = paper_scenarios(planner, cfg.n_leaders, cfg.decel, 1, np.random.default_rng(seed), ScenarioConfig())
+        x = b.x / np.abs(b.x[:, :1]) * cfg.gap  # F at -δp, L_i at i·δp with the example's δp
+        parts.append(ScenarioBatch(**{**b.__dict__, "x": x, "ego_vx": np.array([cfg.ego_speed])}))
+    batch = ScenarioBatch(**{k: np.concatenate([getattr(p, k) for p in parts]) for k in parts[0].__dict__})
+    result = simulate_batch(
+        batch, seed=seed, params=preset.params, config=preset.sim, nominal=nominal, trace=True, trace_limit=len(parts)
+    )
+    return result.trace
