@@ -2,10 +2,12 @@
 
 Two sampled components (mixed by ``paper_fraction``), both ego-relative with a random absolute offset:
 
-* **paper** — around the experiments of §4: ego speed near ``U[29, 31]`` m/s (widened to ``[24, 32]`` for
-  states after braking), ``F`` and ``L1`` near 30 m/s, gaps ``U[5, 30]`` m around the paper's
-  ``δp ~ U[17, 22]``; a third of the states at the start of a lane change (``p_y = v_y = 0``); ``L1`` cruising,
-  braking within a 0.5 m/s² promise, or braking hard (up to 6 m/s²) for part of its plan.
+* **paper** — around the experiments of §4. A third are initial states as the paper samples them, widened:
+  ``p_y = v_y = 0``, ego speed ``U[28, 32]`` (paper ``U[29, 31]``) m/s, ``F`` and ``L1`` at ``30 ± 0.5`` m/s,
+  both gaps ``δp ~ U[15, 24]`` (paper ``U[17, 22]``) m. The rest are states of a lane change under way:
+  ``p_y ∈ [−0.3, 3.8]`` m, ``v_y ∈ [−1.2, 1.5]`` m/s, ego speed ``U[24, 32]``, ``L1`` ``U[20, 31]`` (it may
+  have braked), ``F`` ``U[24, 32]`` m/s, gaps ``U[5, 30]`` m. ``L1``'s plan: cruising, braking within the
+  0.5 m/s² promise, or braking hard (up to 6 m/s²) for part of the plan.
 * **broad** — well beyond it: ego speed ``U[5, 40]``, relative speeds ``±10`` m/s, gaps ``U[2, 60]`` m, any
   lateral state in ``[−0.8, 4.3]`` m × ``[−2, 2]`` m/s, random piecewise-constant ``L1`` plans within the
   mechanical limits.
@@ -64,10 +66,13 @@ def sample_observations(n: int, rng: np.random.Generator, params: Params, cfg: D
     parts = []
     for size, paper in ((n_paper, True), (n - n_paper, False)):
         if paper:
-            v_x = rng.uniform(24.0, 32.0, size)
-            v_x_l, v_x_f = rng.uniform(20.0, 31.0, size), rng.uniform(24.0, 32.0, size)
-            gap_l, gap_f = rng.uniform(5.0, 30.0, size), rng.uniform(5.0, 30.0, size)
             start = rng.random(size) < 1 / 3
+            delta_p = rng.uniform(15.0, 24.0, size)  # the paper's δp ~ U[17, 22], widened
+            v_x = np.where(start, rng.uniform(28.0, 32.0, size), rng.uniform(24.0, 32.0, size))
+            v_x_l = np.where(start, rng.uniform(29.5, 30.5, size), rng.uniform(20.0, 31.0, size))
+            v_x_f = np.where(start, rng.uniform(29.5, 30.5, size), rng.uniform(24.0, 32.0, size))
+            gap_l = np.where(start, delta_p, rng.uniform(5.0, 30.0, size))
+            gap_f = np.where(start, delta_p, rng.uniform(5.0, 30.0, size))
             p_y = np.where(start, 0.0, rng.uniform(-0.3, 3.8, size))
             v_y = np.where(start, 0.0, rng.uniform(-1.2, 1.5, size))
         else:

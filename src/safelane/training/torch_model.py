@@ -49,6 +49,8 @@ class TorchPlanner(nn.Module):
         super().__init__()
         self.activation, self.hidden = activation, tuple(hidden)
         self.bounds = {h: (float(lo), float(hi)) for h, (lo, hi) in bounds.items()}
+        # float64 copies keep the NumPy planner's normalisation exact through a round trip
+        self.mean64, self.std64 = np.asarray(mean, np.float64).copy(), np.asarray(std, np.float64).copy()
         self.register_buffer("mean", torch.as_tensor(np.asarray(mean), dtype=torch.float32))
         self.register_buffer("std", torch.as_tensor(np.asarray(std), dtype=torch.float32))
         lo = [self.bounds[h][0] for h in HEADS]
@@ -74,8 +76,8 @@ def to_planner(module: TorchPlanner, metadata: dict | None = None) -> MLPPlanner
         )
     return MLPPlanner(
         layers=layers,
-        mean=module.mean.cpu().numpy().astype(np.float64),
-        std=module.std.cpu().numpy().astype(np.float64),
+        mean=module.mean64.copy(),
+        std=module.std64.copy(),
         bounds=dict(module.bounds),
         activation=module.activation,
         metadata=dict(metadata or {}),
