@@ -41,9 +41,9 @@ class SimConfig(BaseModel):
     assessment: Literal["observed", "truth"] = Field(
         "observed", description="'truth' replaces the aggressiveness assessment by F's true type."
     )
-    sensor_noise_std: float = Field(0.0, ge=0.0, description="Std of the ego's speed measurements of F, L1 [m/s].")
+    sensor_noise_std: float = Field(0.0, ge=0.0, description="Std of the ego's measurements of F's speed [m/s].")
     assess_window: int = Field(5, ge=2, description="Observations in the assessment's slope window.")
-    assess_threshold: float = Field(0.2, gt=0.0, description="Relative-acceleration evidence threshold [m/s²].")
+    assess_threshold: float = Field(0.2, gt=0.0, description="Acceleration evidence threshold of the assessment [m/s²].")
     follower_open_decel: float = Field(0.5, ge=0.0, description="Collaborative F's gap-opening deceleration [m/s²].")
     follower_open_gap_m: float = Field(3.0, ge=0.0, description="How much a collaborative F opens the gap [m].")
     l1_plan_steps: int = Field(10, ge=1, description="Periods of L1's planned acceleration shared over V2X.")
@@ -280,7 +280,7 @@ class _Sim:
         ex, ey, evx, evy = s.ego
         obs = self.observe(s)
         noise = cfg.sensor_noise_std * counter_normal(self.seed, b.scenario_id, s.step, 0)
-        belief = assess.update(s.belief, s.v[:, 0] - s.v[:, 1] + noise, s.t, dt, cfg.assess_threshold)
+        belief = assess.update(s.belief, s.v[:, 0] + noise, s.t, dt, cfg.assess_threshold)
         l1_decel, f_aggr = self.worst_case(s, belief)
         a_x, a_y = self.nominal(obs, prm)
         a_x = np.clip(np.asarray(a_x, float), -prm.a_x_d, prm.a_x_a)
