@@ -43,7 +43,7 @@ class SimConfig(BaseModel):
     )
     sensor_noise_std: float = Field(0.0, ge=0.0, description="Std of the ego's measurements of F's speed [m/s].")
     assess_window: int = Field(5, ge=2, description="Observations in the assessment's slope window.")
-    assess_threshold: float = Field(0.2, gt=0.0, description="Acceleration evidence threshold of the assessment [m/s²].")
+    assess_threshold: float = Field(0.2, gt=0.0, description="Evidence threshold on F's acceleration [m/s²].")
     follower_open_decel: float = Field(0.5, ge=0.0, description="Collaborative F's gap-opening deceleration [m/s²].")
     follower_open_gap_m: float = Field(3.0, ge=0.0, description="How much a collaborative F opens the gap [m].")
     l1_plan_steps: int = Field(10, ge=1, description="Periods of L1's planned acceleration shared over V2X.")
