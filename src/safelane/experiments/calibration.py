@@ -8,7 +8,10 @@ Searched (plausible physical ranges, and why):
 * ``a_y_m`` ∈ [1.0, 3.5] m/s² — lateral acceleration of lane changes (comfort ≈ 1–2, evasive ≈ 3–4);
 * ``p_m`` ∈ [5.0, 10.0] m — centre-to-centre margin: at least a car length (4.8 m), below the paper's smallest
   initial gap of 17 m minus the room a lane change needs;
-* ``horizon_s`` ∈ [6, 12] s — the paper's simulation horizon is unstated; its Figure 5 completes in ≈ 3 s.
+* ``horizon_s`` ∈ [6, 12] s — the paper's simulation horizon is unstated; its Figure 5 completes in ≈ 3 s;
+* the nominal (expert) planner's lateral natural frequency ``omega`` ∈ [0.5, 1.2] rad/s (a lane change of
+  ≈ 1.5–3.5 s to the boundary) and its L1-speed tracking gain ``k_v`` ∈ [0, 1] 1/s — the paper's NN planners
+  are unpublished, so how eagerly the ego changes lanes and matches L1's braking is ours to fit.
 
 Fixed: lane width 3.5 m, vehicle 4.8 × 1.8 m, ``dt`` 0.1 s, the behaviour models and planner of the simulator.
 
@@ -21,7 +24,7 @@ draw is seeded, so the procedure is repeatable. The N = 3 rows are never used.
 from __future__ import annotations
 
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
@@ -29,6 +32,7 @@ import pandas as pd
 import yaml
 
 from ..params import Params
+from ..planners.base import ExpertPlanner
 from ..sim.engine import SimConfig
 from ..sim.metrics import summarize
 from .grid import Cell, run_cells
@@ -41,8 +45,11 @@ SEARCH_SPACE: dict[str, tuple[float, float]] = {
     "a_y_m": (1.0, 3.5),
     "p_m": (5.0, 10.0),
     "horizon_s": (6.0, 12.0),
+    "omega": (0.5, 1.2),
+    "k_v": (0.0, 1.0),
 }
 _SIM_KEYS = ("horizon_s",)
+_PLANNER_KEYS = ("k_p", "k_v", "omega")
 
 PRESET_DIR = Path(__file__).resolve().parent.parent / "presets"
 
@@ -55,12 +62,21 @@ class Preset:
     params: Params
     sim: SimConfig
     meta: dict
+    planner: dict = field(default_factory=dict)  # ExpertPlanner keyword arguments
+
+    def nominal(self) -> ExpertPlanner:
+        """The nominal planner this preset was calibrated with."""
+        return ExpertPlanner(**self.planner)
 
     def to_yaml(self) -> str:
-        return yaml.safe_dump(
-            {"name": self.name, "params": self.params.model_dump(), "sim": self.sim.model_dump(), "meta": self.meta},
-            sort_keys=False,
-        )
+        data = {
+            "name": self.name,
+            "params": self.params.model_dump(),
+            "sim": self.sim.model_dump(),
+            "planner": dict(self.planner),
+            "meta": self.meta,
+        }
+        return yaml.safe_dump(data, sort_keys=False)
 
 
 def load_preset(name_or_path: str | Path = "paper") -> Preset:
@@ -88,18 +104,26 @@ def published_cells() -> list[Cell]:
     return [Cell(p, n, d) for (n, d) in TABLE1 for p in PLANNERS]
 
 
-def candidate_to_settings(candidate: dict[str, float], base: Preset | None = None) -> tuple[Params, SimConfig]:
-    """Split a search point into ``Params`` and ``SimConfig``."""
-    params = (base.params if base else Params()).model_dump()
-    sim = (base.sim if base else SimConfig()).model_dump()
+def candidate_to_preset(candidate: dict[str, float], meta: dict | None = None) -> Preset:
+    """Split a search point into ``Params``, ``SimConfig`` and planner settings."""
+    params, sim, planner = Params().model_dump(), SimConfig().model_dump(), {}
     for key, value in candidate.items():
-        (sim if key in _SIM_KEYS else params)[key] = float(value)
-    return Params(**params), SimConfig(**sim)
+        target = sim if key in _SIM_KEYS else planner if key in _PLANNER_KEYS else params
+        target[key] = float(value)
+    return Preset("paper", Params(**params), SimConfig(**sim), meta or {}, planner)
 
 
-def score(params: Params, sim: SimConfig, samples: int, seed: int, workers: int = 2) -> tuple[float, pd.DataFrame]:
+def score(preset: Preset, samples: int, seed: int, workers: int = 1) -> tuple[float, pd.DataFrame]:
     """Loss (mean absolute success-rate difference over the published cells) and the per-cell fit."""
-    table = run_cells(published_cells(), samples, seed, params=params, config=sim, workers=workers)
+    table = run_cells(
+        published_cells(),
+        samples,
+        seed,
+        params=preset.params,
+        config=preset.sim,
+        nominal=preset.nominal(),
+        workers=workers,
+    )
     ours = summarize(table, by=("planner", "n_leaders", "decel"))
     fit = pd.DataFrame(table1_long()).merge(ours, on=["planner", "n_leaders", "decel"])
     fit["abs_diff"] = (fit["success_rate"] - fit["paper_success"]).abs()
@@ -119,45 +143,66 @@ def latin_hypercube(n: int, space: dict[str, tuple[float, float]], rng: np.rando
 def calibrate(
     candidates: int = 32,
     samples: int = 100,
+    refine: int = 16,
     finalists: int = 4,
     final_samples: int = 400,
     seed: int = 0,
     on_candidate: Callable[[int, dict, float], None] | None = None,
+    workers: int = 1,
 ) -> tuple[Preset, pd.DataFrame]:
     """Run the search; returns the best preset and the table of all scored candidates."""
     rng = np.random.default_rng(seed)
-    points = [{k: v for k, v in Params().model_dump().items() if k in SEARCH_SPACE} | {"horizon_s": 10.0}]
+    defaults = Params().model_dump() | {
+        "horizon_s": SimConfig().horizon_s,
+        "omega": ExpertPlanner().omega,
+        "k_v": ExpertPlanner().k_v,
+    }
+    points = [{k: v for k, v in defaults.items() if k in SEARCH_SPACE}]
     points += latin_hypercube(candidates - 1, SEARCH_SPACE, rng)
     rows = []
     for i, point in enumerate(points):
-        params, sim = candidate_to_settings(point)
-        loss, _ = score(params, sim, samples, seed)
+        loss, _ = score(candidate_to_preset(point), samples, seed, workers)
         rows.append({**point, "loss": loss, "stage": 1})
         if on_candidate:
             on_candidate(i, point, loss)
+    # Local refinement: Gaussian steps around the incumbent, shrinking (a (1+1) evolution strategy).
+    incumbent = min(rows, key=lambda r: r["loss"])
+    scale = 0.15
+    for j in range(refine):
+        point = {}
+        for key, (lo, hi) in SEARCH_SPACE.items():
+            step = rng.normal(0.0, scale * (hi - lo))
+            point[key] = round(float(np.clip(incumbent[key] + step, lo, hi)), 3)
+        loss, _ = score(candidate_to_preset(point), samples, seed, workers)
+        rows.append({**point, "loss": loss, "stage": 1})
+        if on_candidate:
+            on_candidate(len(points) + j, point, loss)
+        if loss < incumbent["loss"]:
+            incumbent = rows[-1]
+        else:
+            scale = max(0.03, scale * 0.85)
     stage1 = pd.DataFrame(rows).sort_values("loss")
     best_loss, best_point, best_fit = np.inf, None, None
     for _, row in stage1.head(finalists).iterrows():
         point = {k: float(row[k]) for k in SEARCH_SPACE}
-        params, sim = candidate_to_settings(point)
-        loss, fit = score(params, sim, final_samples, seed + 1)
+        loss, fit = score(candidate_to_preset(point), final_samples, seed + 1, workers)
         rows.append({**point, "loss": loss, "stage": 2})
         if on_candidate:
             on_candidate(len(rows) - 1, point, loss)
         if loss < best_loss:
             best_loss, best_point, best_fit = loss, point, fit
-    params, sim = candidate_to_settings(best_point)
     meta = {
         "loss_mean_abs_diff": round(best_loss, 4),
-        "procedure": f"latin hypercube, {candidates} candidates x {samples} samples/cell, "
-        f"best {finalists} rescored with {final_samples} samples/cell",
+        "procedure": f"latin hypercube, {candidates} candidates x {samples} samples/cell, {refine} local "
+        f"refinement steps, best {finalists} rescored with {final_samples} samples/cell",
         "seed": seed,
         "search_space": {k: list(v) for k, v in SEARCH_SPACE.items()},
         "fitted_to": "Table 1, N in {1, 10} (40 cells); N = 3 never used",
-        "command": f"safelane calibrate --candidates {candidates} --samples {samples} --finalists {finalists} "
+        "command": f"safelane calibrate --candidates {candidates} --samples {samples} --refine {refine} "
+        f"--finalists {finalists} "
         f"--final-samples {final_samples} --seed {seed}",
         "per_cell": best_fit[["n_leaders", "decel", "planner", "paper_success", "success_rate"]]
         .round(4)
         .to_dict("records"),
     }
-    return Preset("paper", params, sim, meta), pd.DataFrame(rows)
+    return candidate_to_preset(best_point, meta), pd.DataFrame(rows)

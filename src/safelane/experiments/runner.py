@@ -46,6 +46,7 @@ def run_experiment(
     exp = get_experiment(name)
     cfg = config or exp.default_config(quick)
     preset = preset or load_preset("paper")
+    nominal = nominal or preset.nominal()
     start = time.perf_counter()
     if exp.cells is None:
         trace = _trace_example(cfg, preset, seed, nominal)
