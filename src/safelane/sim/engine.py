@@ -8,12 +8,10 @@ planner → supervisor → other vehicles act → exact integration → continuo
 from __future__ import annotations
 
 import dataclasses
-from dataclasses import dataclass, field
-from typing import Literal
+from dataclasses import dataclass
 
 import numpy as np
 import pandas as pd
-from pydantic import BaseModel, ConfigDict, Field
 
 from ..params import Params
 from ..planners.base import ExpertPlanner, NominalPlanner, Observation
@@ -25,29 +23,12 @@ from ..safety.lateral import LATERAL_TOL_M
 from . import assessment as assess
 from .behaviours import follower_accel, leader_accels, responsible_accel
 from .checks import ego_checks, lane_checks
+from .config import SimConfig
 from .kinematics import Motion
+from .results import SimResult, results_table, trace_rows
 from .rng import counter_normal, counter_uniform
 from .scenario import ScenarioBatch, ScenarioConfig, paper_scenarios
 from .supervisor import ABORT, HESITATE, PROCEED, check_candidate, hesitate_lateral, plan_motion, select_motion
-
-
-class SimConfig(BaseModel):
-    """Settings of a simulation run (not of the scenario distribution)."""
-
-    model_config = ConfigDict(frozen=True, extra="forbid", allow_inf_nan=False)
-
-    horizon_s: float = Field(10.0, gt=0.0, description="Simulated time [s] (our assumption; the paper's is unstated).")
-    brake_start_s: float = Field(0.0, ge=0.0, description="When L(N+1) starts its sudden braking [s] (paper: t = 0).")
-    assessment: Literal["observed", "truth"] = Field(
-        "observed", description="'truth' replaces the aggressiveness assessment by F's true type."
-    )
-    sensor_noise_std: float = Field(0.0, ge=0.0, description="Std of the ego's measurements of F's speed [m/s].")
-    assess_window: int = Field(5, ge=2, description="Observations in the assessment's slope window.")
-    assess_threshold: float = Field(0.2, gt=0.0, description="Evidence threshold on F's acceleration [m/s²].")
-    follower_open_decel: float = Field(0.5, ge=0.0, description="Collaborative F's gap-opening deceleration [m/s²].")
-    follower_open_gap_m: float = Field(3.0, ge=0.0, description="How much a collaborative F opens the gap [m].")
-    l1_plan_steps: int = Field(10, ge=1, description="Periods of L1's planned acceleration shared over V2X.")
-    supervised: bool = Field(True, description="False runs the nominal planner without the safety supervisor.")
 
 
 @dataclass(frozen=True)
@@ -72,20 +53,6 @@ class SimState:
     min_gap_f: np.ndarray
     min_gap_l1: np.ndarray
     counts: np.ndarray  # (B, 3) proceed / hesitate / abort
-
-
-@dataclass
-class SimResult:
-    """Per-scenario table, optional per-step trace and recorded observations."""
-
-    table: pd.DataFrame
-    trace: pd.DataFrame | None = None
-    observations: list[Observation] = field(default_factory=list)
-
-    def summary(self) -> pd.DataFrame:
-        from .metrics import summarize
-
-        return summarize(self.table)
 
 
 def simulate(
@@ -161,8 +128,8 @@ def simulate_batch(
         if record_observations:
             observations.append(obs)
         if trace:
-            rows.append(sim.trace_rows(state, behaviour, trace_limit))
-    table = sim.table(state)
+            rows.append(trace_rows(batch, state, behaviour, trace_limit))
+    table = results_table(batch, state)
     trace_df = pd.concat(rows, ignore_index=True) if trace and rows else None
     return SimResult(table=table, trace=trace_df, observations=observations)
 
@@ -407,60 +374,6 @@ class _Sim:
             min_gap_f=min_gap_f,
             min_gap_l1=min_gap_l1,
             counts=counts,
-        )
-
-    def table(self, s: SimState) -> pd.DataFrame:
-        b = self.b
-        truth = b.follower_aggressive
-        belief = s.belief.aggressive
-        return pd.DataFrame(
-            {
-                "scenario_id": b.scenario_id,
-                "planner": np.asarray(VARIANT_NAMES)[b.variant],
-                "n_leaders": b.n_connected,
-                "decel": b.decel_last,
-                "p_v": b.p_v,
-                "success": s.completed & ~s.collided,
-                "collision": s.collided,
-                "safety_violation": s.violated,
-                "leader_collision": s.leader_collided,
-                "leader_violation": s.leader_violated,
-                "completed": s.completed,
-                "completion_time_s": s.t_complete,
-                "min_gap_follower_m": np.where(np.isinf(s.min_gap_f), np.nan, s.min_gap_f),
-                "min_gap_leader_m": np.where(np.isinf(s.min_gap_l1), np.nan, s.min_gap_l1),
-                "n_proceed": s.counts[:, 0],
-                "n_hesitate": s.counts[:, 1],
-                "n_abort": s.counts[:, 2],
-                "follower_connected": b.connected[:, 0],
-                "follower_aggressive": truth,
-                "assessed_aggressive": belief,
-                "assessment_correct": belief == truth,
-                "assessment_time_s": s.belief.first_collaborative_s,
-            }
-        )
-
-    def trace_rows(self, s: SimState, behaviour, limit: int) -> pd.DataFrame:
-        n = min(limit, len(self.b))
-        ex, ey, evx, evy = s.ego
-        return pd.DataFrame(
-            {
-                "scenario_id": self.b.scenario_id[:n],
-                "planner": np.asarray(VARIANT_NAMES)[self.b.variant[:n]],
-                "t": s.t,
-                "ego_x": ex[:n],
-                "ego_y": ey[:n],
-                "ego_vx": evx[:n],
-                "ego_vy": evy[:n],
-                "behaviour": behaviour[:n],
-                "f_x": s.x[:n, 0],
-                "f_v": s.v[:n, 0],
-                "l1_x": s.x[:n, 1],
-                "l1_v": s.v[:n, 1],
-                "completed": s.completed[:n],
-                "violated": s.violated[:n],
-                "collided": s.collided[:n],
-            }
         )
 
 

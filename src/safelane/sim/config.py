@@ -1,0 +1,26 @@
+"""Settings of a simulation run (not of the scenario distribution)."""
+
+from __future__ import annotations
+
+from typing import Literal
+
+from pydantic import BaseModel, ConfigDict, Field
+
+
+class SimConfig(BaseModel):
+    """Settings of a simulation run (not of the scenario distribution)."""
+
+    model_config = ConfigDict(frozen=True, extra="forbid", allow_inf_nan=False)
+
+    horizon_s: float = Field(10.0, gt=0.0, description="Simulated time [s] (our assumption; the paper's is unstated).")
+    brake_start_s: float = Field(0.0, ge=0.0, description="When L(N+1) starts its sudden braking [s] (paper: t = 0).")
+    assessment: Literal["observed", "truth"] = Field(
+        "observed", description="'truth' replaces the aggressiveness assessment by F's true type."
+    )
+    sensor_noise_std: float = Field(0.0, ge=0.0, description="Std of the ego's measurements of F's speed [m/s].")
+    assess_window: int = Field(5, ge=2, description="Observations in the assessment's slope window.")
+    assess_threshold: float = Field(0.2, gt=0.0, description="Evidence threshold on F's acceleration [m/s²].")
+    follower_open_decel: float = Field(0.5, ge=0.0, description="Collaborative F's gap-opening deceleration [m/s²].")
+    follower_open_gap_m: float = Field(3.0, ge=0.0, description="How much a collaborative F opens the gap [m].")
+    l1_plan_steps: int = Field(10, ge=1, description="Periods of L1's planned acceleration shared over V2X.")
+    supervised: bool = Field(True, description="False runs the nominal planner without the safety supervisor.")

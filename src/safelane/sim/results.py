@@ -1,0 +1,83 @@
+"""What a simulation run returns: the per-scenario table, the optional trace and recorded observations."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+import pandas as pd
+
+from ..planners.base import Observation
+from ..planners.variants import VARIANT_NAMES
+from .scenario import ScenarioBatch
+
+
+@dataclass
+class SimResult:
+    """Per-scenario table, optional per-step trace and recorded observations."""
+
+    table: pd.DataFrame
+    trace: pd.DataFrame | None = None
+    observations: list[Observation] = field(default_factory=list)
+
+    def summary(self) -> pd.DataFrame:
+        from .metrics import summarize
+
+        return summarize(self.table)
+
+
+def results_table(b: ScenarioBatch, s) -> pd.DataFrame:
+    """One row per scenario: outcomes, gaps, behaviour counts, assessment."""
+    truth = b.follower_aggressive
+    belief = s.belief.aggressive
+    return pd.DataFrame(
+        {
+            "scenario_id": b.scenario_id,
+            "planner": np.asarray(VARIANT_NAMES)[b.variant],
+            "n_leaders": b.n_connected,
+            "decel": b.decel_last,
+            "p_v": b.p_v,
+            "success": s.completed & ~s.collided,
+            "collision": s.collided,
+            "safety_violation": s.violated,
+            "leader_collision": s.leader_collided,
+            "leader_violation": s.leader_violated,
+            "completed": s.completed,
+            "completion_time_s": s.t_complete,
+            "min_gap_follower_m": np.where(np.isinf(s.min_gap_f), np.nan, s.min_gap_f),
+            "min_gap_leader_m": np.where(np.isinf(s.min_gap_l1), np.nan, s.min_gap_l1),
+            "n_proceed": s.counts[:, 0],
+            "n_hesitate": s.counts[:, 1],
+            "n_abort": s.counts[:, 2],
+            "follower_connected": b.connected[:, 0],
+            "follower_aggressive": truth,
+            "assessed_aggressive": belief,
+            "assessment_correct": belief == truth,
+            "assessment_time_s": s.belief.first_collaborative_s,
+        }
+    )
+
+
+def trace_rows(b: ScenarioBatch, s, behaviour, limit: int) -> pd.DataFrame:
+    """Per-step rows of the first ``limit`` scenarios."""
+    n = min(limit, len(b))
+    ex, ey, evx, evy = s.ego
+    return pd.DataFrame(
+        {
+            "scenario_id": b.scenario_id[:n],
+            "planner": np.asarray(VARIANT_NAMES)[b.variant[:n]],
+            "t": s.t,
+            "ego_x": ex[:n],
+            "ego_y": ey[:n],
+            "ego_vx": evx[:n],
+            "ego_vy": evy[:n],
+            "behaviour": behaviour[:n],
+            "f_x": s.x[:n, 0],
+            "f_v": s.v[:n, 0],
+            "l1_x": s.x[:n, 1],
+            "l1_v": s.v[:n, 1],
+            "completed": s.completed[:n],
+            "violated": s.violated[:n],
+            "collided": s.collided[:n],
+        }
+    )
