@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 
 import scenarios
-from safelane import Params
+from safelane import Params, safety
 from safelane.safety import (
     evasion_exists,
     follower_position,
@@ -278,3 +278,20 @@ def test_params_are_frozen():
     with _raises_naming("a_x_d"):
         params.a_x_d = 6.0
     assert params.a_x_d == 8.0
+
+
+@pytest.mark.parametrize(
+    "call",
+    [
+        lambda prm: safety.worst_case_leader_decel([20.0, 40.0], [30.0, 30.0], [0.5], prm),
+        lambda prm: safety.leader_position(0.0, 30.0, 2.0, 1.0, prm),
+        lambda prm: safety.lateral_evasion_time(1.0, 0.2, prm),
+        lambda prm: safety.longitudinal_evasion(0.0, 30.0, 20.0, 30.0, 2.0, 1.0, prm),
+        lambda prm: safety.follower_position(-20.0, 30.0, True, 1.0, prm),
+        lambda prm: safety.evasion_exists(0.0, 1.0, 30.0, 0.2, 20.0, 30.0, 2.0, -20.0, 30.0, True, prm),
+        lambda prm: safety.plan_evasion(0.0, 1.0, 30.0, 0.2, 20.0, 30.0, 2.0, -20.0, 30.0, True, prm),
+    ],
+)
+def test_params_must_be_params(call):
+    with pytest.raises(ValueError, match=r"params must be a safelane\.Params"):
+        call({"a_x_d": 8.0})

@@ -11,9 +11,16 @@ from collections.abc import Iterable, Mapping
 
 import numpy as np
 
+from ..params import Params
 from ._backend import ARRAY, SCALAR
 
 _SCALAR_TYPES = (int, float, bool, np.floating, np.integer, np.bool_)
+
+
+def check_params(params: object) -> None:
+    """``params`` must be a :class:`safelane.Params` (a dict or anything else is a clear error)."""
+    if not isinstance(params, Params):
+        raise ValueError(f"params must be a safelane.Params; got {type(params).__name__}")
 
 
 def _is_scalar(value: object) -> bool:

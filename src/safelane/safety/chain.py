@@ -20,7 +20,7 @@ import numpy as np
 
 from ..params import Params
 from ._backend import ARRAY, INF, SCALAR
-from ._checks import bool_array, finish, float_array, prepare
+from ._checks import bool_array, check_params, finish, float_array, prepare
 
 
 def min_follow_decel(xp, slack, v_f, v_l, a_l):
@@ -78,6 +78,7 @@ def leader_chain(p, v, promise_decel, params: Params, *, human_driven=None) -> C
     ``L_i`` brakes at ``max(a_m_d_i, z_i)``: its promise, or the least it needs (an expected violation).
     The loop runs over the chain, not the batch: each link depends on the one ahead (a scan).
     """
+    check_params(params)
     p = _as_chain("p", p)
     v = _as_chain("v", v)
     n_links = p.shape[-1] - 1
@@ -159,6 +160,7 @@ def leader_position(p, v, decel, t, params: Params):
 
     All arguments broadcast; ``decel`` in ``[0, a_x_d]``, ``v >= 0``, ``t >= 0``.
     """
+    check_params(params)
     xp, a, shape = prepare(
         {"p": p, "v": v, "decel": decel, "t": t},
         nonneg=("v", "decel", "t"),

@@ -24,7 +24,7 @@ import numpy as np
 
 from ..params import Params
 from ._backend import ARRAY
-from ._checks import bool_array, finish, float_array, prepare
+from ._checks import bool_array, check_params, finish, float_array, prepare
 from .chain import braked_position
 from .lateral import lateral_core, lateral_state
 from .longitudinal import FEASIBILITY_TOL_M, ego_position, ego_speed, longitudinal_core
@@ -54,6 +54,7 @@ def follower_offset(xp, t, f_p, f_v, aggressive, prm: Params, f_stop=None):
 def follower_position(p, v, aggressive, t, params: Params):
     """Worst-case follower position at ``t`` (Eq. 9): aggressive accelerates at ``a_x_a``, collaborative
     brakes at ``a_x_d`` until it stops. Arguments broadcast; ``v >= 0``, ``t >= 0``."""
+    check_params(params)
     xp, a, shape = prepare({"p": p, "v": v, "aggressive": aggressive, "t": t}, nonneg=("v", "t"), bools=("aggressive",))
     with np.errstate(all="ignore"):
         out = follower_offset(xp, a["t"], a["p"], a["v"], a["aggressive"], params)
@@ -223,6 +224,7 @@ def _prepare_evasion(
     leader_human,
     follower_human,
 ):
+    check_params(params)
     values = dict(zip(_PLAN_INPUTS, (ego_px, ego_py, ego_vx, ego_vy, l1_p, l1_v, l1_decel, f_p, f_v), strict=False))
     values.update(follower_aggressive=follower_aggressive, leader_human=leader_human, follower_human=follower_human)
     xp, a, shape = prepare(

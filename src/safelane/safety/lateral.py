@@ -20,7 +20,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..params import Params
-from ._checks import finish, prepare
+from ._checks import check_params, finish, prepare
 
 #: Intrusions up to this many metres beyond ``y_s`` count as none (round-off of the exact return profile).
 LATERAL_TOL_M = 1e-9
@@ -71,6 +71,7 @@ def lateral_evasion_time(p_y, v_y, params: Params):
         ``(t_y_f, t_switch)``: float64 arrays of the broadcast shape. ``t_y_f = 0`` when there is nothing to
         evade; ``t_switch`` is when the lateral acceleration flips from ``−a_y_m`` to ``+a_y_m``.
     """
+    check_params(params)
     xp, a, shape = prepare({"p_y": p_y, "v_y": v_y})
     with np.errstate(all="ignore"):
         t_y_f, t_1, *_ = lateral_core(xp, a["p_y"], a["v_y"], params)

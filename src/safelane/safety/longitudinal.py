@@ -33,7 +33,7 @@ import numpy as np
 
 from ..params import Params
 from ._backend import INF
-from ._checks import finish, prepare
+from ._checks import check_params, finish, prepare
 from .chain import braked_position
 
 #: Gaps within this many metres of the margin count as satisfied (float round-off of the closed forms).
@@ -160,6 +160,7 @@ def longitudinal_evasion(ego_px, ego_vx, l1_p, l1_v, l1_decel, t_y_f, params: Pa
 
     Returns :class:`LongitudinalEvasion`; ``min_gap`` is the smallest ``p_1 − p`` over ``[0, t_y_f]``.
     """
+    check_params(params)
     xp, a, shape = prepare(
         {"ego_px": ego_px, "ego_vx": ego_vx, "l1_p": l1_p, "l1_v": l1_v, "l1_decel": l1_decel, "t_y_f": t_y_f},
         nonneg=("ego_vx", "l1_v", "l1_decel", "t_y_f"),
