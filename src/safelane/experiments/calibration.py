@@ -88,14 +88,19 @@ def load_preset(name_or_path: str | Path = "paper") -> Preset:
         available = ", ".join(sorted(p.stem for p in PRESET_DIR.glob("*.yaml"))) or "none"
         raise FileNotFoundError(f"preset {name_or_path!r} not found (available: {available})")
     data = yaml.safe_load(path.read_text())
-    unknown = set(data) - {"name", "params", "sim", "meta"}
+    unknown = set(data) - {"name", "params", "sim", "planner", "meta"}
     if unknown:
         raise ValueError(f"{path}: unknown preset keys {sorted(unknown)}")
+    planner = data.get("planner") or {}
+    bad = set(planner) - set(_PLANNER_KEYS)
+    if bad:
+        raise ValueError(f"{path}: unknown planner keys {sorted(bad)} (allowed: {', '.join(_PLANNER_KEYS)})")
     return Preset(
         name=data.get("name", path.stem),
         params=Params(**data.get("params", {})),
         sim=SimConfig(**data.get("sim", {})),
         meta=data.get("meta", {}),
+        planner=planner,
     )
 
 
