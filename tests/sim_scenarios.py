@@ -49,10 +49,12 @@ def mixed_campaign_batch(
     return concat(parts)
 
 
-def leaders_only_worst_batch(samples: int, rng: np.random.Generator, planner: str = "CV_all") -> ScenarioBatch:
-    """The hardest leader chain of the campaign: N = 10 connected leaders behind an L(N+1) braking at 8 m/s²
-    (the mechanical limit) from t = 0, with some human-driven leaders."""
-    return paper_scenarios(planner, 10, 8.0, samples, rng, MIXED_TRAFFIC)
+def hardest_braking_chain(
+    samples: int, rng: np.random.Generator, n_leaders: int = 10, planner: str = "CV_all"
+) -> ScenarioBatch:
+    """The hardest leader chains of the campaign: ``n_leaders`` connected leaders (some human-driven) behind an
+    L(N+1) braking at 8 m/s² — the mechanical limit — from t = 0."""
+    return paper_scenarios(planner, n_leaders, 8.0, samples, rng, MIXED_TRAFFIC)
 
 
 # --- motions over one period -------------------------------------------------------------------------------------
