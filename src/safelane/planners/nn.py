@@ -32,7 +32,9 @@ from .features import FEATURE_NAMES, FEATURES_VERSION, features
 FORMAT = "safelane-mlp-planner"
 FORMAT_VERSION = 1
 HEADS = ("a_x", "a_y")
-ACTIVATIONS = {"tanh": np.tanh, "relu": lambda h: np.maximum(h, 0.0, out=h)}
+#: Hidden activations, applied in place.
+ACTIVATIONS = {"tanh": lambda h: np.tanh(h, out=h), "relu": lambda h: np.maximum(h, 0.0, out=h)}
+CHUNK_ROWS = 4096
 DEFAULT_MODEL = "mlp_default"
 
 Layers = tuple[tuple[np.ndarray, np.ndarray], ...]
@@ -75,22 +77,29 @@ class MLPPlanner:
 
     # ------------------------------------------------------------------ inference
     def predict(self, x: np.ndarray) -> np.ndarray:
-        """Bounded actions ``(B, 2)`` [m/s²] (columns ``a_x``, ``a_y``) for raw features ``x`` ``(B, F)``."""
+        """Bounded actions ``(B, 2)`` [m/s²] (columns ``a_x``, ``a_y``) for raw features ``x`` ``(B, F)``.
+
+        Rows go through in chunks of :data:`CHUNK_ROWS` so the hidden activations stay in cache; bias and
+        activation are applied in place."""
         x = np.asarray(x, dtype=np.float64)
         if x.ndim != 2 or x.shape[1] != self.mean.shape[0]:
             raise ValueError(f"features must have shape (B, {self.mean.shape[0]}), got {x.shape}")
-        z0 = ((x - self.mean) / self.std).astype(np.float32)
         act = ACTIVATIONS[self.activation]
         out = np.empty((x.shape[0], len(HEADS)))
+        for s in range(0, x.shape[0], CHUNK_ROWS):
+            z0 = ((x[s : s + CHUNK_ROWS] - self.mean) / self.std).astype(np.float32)
+            for j, head in enumerate(HEADS):
+                h = z0
+                layers = self.layers[head]
+                for w, b in layers[:-1]:
+                    h = h @ w
+                    h += b
+                    act(h)
+                w, b = layers[-1]
+                out[s : s + CHUNK_ROWS, j] = np.tanh(h @ w + b)[:, 0]
         for j, head in enumerate(HEADS):
-            h = z0
-            layers = self.layers[head]
-            for w, b in layers[:-1]:
-                h = act(h @ w + b)
-            w, b = layers[-1]
-            z = np.tanh(h @ w + b)[:, 0]
             lo, hi = self.bounds[head]
-            out[:, j] = 0.5 * (lo + hi) + 0.5 * (hi - lo) * z.astype(np.float64)
+            out[:, j] = 0.5 * (lo + hi) + 0.5 * (hi - lo) * out[:, j]
         return out
 
     def __call__(self, obs: Observation, params: Params) -> tuple[np.ndarray, np.ndarray]:

@@ -31,7 +31,7 @@ class SimCell(BaseModel):
 
 
 def _default_cells() -> list[SimCell]:
-    return [SimCell(variant="CV_all", n_leaders=n, decel=d) for n in (1, 3, 10) for d in (2.0, 4.0, 6.0)]
+    return [SimCell(variant="CV_all", n_leaders=n, decel=d) for n in (1, 5, 10) for d in (2.0, 4.0, 6.0)]
 
 
 class DaggerConfig(BaseModel):

@@ -7,7 +7,8 @@ from ``torch.manual_seed(seed)`` inside :func:`train`, on ``threads`` CPU thread
 
 Loss: mean squared error of the actions divided by each head's half range (``a_x`` and ``a_y`` errors weigh
 alike). Adam, learning rate halved on validation plateaus, early stopping on the validation loss (best weights
-restored). Files written to ``out_dir``: ``model.npz`` (+ ``model.onnx``), ``metrics.csv`` (one row per epoch),
+restored). Files written to ``out_dir``: ``model.npz`` (+ ``model.onnx``), ``model.json`` (the model's metadata,
+training summary and closed-loop results: a machine-readable model card), ``metrics.csv`` (one row per epoch),
 ``summary.json``, ``config.yaml`` and, when evaluation cells are configured, ``closed_loop.csv``.
 """
 
@@ -189,6 +190,10 @@ def train(cfg: TrainConfig, out_dir: Path | str, progress: bool = True) -> Train
             t0 = time.perf_counter()
             _fit(module, torch, as_tensors(parts), cfg, cfg.dagger.epochs_per_round, rng, bar, r, log)
             timings["fit_s"] += time.perf_counter() - t0
+    # A fresh test set from the paper component alone: the error where the experiments happen.
+    x_test, y_test = label(sample_observations(max(cfg.data.n_states // 20, 100), rng, prm,
+                                               cfg.data.model_copy(update={"paper_fraction": 1.0})), prm, teacher)
+    test_rmse = np.sqrt(((to_planner(module).predict(x_test) - y_test) ** 2).mean(axis=0))
     metrics = pd.DataFrame(log)
     last = metrics[metrics["round"] == metrics["round"].max()]
     best = last.loc[last["val_loss"].idxmin()]  # the weights restored by early stopping
@@ -200,6 +205,8 @@ def train(cfg: TrainConfig, out_dir: Path | str, progress: bool = True) -> Train
         "n_val": len(parts[2]),
         "val_loss": float(best["val_loss"]),
         **{f"val_rmse_{h}_mps2": float(best[f"val_rmse_{h}"]) for h in HEADS},
+        **{f"test_paper_rmse_{h}_mps2": float(r) for h, r in zip(HEADS, test_rmse, strict=True)},
+        "n_test_paper": len(x_test),
         "epochs": len(metrics),
         "timings_s": {k: round(v, 2) for k, v in timings.items()},
     }
@@ -222,4 +229,6 @@ def train(cfg: TrainConfig, out_dir: Path | str, progress: bool = True) -> Train
         table.to_csv(out_dir / "closed_loop.csv", index=False)
         summary["timings_s"]["evaluation_s"] = round(time.perf_counter() - t0, 2)
     (out_dir / "summary.json").write_text(json.dumps(summary, indent=2))
+    card = {**planner.full_metadata(), "closed_loop": json.loads(table.to_json(orient="records")) if ev.cells else []}
+    (out_dir / "model.json").write_text(json.dumps(card, indent=2))
     return TrainResult(planner=planner, summary=summary, metrics=metrics, out_dir=out_dir)
