@@ -55,7 +55,11 @@ def run_experiment(
     table = run_cells(
         cells, cfg.samples, seed, params=preset.params, config=preset.sim, nominal=nominal, workers=workers
     )
-    summary = summarize(table, by=SUMMARY_KEYS)
+    keys = SUMMARY_KEYS
+    if any(c.penetration is not None for c in cells):
+        # The general sampler draws N per scenario: a cell is (planner, decel, p_v, penetration), not split by N.
+        keys = tuple(k for k in SUMMARY_KEYS if k != "n_leaders")
+    summary = summarize(table, by=keys)
     return ExperimentResult(name, cfg, table, summary, None, time.perf_counter() - start)
 
 
