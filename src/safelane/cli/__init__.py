@@ -19,7 +19,9 @@ def _main() -> None:
 
 def _register() -> None:
     # Each subcommand module adds itself to `app`; imports are local so `--help` stays fast.
+    from . import calibrate as _calibrate  # noqa: F401
     from . import check  # noqa: F401
+    from . import reproduce as _reproduce  # noqa: F401
     from . import train as _train  # noqa: F401
 
 
