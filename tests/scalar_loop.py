@@ -1,0 +1,205 @@
+"""The closed loop for one scenario at a time, in Python floats on the scalar safety API. Test helper, not tests.
+
+A straightforward re-implementation of :mod:`safelane.sim.engine`'s step — assessment, worst case by variant,
+expert planner, supervisor (proceed / hesitate / abort with the completion guard and the within-period check),
+leader and follower behaviours, exact integration, per-period checks — calling ``worst_case_leader_decel``,
+``plan_evasion`` and ``EvasionPlan.state`` with Python floats per step, as one would without batching. It is
+the baseline of ``benchmarks/bench_sim.py`` and, in ``tests/test_sim_scalar_loop.py``, an independent check of
+the engine's decisions. Its checks are exact pair minima over each period, lateral-windowed only during an abort
+(where they are sampled at 11 instants), so near-misses may be counted differently from the engine.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from safelane import Params
+from safelane.planners.variants import VARIANT_NAMES, VARIANTS
+from safelane.safety import plan_evasion, worst_case_leader_decel
+
+SAMPLES = np.linspace(0.0, Params().dt, 11)
+LATERAL_TOL_M = 1e-9
+
+
+def _advance(x, v, a, dt):
+    """Exact constant-acceleration step with stopping (Python floats)."""
+    if a < 0.0 and v + a * dt < 0.0:
+        s = v / -a
+        return x + v * s + 0.5 * a * s * s, 0.0
+    return x + v * dt + 0.5 * a * dt * dt, v + a * dt
+
+
+def _pair_min_gap(slack, v_f, a_f, v_l, a_l, dt):
+    """Minimum over the period of ``x_l − x_f`` starting from ``slack`` (both stop rather than reverse)."""
+    best = slack
+    times = [dt]
+    for v, a in ((v_f, a_f), (v_l, a_l)):
+        if a < 0.0 and v / -a < dt:
+            times.append(v / -a)
+    if a_f != a_l:
+        tau = (v_l - v_f) / (a_f - a_l)
+        if 0.0 < tau < dt:
+            times.append(tau)
+    for t in times:
+        xf, _ = _advance(0.0, v_f, a_f, t)
+        xl, _ = _advance(slack, v_l, a_l, t)
+        best = min(best, xl - xf)
+    return best
+
+
+def _min_follow_decel(slack, v_f, v_l, a_l):
+    if slack <= 0.0:
+        return math.inf
+    lead = v_l * v_l / a_l if a_l > 0.0 else (math.inf if v_l > 0.0 else 0.0)
+    dv = v_f - v_l
+    if dv > 0.0 and 2.0 * slack * a_l <= v_l * dv:
+        return a_l + dv * dv / (2.0 * slack)
+    return v_f * v_f / (2.0 * slack + lead)
+
+
+def _responsible_ok(a, slack, v_f, v_l, lead_decel, prm, dt):
+    if _pair_min_gap(slack, v_f, a, v_l, -lead_decel, dt) < 0.0:
+        return False
+    xf, vf = _advance(0.0, v_f, a, dt)
+    xl, vl = _advance(slack, v_l, -lead_decel, dt)
+    return _min_follow_decel(xl - xf, vf, vl, lead_decel) <= prm.a_x_d
+
+
+def _responsible_accel(a_wanted, slack, v_f, v_l, lead_decel, prm, dt):
+    if _responsible_ok(a_wanted, slack, v_f, v_l, lead_decel, prm, dt):
+        return a_wanted
+    lo, hi = -prm.a_x_d, a_wanted
+    for _ in range(12):
+        mid = 0.5 * (lo + hi)
+        lo, hi = (mid, hi) if _responsible_ok(mid, slack, v_f, v_l, lead_decel, prm, dt) else (lo, mid)
+    return lo
+
+
+def loop_scenario(b, i: int, prm: Params, steps: int, open_decel=0.5, open_gap=3.0, window=5, thr=0.2) -> dict:
+    """One scenario of the batch ``b`` through the closed loop, one Python float at a time."""
+    dt = prm.dt
+    variant = VARIANTS[VARIANT_NAMES[int(b.variant[i])]]
+    n = int(b.n_connected[i])
+    k = n + 2
+    x, v = [float(a) for a in b.x[i, :k]], [float(a) for a in b.v[i, :k]]
+    v_desired = list(v)
+    human = [bool(h) for h in b.human[i, :k]]
+    promise_d = [float(a) for a in b.promise_decel[i, :k]]
+    promise_a = [float(a) for a in b.promise_accel[i, :k]]
+    f_conn, f_aggr_true, decel_last = bool(b.connected[i, 0]), bool(b.follower_aggressive[i]), float(b.decel_last[i])
+    ex, ey, evx, evy = float(b.ego_x[i]), float(b.ego_y[i]), float(b.ego_vx[i]), float(b.ego_vy[i])
+    gap0 = ex - x[0]
+    plan = plan_evasion(ex, ey, evx, evy, x[1], v[1], prm.a_x_d, x[0], v[0], True, prm)
+    plan_t0, t, completed, t_complete = 0.0, 0.0, False, math.nan
+    history, aggressive, latched = [], True, False
+    collided = violated = leader_collided = False
+    counts = [0, 0, 0]
+    times = [(j - (window - 1) / 2.0) * dt for j in range(window)]
+    norm = sum(s * s for s in times)
+    for _ in range(steps):
+        # Assess F from its observed speed.
+        history = [*history[-(window - 1) :], v[0]]
+        if len(history) == window:
+            slope = sum(h * s for h, s in zip(history, times, strict=True)) / norm
+            latched = latched or slope >= thr
+            aggressive = latched or (aggressive and slope > -thr)
+        # Worst case by variant.
+        if variant.uses_chain and n >= 1:
+            chain = worst_case_leader_decel(x[1:], v[1:], promise_d[1 : n + 1], prm, human_driven=human[1 : n + 1])
+            l1_decel = float(chain)
+        else:
+            l1_decel = prm.a_x_d
+        f_aggr = False if (variant.uses_follower_v2x and f_conn) else (aggressive if variant.uses_assessment else True)
+        # Expert planner.
+        a_x = 0.3 * (0.5 * (x[1] + x[0]) - ex) + 0.8 * (v[1] - evx)
+        a_x = min(max(a_x, -prm.a_x_d), prm.a_x_a)
+        a_y = min(max(0.65**2 * (prm.lane_width - ey) - 1.3 * evy, -prm.a_y_m), prm.a_y_m)
+        # Supervisor.
+        behaviour, completing = 2, False
+        if completed:
+            a_x = _responsible_accel(a_x, x[1] - ex - prm.p_m, evx, v[1], l1_decel, prm, dt)
+            a_y = min(max(0.8 * (prm.lane_width - ey) - 1.6 * evy, -prm.a_y_m), prm.a_y_m)
+            behaviour = -1
+        else:
+            a_f = prm.a_x_a if f_aggr else -prm.a_x_d
+            for code, lat in ((0, a_y), (1, min(max(-evy / dt, -prm.a_y_m), prm.a_y_m))):
+                nx, nvx = _advance(ex, evx, a_x, dt)
+                ny, nvy = ey + evy * dt + 0.5 * lat * dt * dt, evy + lat * dt
+                lx, lv = _advance(x[1], v[1], -l1_decel, dt)
+                fx, fv = _advance(x[0], v[0], a_f, dt)
+                y_max = max(ey, ny, ey - evy * evy / (2.0 * lat) if lat < 0.0 < evy < -lat * dt else ey)
+                ok = y_max <= prm.y_safe + LATERAL_TOL_M or (
+                    _pair_min_gap(x[1] - ex - prm.p_m, evx, a_x, v[1], -l1_decel, dt) >= -1e-9
+                    and _pair_min_gap(ex - x[0] - prm.p_m, v[0], a_f, evx, a_x, dt) >= -1e-9
+                )
+                candidate = plan_evasion(nx, ny, nvx, nvy, lx, lv, l1_decel, fx, fv, f_aggr, prm)
+                if ny >= prm.y_boundary:
+                    ok = ok and _min_follow_decel(lx - nx - prm.p_m, nvx, lv, l1_decel) <= prm.a_x_d
+                    ok = ok and _min_follow_decel(nx - fx - prm.p_m, fv, nvx, prm.a_x_d) <= prm.a_x_d
+                else:
+                    ok = ok and bool(candidate.feasible)
+                if ok:
+                    behaviour, completing, plan, plan_t0, a_y = code, ny >= prm.y_boundary, candidate, t + dt, lat
+                    break
+            counts[behaviour] += 1
+        # Others act: leaders front to back, then F.
+        acc = [0.0] * k
+        for j in range(k - 1, 0, -1):
+            if j == n + 1:
+                acc[j] = -decel_last if t + 1e-9 >= 0.0 else 0.0
+                continue
+            margin = prm.p_m_human if human[j] else prm.p_m
+            z = min(_min_follow_decel(x[j + 1] - x[j] - margin, v[j], v[j + 1], max(-acc[j + 1], 0.0)), prm.a_x_d)
+            task = min(max(0.5 * (v_desired[j] - v[j]), -promise_d[j]), promise_a[j])
+            acc[j] = min(task, -z)
+        if f_aggr_true:
+            wanted = min(max(0.5 * (x[1] - x[0] - prm.p_m - 1.0) + 1.5 * (v[1] - v[0]), -prm.a_x_d), prm.a_x_a)
+        elif ex - x[0] < gap0 + open_gap:
+            wanted = -open_decel
+        else:
+            wanted = min(max(evx - v[0], -open_decel), open_decel)
+        a_f = _responsible_accel(wanted, x[1] - x[0] - prm.p_m, v[0], v[1], prm.a_x_d, prm, dt)
+        if ex - x[0] > 0.0 and (not f_aggr_true or completed):
+            a_f = _responsible_accel(a_f, ex - x[0] - prm.p_m, v[0], evx, prm.a_x_d, prm, dt)
+        acc[0] = a_f
+        # Exact integration (an abort follows the verified plan) and continuous-time checks; the abort's
+        # motion switches acceleration inside the period, so its gaps are checked at 11 instants instead.
+        if behaviour == 2:
+            px, py, pvx, pvy = plan.state(t - plan_t0 + SAMPLES)
+            nx, ny, nvx, nvy = float(px[-1]), float(py[-1]), float(pvx[-1]), float(pvy[-1])
+            lateral_max = float(py.max())
+        else:
+            nx, nvx = _advance(ex, evx, a_x, dt)
+            ny, nvy = ey + evy * dt + 0.5 * a_y * dt * dt, evy + a_y * dt
+            lateral_max = max(ey, ny)
+        if lateral_max > prm.y_safe + LATERAL_TOL_M:
+            for j in range(k):
+                if behaviour == 2:  # only the instants at which the ego is still out of its own lane count
+                    others = [_advance(x[j], v[j], acc[j], float(s))[0] for s in SAMPLES]
+                    out = py > prm.y_safe + LATERAL_TOL_M
+                    g = min(abs(o - e) for o, e, w in zip(others, px.tolist(), out, strict=True) if w)
+                elif j == 0:
+                    g = _pair_min_gap(ex - x[0], v[0], acc[0], evx, a_x, dt)
+                else:
+                    g = _pair_min_gap(x[j] - ex, evx, a_x, v[j], acc[j], dt)
+                violated = violated or g < prm.p_m - 1e-9
+                collided = collided or (g < prm.vehicle_length and lateral_max > prm.lane_width - prm.vehicle_width)
+        for j in range(k - 1):
+            g = _pair_min_gap(x[j + 1] - x[j], v[j], acc[j], v[j + 1], acc[j + 1], dt)
+            leader_collided = leader_collided or g < prm.vehicle_length
+        for j in range(k):
+            x[j], v[j] = _advance(x[j], v[j], acc[j], dt)
+        ex, ey, evx, evy = nx, ny, nvx, nvy
+        t += dt
+        if completing and not completed:
+            completed, t_complete = True, t
+    return {
+        "success": completed and not collided,
+        "collision": collided,
+        "safety_violation": violated,
+        "leader_collision": leader_collided,
+        "completion_time_s": t_complete,
+        "counts": counts,
+    }

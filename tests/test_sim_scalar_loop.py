@@ -1,0 +1,32 @@
+"""The batched engine against an independent per-scenario re-implementation on the scalar safety API.
+
+``scalar_loop.loop_scenario`` runs one scenario in Python floats (the baseline of ``benchmarks/bench_sim.py``).
+Both must make the same decisions: the same proceed / hesitate / abort count in every scenario, the same
+completion time, the same outcome.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from safelane import Params
+from safelane.planners.variants import VARIANT_NAMES
+from safelane.sim import simulate_batch
+from scalar_loop import loop_scenario
+from sim_scenarios import mixed_campaign_batch
+
+PARAMS = Params()
+
+
+@pytest.mark.parametrize("planner", VARIANT_NAMES)
+def test_engine_and_scalar_loop_make_the_same_decisions(planner):
+    batch = mixed_campaign_batch(planner, 15, np.random.default_rng(VARIANT_NAMES.index(planner)))
+    table = simulate_batch(batch).table
+    for i in range(len(batch)):
+        row = loop_scenario(batch, i, PARAMS, steps=100)
+        assert row["counts"] == table.loc[i, ["n_proceed", "n_hesitate", "n_abort"]].tolist(), i
+        assert row["completion_time_s"] == pytest.approx(table.loc[i, "completion_time_s"], abs=1e-9, nan_ok=True)
+        for col in ("success", "collision", "safety_violation", "leader_collision"):
+            assert row[col] == table.loc[i, col], (i, col)
+    assert table["n_abort"].sum() > 0 and table["n_hesitate"].sum() > 0
