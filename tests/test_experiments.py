@@ -16,7 +16,7 @@ from safelane.experiments.runner import run_experiment
 from safelane.sim.engine import SimConfig
 from safelane.sim.metrics import wilson_interval
 
-PRESET = Preset("test", Params(), SimConfig(), {})
+PRESET = Preset("test", Params(), SimConfig(horizon_s=4.0), {})  # a short horizon keeps the runs fast
 
 
 def summary(rows: list[tuple]) -> pd.DataFrame:

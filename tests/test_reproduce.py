@@ -5,6 +5,8 @@ from __future__ import annotations
 
 import datetime as dt
 import html
+import subprocess
+import sys
 
 import pandas as pd
 import pytest
@@ -194,3 +196,12 @@ def test_calibrate_command_writes_and_installs(monkeypatch, tmp_path):
         assert (out / name).exists()
     installed = calibration.load_preset(tmp_path / "presets" / "paper.yaml")
     assert installed.meta["loss_mean_abs_diff"] == 0.1234
+
+
+def test_importing_the_package_and_commands_does_not_import_plotting():
+    code = (
+        "import sys, safelane, safelane.experiments.reproduce, safelane.cli; "
+        "print('matplotlib' in sys.modules, any(m.startswith('safelane.reporting') for m in sys.modules))"
+    )
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout
+    assert out.split() == ["False", "False"]
