@@ -186,3 +186,19 @@ def test_shipped_default_planner_loads_and_is_bounded():
     assert np.all((-PARAMS.a_x_d <= a_x) & (a_x <= PARAMS.a_x_a)) and np.all(np.abs(a_y) <= PARAMS.a_y_m)
     # An open gap at the start of a lane change: move toward the target lane.
     assert np.all(planner(open_gap_observation(), PARAMS)[1] > 0.5)
+
+
+def test_inference_imports_no_torch_or_onnx():
+    import subprocess
+    import sys
+
+    code = (
+        "import sys, numpy as np\n"
+        "import safelane.cli, safelane.training.train\n"
+        "from safelane.planners.nn import load_default_planner\n"
+        "from safelane.planners.teacher import OptimalControlTeacher\n"
+        "load_default_planner()\n"
+        "heavy = sorted(m for m in sys.modules if m.split('.')[0] in ('torch', 'onnx', 'onnxruntime'))\n"
+        "assert not heavy, heavy\n"
+    )
+    subprocess.run([sys.executable, "-c", code], check=True)
