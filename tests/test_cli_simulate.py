@@ -1,0 +1,90 @@
+"""``safelane simulate``: summary on screen, CSVs and a trace plot on disk, clear errors."""
+
+from __future__ import annotations
+
+import pandas as pd
+import pytest
+from typer.testing import CliRunner
+
+from safelane.cli import app
+
+runner = CliRunner()
+TINY = ["simulate", "--planner", "CV_none", "--leaders", "1", "--decel", "4", "--samples", "6", "--seed", "3"]
+STEM = "CV_none_N1_decel4_pv0_seed3"
+
+
+def _invoke(*args):
+    return runner.invoke(app, [*TINY, *args])
+
+
+def test_tiny_run_prints_a_summary_and_writes_csvs(tmp_path):
+    result = _invoke("--out", str(tmp_path), "--no-progress")
+    assert result.exit_code == 0, result.output
+    for text in ("CV_none, N = 1", "success", "collision", "95 % Wilson interval", "assessment correct"):
+        assert text in result.output
+    scenarios = pd.read_csv(tmp_path / f"{STEM}_scenarios.csv")
+    summary = pd.read_csv(tmp_path / f"{STEM}_summary.csv")
+    assert len(scenarios) == 6 and (scenarios["planner"] == "CV_none").all()
+    assert {"success", "collision", "safety_violation", "completion_time_s", "n_abort"} <= set(scenarios.columns)
+    assert len(summary) == 1 and summary.loc[0, "samples"] == 6
+    assert {"success_rate", "success_lo", "success_hi", "collision_hi"} <= set(summary.columns)
+    assert not (tmp_path / f"{STEM}_trace.csv").exists()
+
+
+def test_same_seed_same_csv(tmp_path):
+    for sub in ("a", "b"):
+        assert _invoke("--out", str(tmp_path / sub), "--no-progress").exit_code == 0
+    first, second = (pd.read_csv(tmp_path / sub / f"{STEM}_scenarios.csv") for sub in ("a", "b"))
+    pd.testing.assert_frame_equal(first, second)
+
+
+def test_trace_writes_one_scenario_and_a_png(tmp_path):
+    result = _invoke("--out", str(tmp_path), "--trace", "--p-v", "0.1", "--assessment", "truth")
+    assert result.exit_code == 0, result.output
+    stem = STEM.replace("pv0", "pv0.1")
+    trace = pd.read_csv(tmp_path / f"{stem}_trace.csv")
+    assert trace["scenario_id"].nunique() == 1 and len(trace) == 100
+    assert {"t", "ego_y", "ego_vx", "behaviour", "l1_v", "f_v"} <= set(trace.columns)
+    png = (tmp_path / f"{stem}_trace.png").read_bytes()
+    assert png[:8] == b"\x89PNG\r\n\x1a\n" and len(png) > 10_000
+    assert f"wrote {tmp_path / f'{stem}_trace.png'}" in result.output.replace("\n", "")
+
+
+def test_params_file_is_used(tmp_path):
+    params = tmp_path / "params.yaml"
+    params.write_text("p_m: 9.0\n")
+    result = _invoke("--out", str(tmp_path), "--no-progress", "--params", str(params))
+    assert result.exit_code == 0, result.output
+    scenarios = pd.read_csv(tmp_path / f"{STEM}_scenarios.csv")
+    assert (scenarios["min_gap_leader_m"].dropna() >= 9.0 - 1e-9).all()
+
+
+@pytest.mark.parametrize(
+    ("args", "message"),
+    [
+        (["--planner", "CV_bogus"], "unknown planner variant"),
+        (["--p-v", "2"], "p_v"),
+        (["--samples", "0"], "samples must be a positive integer"),
+        (["--assessment", "oracle"], "assessment"),
+    ],
+)
+def test_bad_options_are_clear_errors(tmp_path, args, message):
+    result = runner.invoke(app, [*TINY, "--out", str(tmp_path), *args])
+    assert result.exit_code == 2
+    assert message in result.output
+
+
+def test_bad_params_file_is_a_clear_error(tmp_path):
+    params = tmp_path / "params.yaml"
+    params.write_text("p_m: 7.0\nbogus_key: 1\n")
+    result = _invoke("--out", str(tmp_path), "--params", str(params))
+    assert result.exit_code == 2 and "bogus_key" in result.output
+    missing = _invoke("--out", str(tmp_path), "--params", str(tmp_path / "nope.yaml"))
+    assert missing.exit_code == 2 and "not found" in missing.output
+
+
+def test_help_lists_the_options():
+    result = runner.invoke(app, ["simulate", "--help"])
+    assert result.exit_code == 0
+    for option in ("--planner", "--leaders", "--decel", "--samples", "--seed", "--p-v", "--params", "--out", "--trace"):
+        assert option in result.output
