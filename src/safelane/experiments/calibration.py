@@ -11,7 +11,11 @@ Searched (plausible physical ranges, and why):
 * ``horizon_s`` ∈ [6, 12] s — the paper's simulation horizon is unstated; its Figure 5 completes in ≈ 3 s;
 * the nominal (expert) planner's lateral natural frequency ``omega`` ∈ [0.5, 1.2] rad/s (a lane change of
   ≈ 1.5–3.5 s to the boundary) and its L1-speed tracking gain ``k_v`` ∈ [0, 1] 1/s — the paper's NN planners
-  are unpublished, so how eagerly the ego changes lanes and matches L1's braking is ours to fit.
+  are unpublished, so how eagerly the ego changes lanes and matches L1's braking is ours to fit; likewise
+  where in the F–L1 gap it settles, ``gap_fraction`` ∈ [0.3, 0.6] (0.5 = the middle);
+* the aggressiveness assessment (the follower model the ego uses): its window ``assess_window`` ∈ [3, 20]
+  periods and evidence threshold ``assess_threshold`` ∈ [0.1, 0.5] m/s² — ASP-DAC'23's method is not
+  available, so how fast it trusts a collaborative follower is fitted.
 
 Fixed: lane width 3.5 m, vehicle 4.8 × 1.8 m, ``dt`` 0.1 s, the behaviour models and planner of the simulator.
 
@@ -47,9 +51,13 @@ SEARCH_SPACE: dict[str, tuple[float, float]] = {
     "horizon_s": (6.0, 12.0),
     "omega": (0.5, 1.2),
     "k_v": (0.0, 1.0),
+    "gap_fraction": (0.3, 0.6),
+    "assess_window": (3.0, 20.0),
+    "assess_threshold": (0.1, 0.5),
 }
-_SIM_KEYS = ("horizon_s",)
-_PLANNER_KEYS = ("k_p", "k_v", "omega")
+_SIM_KEYS = ("horizon_s", "assess_window", "assess_threshold")
+_PLANNER_KEYS = ("k_p", "k_v", "omega", "gap_fraction")
+_INT_KEYS = ("assess_window",)
 
 PRESET_DIR = Path(__file__).resolve().parent.parent / "presets"
 
@@ -114,7 +122,7 @@ def candidate_to_preset(candidate: dict[str, float], meta: dict | None = None) -
     params, sim, planner = Params().model_dump(), SimConfig().model_dump(), {}
     for key, value in candidate.items():
         target = sim if key in _SIM_KEYS else planner if key in _PLANNER_KEYS else params
-        target[key] = float(value)
+        target[key] = round(value) if key in _INT_KEYS else float(value)
     return Preset("paper", Params(**params), SimConfig(**sim), meta or {}, planner)
 
 
@@ -157,11 +165,7 @@ def calibrate(
 ) -> tuple[Preset, pd.DataFrame]:
     """Run the search; returns the best preset and the table of all scored candidates."""
     rng = np.random.default_rng(seed)
-    defaults = Params().model_dump() | {
-        "horizon_s": SimConfig().horizon_s,
-        "omega": ExpertPlanner().omega,
-        "k_v": ExpertPlanner().k_v,
-    }
+    defaults = Params().model_dump() | SimConfig().model_dump() | vars(ExpertPlanner())
     points = [{k: v for k, v in defaults.items() if k in SEARCH_SPACE}]
     points += latin_hypercube(candidates - 1, SEARCH_SPACE, rng)
     rows = []

@@ -63,7 +63,8 @@ class NominalPlanner(Protocol):
 class ExpertPlanner:
     """Rule-based teacher/baseline planner.
 
-    Longitudinal: a PD law placing the ego in the middle of the F–L1 gap at L1's speed.
+    Longitudinal: a PD law placing the ego in the F–L1 gap (at ``gap_fraction`` of the way from F to L1;
+    0.5 is the middle) at L1's speed.
     Lateral: a critically damped PD law toward the target-lane centre ``y = w_l`` (natural frequency
     ``omega``), which gives a smooth lane change; both clipped to the mechanical limits.
     """
@@ -71,9 +72,10 @@ class ExpertPlanner:
     k_p: float = 0.3
     k_v: float = 0.8
     omega: float = 0.65
+    gap_fraction: float = 0.5
 
     def __call__(self, obs: Observation, params: Params) -> tuple[np.ndarray, np.ndarray]:
-        mid = 0.5 * (obs.p_x_l + obs.p_x_f)
+        mid = obs.p_x_f + self.gap_fraction * (obs.p_x_l - obs.p_x_f)
         a_x = self.k_p * (mid - obs.p_x) + self.k_v * (obs.v_x_l - obs.v_x)
         a_y = self.omega**2 * (params.lane_width - obs.p_y) - 2.0 * self.omega * obs.v_y
         return (
