@@ -60,7 +60,7 @@ def run_cells(
     tables = []
     for start in range(0, len(cells), per_batch):
         group = cells[start : start + per_batch]
-        batch = concat([_cell_batch(c, samples, seed, scenario) for c in group])
+        batch = concat([cell_batch(c, samples, seed, scenario) for c in group])
         result = simulate_batch(
             batch, seed=seed, params=params, config=config, nominal=nominal, progress=progress, workers=workers
         )
@@ -73,7 +73,7 @@ def run_cells(
     return table
 
 
-def _cell_batch(cell: Cell, samples: int, seed: int, scenario: ScenarioConfig | None):
+def cell_batch(cell: Cell, samples: int, seed: int, scenario: ScenarioConfig | None):
     rng = cell_rng(seed, cell)
     if cell.penetration is None:
         return paper_scenarios(cell.planner, cell.n_leaders, cell.decel, samples, rng, scenario, p_v=cell.p_v)

@@ -8,6 +8,7 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import dataclass
+from typing import Literal
 
 from pydantic import BaseModel, ConfigDict, Field
 
@@ -38,8 +39,14 @@ class Fig5Config(BaseModel):
 
     n_leaders: int = 5
     decel: float = 5.0
-    ego_speed: float = Field(30.0, description="Initial ego speed of the example [m/s].")
-    gap: float = Field(19.5, description="Initial inter-vehicle distance δp of the example [m].")
+    selection: Literal["illustrative", "fixed"] = Field(
+        "illustrative",
+        description="'illustrative': the first of `search` seeded scenarios of the cell in which CV_all completes "
+        "and another planner turns back (the kind of example the paper shows); 'fixed': ego_speed and gap below.",
+    )
+    search: int = Field(200, ge=1, description="Scenarios searched for an illustrative example.")
+    ego_speed: float = Field(30.0, description="Initial ego speed of the fixed example [m/s].")
+    gap: float = Field(19.5, description="Initial inter-vehicle distance δp of the fixed example [m].")
     planners: tuple[str, ...] = PLANNERS
 
 

@@ -12,9 +12,9 @@ from pydantic import BaseModel
 from ..planners.base import NominalPlanner
 from ..sim.engine import simulate_batch
 from ..sim.metrics import summarize
-from ..sim.scenario import ScenarioBatch, ScenarioConfig, paper_scenarios
+from ..sim.scenario import ScenarioBatch, ScenarioConfig, concat, paper_scenarios
 from .calibration import Preset, load_preset
-from .grid import run_cells
+from .grid import Cell, cell_batch, run_cells
 from .registry import Fig5Config, get_experiment
 
 SUMMARY_KEYS = ("planner", "n_leaders", "decel", "p_v", "penetration")
@@ -64,14 +64,36 @@ def run_experiment(
 
 
 def _trace_example(cfg: Fig5Config, preset: Preset, seed: int, nominal) -> pd.DataFrame:
-    """One fixed scenario (ego speed and δp from the config) traced under every planner."""
+    """One scenario traced under every planner: an illustrative one found in the seeded cell, or a fixed one."""
+    batch = _illustrative_example(cfg, preset, seed, nominal) if cfg.selection == "illustrative" else None
+    if batch is None:
+        batch = _fixed_example(cfg, seed)
+    result = simulate_batch(
+        batch, seed=seed, params=preset.params, config=preset.sim, nominal=nominal, trace=True, trace_limit=len(batch)
+    )
+    return result.trace
+
+
+def _illustrative_example(cfg: Fig5Config, preset: Preset, seed: int, nominal) -> ScenarioBatch | None:
+    """The first scenario of the cell where CV_all completes and some other planner does not complete or aborts."""
+    cells = [Cell(p, cfg.n_leaders, cfg.decel) for p in cfg.planners]
+    table = run_cells(cells, cfg.search, seed, params=preset.params, config=preset.sim, nominal=nominal)
+    success = table.pivot(index="scenario_id", columns="planner", values="success")
+    aborts = table.pivot(index="scenario_id", columns="planner", values="n_abort")
+    others = [p for p in cfg.planners if p != "CV_all"]
+    if "CV_all" not in success or not others:
+        return None
+    wanted = success["CV_all"] & ((~success[others]).any(axis=1) | (aborts[others] > 0).any(axis=1))
+    if not wanted.any():
+        return None
+    row = int(np.flatnonzero(wanted.to_numpy())[0])
+    return concat([cell_batch(c, cfg.search, seed, None).take([row]) for c in cells])
+
+
+def _fixed_example(cfg: Fig5Config, seed: int) -> ScenarioBatch:
     parts = []
     for planner in cfg.planners:
         b = paper_scenarios(planner, cfg.n_leaders, cfg.decel, 1, np.random.default_rng(seed), ScenarioConfig())
         x = b.x / np.abs(b.x[:, :1]) * cfg.gap  # F at -δp, L_i at i·δp with the example's δp
         parts.append(ScenarioBatch(**{**b.__dict__, "x": x, "ego_vx": np.array([cfg.ego_speed])}))
-    batch = ScenarioBatch(**{k: np.concatenate([getattr(p, k) for p in parts]) for k in parts[0].__dict__})
-    result = simulate_batch(
-        batch, seed=seed, params=preset.params, config=preset.sim, nominal=nominal, trace=True, trace_limit=len(parts)
-    )
-    return result.trace
+    return concat(parts)
