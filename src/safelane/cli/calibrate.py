@@ -40,7 +40,8 @@ def calibrate(
     from ..experiments.calibration import calibrate as run
 
     table = Table(title="calibration candidates (loss: mean |ours - paper| over 40 cells; * = best so far)")
-    for column in ("#", "stage", *SEARCH_SPACE, "loss"):
+    # The loss comes first so a narrow terminal still shows it.
+    for column in ("#", "stage", "loss", *SEARCH_SPACE):
         table.add_column(column, justify="right", no_wrap=True)
     best = [float("inf")]
 
@@ -48,7 +49,7 @@ def calibrate(
         mark = " *" if loss < best[0] else ""
         best[0] = min(best[0], loss)
         stage = "search" if i < candidates else "refine" if i < candidates + refine else "final"
-        table.add_row(str(i), stage, *(f"{point[k]:.3f}" for k in SEARCH_SPACE), f"{loss:.4f}{mark}")
+        table.add_row(str(i), stage, f"{loss:.4f}{mark}", *(f"{point[k]:.3f}" for k in SEARCH_SPACE))
 
     console = Console()
     with Live(table, console=console, refresh_per_second=4, vertical_overflow="visible"):
