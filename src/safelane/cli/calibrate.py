@@ -33,36 +33,31 @@ def calibrate(
     """
     import pandas as pd
     from rich.console import Console
-    from rich.live import Live
-    from rich.table import Table
 
     from ..experiments.calibration import PRESET_DIR, SEARCH_SPACE
     from ..experiments.calibration import calibrate as run
 
-    table = Table(title="calibration candidates (loss: mean |ours - paper| over 40 cells; * = best so far)")
-    # The loss comes first so a narrow terminal still shows it.
-    for column in ("#", "stage", "loss", *SEARCH_SPACE):
-        table.add_column(column, justify="right", no_wrap=True)
+    console = Console()
+    console.print("calibration candidates (loss: mean |ours - paper| over 40 cells; * = best so far)")
     best = [float("inf")]
 
     def on_candidate(i: int, point: dict, loss: float) -> None:
-        mark = " *" if loss < best[0] else ""
+        mark = " *" if loss < best[0] else "  "
         best[0] = min(best[0], loss)
         stage = "search" if i < candidates else "refine" if i < candidates + refine else "final"
-        table.add_row(str(i), stage, f"{loss:.4f}{mark}", *(f"{point[k]:.3f}" for k in SEARCH_SPACE))
+        values = "  ".join(f"{k}={point[k]:.3g}" for k in SEARCH_SPACE)
+        console.print(f"{i:4d} {stage:6s} loss {loss:.4f}{mark}  {values}", soft_wrap=True)
 
-    console = Console()
-    with Live(table, console=console, refresh_per_second=4, vertical_overflow="visible"):
-        preset, frame = run(
-            candidates=candidates,
-            samples=samples,
-            refine=refine,
-            finalists=min(finalists, candidates),
-            final_samples=final_samples,
-            seed=seed,
-            on_candidate=on_candidate,
-            workers=workers,
-        )
+    preset, frame = run(
+        candidates=candidates,
+        samples=samples,
+        refine=refine,
+        finalists=min(finalists, candidates),
+        final_samples=final_samples,
+        seed=seed,
+        on_candidate=on_candidate,
+        workers=workers,
+    )
     console.print()
     out.mkdir(parents=True, exist_ok=True)
     text = preset.to_yaml()
