@@ -22,7 +22,7 @@ def _register() -> None:
     from . import calibrate as _calibrate  # noqa: F401
     from . import check  # noqa: F401
     from . import reproduce as _reproduce  # noqa: F401
-    from . import simulate  # noqa: F401
+    from . import simulate as _simulate  # noqa: F401
     from . import train as _train  # noqa: F401
 
 
