@@ -35,12 +35,11 @@ def pair_min_gap(slack, v_f, a_f, v_l, a_l, dt):
     ts_f, ts_l = stop_time(v_f, a_f, dt), stop_time(v_l, a_l, dt)
     dv, da = v_l - v_f, a_f - a_l
     tau = np.where(da != 0.0, dv / np.where(da != 0.0, da, 1.0), 0.0)
-    best = slack
-    for t in (ts_f, ts_l, np.clip(tau, 0.0, dt), np.full_like(ts_f, dt)):
-        xf, _ = advance(0.0, v_f, a_f, t)
-        xl, _ = advance(slack, v_l, a_l, t)
-        best = np.minimum(best, xl - xf)
-    return best
+    # All candidate instants at once (stops, equal speeds, end of period): one stacked evaluation.
+    t = np.stack(np.broadcast_arrays(ts_f, ts_l, np.clip(tau, 0.0, dt), np.full_like(ts_f, dt)))
+    xf, _ = advance(0.0, v_f, a_f, t)
+    xl, _ = advance(slack, v_l, a_l, t)
+    return np.minimum(slack, (xl - xf).min(0))
 
 
 def responsible_ok(a, slack, v_f, v_l, lead_decel, prm: Params):
