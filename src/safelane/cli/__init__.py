@@ -9,6 +9,7 @@ app = typer.Typer(
     help="Safe lane changing for connected autonomous vehicles in mixed traffic.",
     no_args_is_help=True,
     add_completion=False,
+    rich_markup_mode=None,  # help texts carry units in brackets ("[m/s²]"), which Rich markup would swallow
 )
 
 

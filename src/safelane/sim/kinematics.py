@@ -18,7 +18,8 @@ def stop_time(v, a, horizon):
     """Time at which a vehicle at speed ``v >= 0`` with acceleration ``a`` stops, capped at ``horizon``."""
     braking = a < 0.0
     safe = np.where(braking, -a, 1.0)
-    return np.where(braking, np.minimum(v / safe, horizon), horizon)
+    with np.errstate(over="ignore"):  # a vanishing deceleration: v / tiny -> inf, then capped at the horizon
+        return np.where(braking, np.minimum(v / safe, horizon), horizon)
 
 
 def advance(x, v, a, dt):
