@@ -252,3 +252,25 @@ def load_default_planner() -> MLPPlanner:
 
     with as_file(files("safelane") / "models" / f"{DEFAULT_MODEL}.npz") as path:
         return MLPPlanner.load(path)
+
+
+def with_random_weights(model: MLPPlanner, rng: np.random.Generator, gain: float = 1.5) -> MLPPlanner:
+    """``model``'s architecture, normalisation, bounds and activation with random weights drawn from ``rng``.
+
+    Weights ``N(0, gain² / fan_in)``, biases ``N(0, 0.1²)``: with the default gain the hidden units and the
+    outputs spread over their whole range (a PyTorch-style ``U(±1/√fan_in)`` initialisation would leave every
+    action near the middle of its limits, a gentle brake). An untrained planner that can ask for anything within
+    the mechanical limits; the ablation of ``benchmarks/supervisor_ablation.py`` uses it to show the supervisor
+    keeps even such a planner safe."""
+    layers = {
+        head: tuple(
+            (
+                (rng.standard_normal(w.shape) * gain / np.sqrt(w.shape[0])).astype(np.float32),
+                (0.1 * rng.standard_normal(b.shape)).astype(np.float32),
+            )
+            for w, b in model.layers[head]
+        )
+        for head in HEADS
+    }
+    meta = {"note": f"random weights (gain {gain}) in the architecture of a trained model"}
+    return MLPPlanner(layers, model.mean.copy(), model.std.copy(), dict(model.bounds), model.activation, meta)
