@@ -90,6 +90,16 @@ def test_ordering_ignores_overlapping_intervals():
     assert claim.evidence.startswith("0 clear reversals in 1 ")
 
 
+def test_information_claims_need_a_clear_gain():
+    gain = summary([("CV_follow", 5, 4.0, 0.0, 95, 100), ("CV_none", 5, 4.0, 0.0, 60, 100)])
+    claim = by_key(check_claims({"fig4_n5": gain}))["follower_information"]
+    assert claim.holds is True and claim.evidence.startswith("1 of 1 cells clearly above")
+    tie = summary([("CV_follow", 5, 4.0, 0.0, 60, 100), ("CV_none", 5, 4.0, 0.0, 60, 100)])
+    claim = by_key(check_claims({"fig4_n5": tie}))["follower_information"]
+    assert claim.holds is False and "largest difference +0.000" in claim.evidence
+    assert by_key(check_claims({"fig4_n5": tie}))["chain_information"].holds is None
+
+
 def test_trends_detect_planted_reversals():
     rising_with_decel = summary([("CV_all", 5, 2.0, 0.0, 10, 100), ("CV_all", 5, 6.0, 0.0, 95, 100)])
     falling_with_n = summary([("CV_all", 1, 4.0, 0.0, 95, 100), ("CV_all", 10, 4.0, 0.0, 10, 100)])
@@ -123,7 +133,7 @@ def test_robustness_claims():
 
 def test_claims_without_experiments_are_not_checked():
     claims = check_claims({})
-    assert len(claims) == 6
+    assert len(claims) == 8
     assert all(c.holds is None for c in claims)
 
 

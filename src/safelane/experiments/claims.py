@@ -36,6 +36,22 @@ def check_claims(summaries: Mapping[str, pd.DataFrame]) -> list[Claim]:
     claims = [
         _zero_collisions(summaries),
         _ordering(summaries),
+        _clearly_better(
+            summaries,
+            "CV_follow",
+            "CV_none",
+            "follower_information",
+            "Knowing the follower's intention helps: CV_follow is clearly above CV_none (paper §4.1: "
+            "'considerably larger success rate'), in at least one cell of Fig. 4 (N = 5).",
+        ),
+        _clearly_better(
+            summaries,
+            "CV_all",
+            "CV_follow",
+            "chain_information",
+            "The connected chain helps beyond the follower's information: CV_all is clearly above "
+            "CV_follow in at least one cell of Fig. 4 (N = 5) (paper: 'slightly better').",
+        ),
         _falls_with_decel(summaries),
         _rises_with_n(summaries),
         *_robustness(summaries.get("fig6_violation")),
@@ -88,6 +104,25 @@ def _ordering(summaries) -> Claim:
     if reversals:
         evidence += ": " + "; ".join(reversals[:8]) + (" …" if len(reversals) > 8 else "")
     return Claim("ordering", text, not reversals, evidence)
+
+
+def _clearly_better(summaries, better: str, worse: str, key: str, text: str) -> Claim:
+    fig4 = summaries.get("fig4_n5")
+    if fig4 is None or fig4.empty or not {better, worse} <= set(fig4["planner"]):
+        return Claim(key, text, None, "fig4_n5 did not run with both planners")
+    rows = fig4.set_index(["decel", "planner"])
+    cells = []
+    for decel in sorted(fig4["decel"].unique()):
+        a, b = rows.loc[(decel, better)], rows.loc[(decel, worse)]
+        if _clearly_below(b, a):
+            cells.append(f"a={decel:g}: {a['success_rate']:.3f} vs {b['success_rate']:.3f}")
+    largest = float(
+        (rows.xs(better, level="planner")["success_rate"] - rows.xs(worse, level="planner")["success_rate"]).max()
+    )
+    evidence = f"{len(cells)} of {fig4['decel'].nunique()} cells clearly above; largest difference {largest:+.3f}" + (
+        ": " + "; ".join(cells) if cells else ""
+    )
+    return Claim(key, text, bool(cells), evidence)
 
 
 def _trend(grid: pd.DataFrame, along: str, group: list[str], decreasing: bool) -> tuple[list[str], int]:
