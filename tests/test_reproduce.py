@@ -24,7 +24,16 @@ from safelane.reporting.figures import FIGURES
 from safelane.reporting.report import PIVOTS
 from safelane.sim.engine import SimConfig
 
-CLAIM_KEYS = {"zero_collisions", "ordering", "falls_with_decel", "rises_with_n", "robust_low_pv", "degrades_high_pv"}
+CLAIM_KEYS = {
+    "zero_collisions",
+    "ordering",
+    "follower_information",
+    "chain_information",
+    "falls_with_decel",
+    "rises_with_n",
+    "robust_low_pv",
+    "degrades_high_pv",
+}
 META = {
     "loss_mean_abs_diff": 0.1234,
     "procedure": "test procedure",
