@@ -17,7 +17,7 @@ $(STAMP): pyproject.toml
 install: $(STAMP)
 
 run: $(STAMP)
-	$(VENV)/bin/safelane reproduce
+	$(VENV)/bin/safelane reproduce --workers 2
 
 test: $(STAMP)
 	$(VENV)/bin/ruff check src tests benchmarks
@@ -28,6 +28,8 @@ lint: $(STAMP)
 
 bench: $(STAMP)
 	$(PY) benchmarks/bench_safety.py
+	$(PY) benchmarks/bench_sim.py
+	$(PY) benchmarks/bench_nn.py
 
 clean:
 	rm -rf $(VENV) build *.egg-info src/*.egg-info .pytest_cache .ruff_cache .hypothesis
