@@ -60,7 +60,7 @@ def simulate(
     table.to_csv(written[0], index=False)
     summary.to_csv(written[1], index=False)
     if trace and result.trace is not None:
-        from ..plotting import plot_trace
+        from ..reporting.trace import plot_trace
 
         first = result.trace[result.trace["scenario_id"] == table["scenario_id"].iloc[0]]
         written.append(out / f"{stem}_trace.csv")
