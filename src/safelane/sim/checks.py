@@ -38,17 +38,58 @@ def ego_checks(
     c_max = np.full((bsz, k), -np.inf)
     o_min, o_max = c_min.copy(), c_max.copy()
     if r.size:
-        ego_lon, ego_lat = _rows(lon, r), _rows(lat, r)
-        other = Motion(*(getattr(others, f)[r, c] for f in ("t", "x", "v", "acc")))
+        # Most pairs are one quadratic over the whole period (nobody stops or switches inside it): closed form.
+        simple = _one_segment(lon, dt)[r] & _one_segment(lat, dt)[r] & (others.t[r, c, 1] >= dt)
+        rs, cs, rg, cg = r[simple], c[simple], r[~simple], c[~simple]
+        ego_lon, ego_lat = _rows(lon, rg), _rows(lat, rg)
+        other = Motion(*(getattr(others, f)[rg, cg] for f in ("t", "x", "v", "acc")))
+        d0 = others.x[rs, cs, 0] - lon.x[rs, 0]
+        dv0 = others.v[rs, cs, 0] - lon.v[rs, 0]
+        rel_acc = others.acc[rs, cs, 0] - lon.acc[rs, 0]
+        lateral = (lat.x[rs, 0], lat.v[rs, 0], lat.acc[rs, 0])
         for level, lo, hi in ((conflict_level, c_min, c_max), (overlap_level, o_min, o_max)):
-            knots = crossing_knots(ego_lat, level)
-            lo[r, c], hi[r, c] = windowed_gap_extrema(ego_lon, other, ego_lat, knots, level)
+            lo[rs, cs], hi[rs, cs] = _windowed_quadratic(d0, dv0, rel_acc, *lateral, level, dt)
+            if rg.size:
+                knots = crossing_knots(ego_lat, level)
+                lo[rg, cg], hi[rg, cg] = windowed_gap_extrema(ego_lon, other, ego_lat, knots, level)
     length = prm.vehicle_length
     collided = ((o_min < length) & (o_max > -length)).any(1)
     violated = ((c_min < prm.p_m - 1e-9) & (c_max > -prm.p_m + 1e-9)).any(1)
     min_gap_f = np.minimum(s.min_gap_f, -c_max[:, 0])
     min_gap_l1 = np.minimum(s.min_gap_l1, c_min[:, 1])
     return collided, violated, min_gap_f, min_gap_l1
+
+
+def _one_segment(m: Motion, dt: float) -> np.ndarray:
+    """True where the motion has no knot strictly inside the period (one constant acceleration throughout)."""
+    return (m.t[..., 1:-1] >= dt).all(-1)
+
+
+def _windowed_quadratic(d0, dv0, rel_acc, y0, vy0, ay, level: float, dt: float):
+    """``(min, max)`` of ``d0 + dv0 t + rel_acc t²/2`` over the instants of ``[0, dt]`` where
+    ``y0 + vy0 t + ay t²/2 > level`` — the one-segment case of :func:`windowed_gap_extrema`, in closed form."""
+    one = Motion(
+        t=np.stack([np.zeros_like(y0), np.full_like(y0, dt)], -1),
+        x=np.stack([y0, y0 + vy0 * dt + 0.5 * ay * dt * dt], -1),
+        v=np.stack([vy0, vy0 + ay * dt], -1),
+        acc=ay[:, None],
+    )
+    knots = crossing_knots(one, level)  # (P, 4): 0, up to two crossings, dt
+    tau0, tau1 = knots[:, :-1], knots[:, 1:]
+    mid = 0.5 * (tau0 + tau1)
+    active = y0[:, None] + vy0[:, None] * mid + 0.5 * ay[:, None] * mid * mid > level
+
+    def d(t):
+        return d0[:, None] + dv0[:, None] * t + 0.5 * rel_acc[:, None] * t * t
+
+    lo, hi = np.minimum(d(tau0), d(tau1)), np.maximum(d(tau0), d(tau1))
+    safe = np.where(rel_acc != 0.0, rel_acc, 1.0)
+    vertex_t = np.where(rel_acc != 0.0, -dv0 / safe, -1.0)[:, None]
+    inside = (vertex_t > tau0) & (vertex_t < tau1)
+    vertex = d(vertex_t)
+    lo = np.where(inside & (rel_acc[:, None] > 0.0), np.minimum(lo, vertex), lo)
+    hi = np.where(inside & (rel_acc[:, None] < 0.0), np.maximum(hi, vertex), hi)
+    return np.where(active, lo, np.inf).min(-1), np.where(active, hi, -np.inf).max(-1)
 
 
 def lane_checks(b, prm: Params, others: Motion):
