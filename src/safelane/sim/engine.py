@@ -12,6 +12,7 @@ from dataclasses import dataclass
 
 import numpy as np
 import pandas as pd
+from threadpoolctl import threadpool_limits
 
 from ..params import Params
 from ..planners.base import ExpertPlanner, NominalPlanner, Observation
@@ -123,12 +124,15 @@ def simulate_batch(
         from rich.progress import track
 
         steps = track(steps, description=f"simulating {len(batch)} scenarios", transient=True)
-    for _ in steps:
-        state, obs, behaviour = sim.step(state)
-        if record_observations:
-            observations.append(obs)
-        if trace:
-            rows.append(trace_rows(batch, state, behaviour, trace_limit))
+    # The batch is elementwise NumPy plus small matrix products (NN planners): BLAS threads only oversubscribe
+    # the cores (and the worker processes), so they are limited to one for the run.
+    with threadpool_limits(limits=1, user_api="blas"):
+        for _ in steps:
+            state, obs, behaviour = sim.step(state)
+            if record_observations:
+                observations.append(obs)
+            if trace:
+                rows.append(trace_rows(batch, state, behaviour, trace_limit))
     table = results_table(batch, state)
     trace_df = pd.concat(rows, ignore_index=True) if trace and rows else None
     return SimResult(table=table, trace=trace_df, observations=observations)
