@@ -28,7 +28,7 @@ from .config import SimConfig
 from .kinematics import Motion
 from .results import SimResult, results_table, trace_rows
 from .rng import counter_normal, counter_uniform
-from .scenario import ScenarioBatch, ScenarioConfig, paper_scenarios
+from .scenario import ScenarioBatch, ScenarioConfig, check_batch, paper_scenarios
 from .supervisor import ABORT, HESITATE, PROCEED, check_candidate, hesitate_lateral, plan_motion, select_motion
 
 
@@ -112,7 +112,7 @@ def simulate_batch(
     prm = params or Params()
     cfg = config or SimConfig()
     nominal = nominal or ExpertPlanner()
-    _check_batch(batch, prm)
+    check_batch(batch, prm)
     if workers > 1 and len(batch) >= 2 * workers and not (trace or record_observations):
         return _simulate_parallel(batch, seed, prm, cfg, nominal, workers)
     sim = _Sim(batch, seed, prm, cfg, nominal)
@@ -393,25 +393,3 @@ def _set_rows(plan: EvasionPlan, rows, sub: EvasionPlan) -> EvasionPlan:
         arr[rows] = getattr(sub, f.name)
         out[f.name] = arr
     return EvasionPlan(**out, params=plan.params)
-
-
-def _check_batch(batch: ScenarioBatch, prm: Params) -> None:
-    if len(batch) == 0:
-        raise ValueError("the scenario batch is empty")
-    if batch.x.shape[1] < 2:
-        raise ValueError("each scenario needs a follower and at least one leader (K >= 2)")
-    if (batch.decel_last > prm.a_x_d + 1e-12).any():
-        worst = float(batch.decel_last.max())
-        # Allowed, but outside the paper's assumptions: say so rather than silently promising safety.
-        import warnings
-
-        warnings.warn(
-            f"a_x_N+1_d={worst} exceeds params.a_x_d={prm.a_x_d}: L(N+1) brakes harder than the worst case the "
-            "safety analysis assumes, so collisions are possible",
-            stacklevel=3,
-        )
-    for name in ("ego_vx",):
-        if (getattr(batch, name) < 0).any():
-            raise ValueError(f"{name} must be >= 0")
-    if (batch.v < 0).any():
-        raise ValueError("vehicle speeds v must be >= 0")

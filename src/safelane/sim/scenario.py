@@ -7,11 +7,13 @@ beyond L(N+1) are not simulated. The ego starts at the origin of the original la
 
 from __future__ import annotations
 
+import warnings
 from dataclasses import dataclass, fields
 
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field
 
+from ..params import Params
 from ..planners.variants import VARIANT_NAMES, get_variant
 
 
@@ -184,3 +186,24 @@ def _check_cell(planner: str, n_leaders: int, decel: float, samples: int, p_v: f
         raise ValueError(f"decel (a_x_N+1_d) must be a positive finite number; got {decel!r}")
     if not isinstance(samples, int | np.integer) or samples < 1:
         raise ValueError(f"samples must be a positive integer; got {samples!r}")
+
+
+def check_batch(batch: ScenarioBatch, prm: Params) -> None:
+    """Reject batches the simulator cannot run; warn where they leave the paper's assumptions."""
+    if len(batch) == 0:
+        raise ValueError("the scenario batch is empty")
+    if batch.x.shape[1] < 2:
+        raise ValueError("each scenario needs a follower and at least one leader (K >= 2)")
+    if (batch.decel_last > prm.a_x_d + 1e-12).any():
+        worst = float(batch.decel_last.max())
+        # Allowed, but outside the paper's assumptions: say so rather than silently promising safety.
+        warnings.warn(
+            f"a_x_N+1_d={worst} exceeds params.a_x_d={prm.a_x_d}: L(N+1) brakes harder than the worst case the "
+            "safety analysis assumes, so collisions are possible",
+            stacklevel=3,
+        )
+    for name in ("ego_vx",):
+        if (getattr(batch, name) < 0).any():
+            raise ValueError(f"{name} must be >= 0")
+    if (batch.v < 0).any():
+        raise ValueError("vehicle speeds v must be >= 0")
