@@ -92,6 +92,15 @@ def _windowed_quadratic(d0, dv0, rel_acc, y0, vy0, ay, level: float, dt: float):
     return np.where(active, lo, np.inf).min(-1), np.where(active, hi, -np.inf).max(-1)
 
 
+def _quadratic_min(d0, dv0, rel_acc, dt: float):
+    """Minimum over ``[0, dt]`` of ``d0 + dv0 t + rel_acc t²/2``."""
+    end = d0 + dv0 * dt + 0.5 * rel_acc * dt * dt
+    safe = np.where(rel_acc > 0.0, rel_acc, 1.0)
+    tau = np.where(rel_acc > 0.0, -dv0 / safe, -1.0)
+    vertex = np.where((tau > 0.0) & (tau < dt), d0 + 0.5 * dv0 * tau, np.inf)
+    return np.minimum(np.minimum(d0, end), vertex)
+
+
 def lane_checks(b, prm: Params, others: Motion):
     """Exact collision / margin checks between consecutive target-lane vehicles (F–L1, L1–L2, …)."""
     dt = prm.dt
@@ -104,7 +113,14 @@ def lane_checks(b, prm: Params, others: Motion):
     r, c = np.nonzero(near)
     pair_min = np.full(gap0.shape, np.inf)
     if r.size:
-        behind = Motion(*(getattr(others, f)[r, c] for f in ("t", "x", "v", "acc")))
-        ahead = Motion(*(getattr(others, f)[r, c + 1] for f in ("t", "x", "v", "acc")))
-        pair_min[r, c], _ = gap_extrema(behind, ahead)
+        simple = _one_segment(others, dt)[r, c] & _one_segment(others, dt)[r, c + 1]
+        rs, cs, rg, cg = r[simple], c[simple], r[~simple], c[~simple]
+        d0 = others.x[rs, cs + 1, 0] - others.x[rs, cs, 0]
+        dv0 = others.v[rs, cs + 1, 0] - others.v[rs, cs, 0]
+        rel_acc = others.acc[rs, cs + 1, 0] - others.acc[rs, cs, 0]
+        pair_min[rs, cs] = _quadratic_min(d0, dv0, rel_acc, dt)
+        if rg.size:
+            behind = Motion(*(getattr(others, f)[rg, cg] for f in ("t", "x", "v", "acc")))
+            ahead = Motion(*(getattr(others, f)[rg, cg + 1] for f in ("t", "x", "v", "acc")))
+            pair_min[rg, cg], _ = gap_extrema(behind, ahead)
     return (pair_min < prm.vehicle_length).any(1), (pair_min < margin - 1e-9).any(1)

@@ -42,6 +42,9 @@ class Motion:
         """Constant acceleration with stopping: knots ``0, t_stop, dt``."""
         x, v, a = np.broadcast_arrays(np.asarray(x, float), np.asarray(v, float), np.asarray(a, float))
         ts = stop_time(v, a, dt)
+        # A vehicle already at rest that "brakes" simply stays: one segment of zero acceleration.
+        at_rest = ts <= 0.0
+        a, ts = np.where(at_rest, 0.0, a), np.where(at_rest, dt, ts)
         xs = x + v * ts + 0.5 * a * ts * ts
         vs = np.where(ts < dt, 0.0, np.maximum(v + a * ts, 0.0))
         t = np.stack([np.zeros_like(ts), ts, np.full_like(ts, dt)], -1)
