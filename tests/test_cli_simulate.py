@@ -88,3 +88,30 @@ def test_help_lists_the_options():
     assert result.exit_code == 0
     for option in ("--planner", "--leaders", "--decel", "--samples", "--seed", "--p-v", "--params", "--out", "--trace"):
         assert option in result.output
+
+
+def test_preset_and_nominal_planner(tmp_path):
+    from safelane.experiments.calibration import load_preset
+    from safelane.sim import simulate
+
+    result = _invoke("--preset", "paper", "--nominal", "expert", "--out", str(tmp_path), "--no-progress")
+    assert result.exit_code == 0, result.output
+    got = pd.read_csv(tmp_path / f"{STEM}_scenarios.csv")
+    preset = load_preset("paper")
+    want = simulate("CV_none", 1, 4.0, 6, 3, params=preset.params, config=preset.sim).table
+    assert got["success"].tolist() == want["success"].tolist()
+    assert got["completion_time_s"].fillna(-1).tolist() == pytest.approx(want["completion_time_s"].fillna(-1).tolist())
+
+
+@pytest.mark.parametrize(
+    ("args", "hint"),
+    [
+        (("--preset", "nope"), "not found"),
+        (("--nominal", "nope"), "unknown nominal planner"),
+        (("--preset", "paper", "--params", "x.yaml"), "either --preset or --params"),
+    ],
+)
+def test_bad_preset_or_nominal(tmp_path, args, hint):
+    result = _invoke(*args, "--out", str(tmp_path), "--no-progress")
+    assert result.exit_code == 2
+    assert hint in result.output

@@ -18,6 +18,10 @@ def simulate(
     seed: int = typer.Option(0, "--seed", help="Seed of every random draw; the same seed gives the same table."),
     p_v: float = typer.Option(0.0, "--p-v", help="Unexpected promise-violation probability per period, in [0, 1]."),
     params_file: Path = typer.Option(None, "--params", help="YAML/JSON file with Params fields."),
+    preset: str = typer.Option(
+        None, "--preset", help="A calibrated preset (e.g. 'paper'): its params, horizon, assessment and planner."
+    ),
+    nominal: str = typer.Option(None, "--nominal", help="Nominal planner: expert (default), mlp or teacher."),
     assessment: str = typer.Option("observed", "--assessment", help="'observed' (the real one) or 'truth'."),
     out: Path = typer.Option(Path("results/simulate"), "--out", "-o", help="Output folder (created if missing)."),
     trace: bool = typer.Option(False, "--trace", help="Also write one scenario's trajectories (CSV) and a plot."),
@@ -32,24 +36,35 @@ def simulate(
     speed over time.
 
     Example: safelane simulate --planner CV_all --leaders 5 --decel 5 --samples 1000 --seed 0
+    Example: safelane simulate --preset paper --nominal mlp --leaders 1 --decel 4
     """
     from pydantic import ValidationError
 
     from ..config import load_params
+    from ..experiments.calibration import load_preset
+    from ..planners.registry import get_nominal
     from ..sim import SimConfig
     from ..sim import simulate as run
 
+    if preset is not None and params_file is not None:
+        raise typer.BadParameter("give either --preset or --params, not both", param_hint="--preset")
     try:
-        params = load_params(params_file)
+        chosen = load_preset(preset) if preset is not None else None
+        params = chosen.params if chosen else load_params(params_file)
     except (ValidationError, ValueError, FileNotFoundError) as exc:
-        raise typer.BadParameter(str(exc), param_hint="--params") from exc
+        raise typer.BadParameter(str(exc), param_hint="--preset" if preset else "--params") from exc
     try:
-        config = SimConfig(assessment=assessment)
+        config = (chosen.sim if chosen else SimConfig()).model_copy(update={"assessment": assessment})
+        SimConfig.model_validate(config.model_dump())
     except ValidationError as exc:
         raise typer.BadParameter(str(exc), param_hint="--assessment") from exc
     try:
+        planner_obj = get_nominal(nominal) if nominal else (chosen.nominal() if chosen else None)
+    except ValueError as exc:
+        raise typer.BadParameter(str(exc), param_hint="--nominal") from exc
+    try:
         result = run(planner, leaders, decel, samples, seed, p_v=p_v, params=params, config=config, trace=trace,
-                     progress=progress)  # fmt: skip
+                     progress=progress, nominal=planner_obj)  # fmt: skip
     except ValueError as exc:
         raise typer.BadParameter(str(exc)) from exc
 
