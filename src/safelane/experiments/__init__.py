@@ -1,0 +1,1 @@
+"""Experiments of the paper and beyond: registry, grid runner, calibration, claims, reproduction."""
