@@ -45,13 +45,35 @@ def pair_min_gap(slack, v_f, a_f, v_l, a_l, dt):
 def responsible_ok(a, slack, v_f, v_l, lead_decel, prm: Params):
     """True where accelerating at ``a`` for one period still lets the follower keep its margin by braking at
     ``a_x_d`` afterwards, with the vehicle ahead braking at ``lead_decel`` from now on."""
-    dt = prm.dt
-    in_period = pair_min_gap(slack, v_f, a, v_l, -lead_decel, dt) >= 0.0
-    xf, vf = advance(0.0, v_f, a, dt)
-    xl, vl = advance(slack, v_l, -lead_decel, dt)
-    with np.errstate(all="ignore"):
-        z = min_follow_decel(ARRAY, xl - xf, vf, vl, lead_decel)
-    return in_period & (z <= prm.a_x_d)
+    return _ResponsibleCheck(slack, v_f, v_l, lead_decel, prm)(a)
+
+
+class _ResponsibleCheck:
+    """:func:`responsible_ok` for many candidate ``a`` on the same rows: the leader's motion does not depend on
+    ``a``, so it is computed once (same arithmetic as :func:`pair_min_gap`, so the same results)."""
+
+    def __init__(self, slack, v_f, v_l, lead_decel, prm: Params):
+        dt = prm.dt
+        self.slack, self.v_f, self.v_l, self.d, self.prm = slack, v_f, v_l, lead_decel, prm
+        self.ts_l = stop_time(v_l, -lead_decel, dt)
+        self.xl_stop, _ = advance(slack, v_l, -lead_decel, self.ts_l)
+        self.xl_end, self.vl_end = advance(slack, v_l, -lead_decel, dt)
+
+    def __call__(self, a):
+        dt, v_f, v_l, slack = self.prm.dt, self.v_f, self.v_l, self.slack
+        ts_f = stop_time(v_f, a, dt)
+        da = a + self.d
+        tau = np.clip(np.where(da != 0.0, (v_l - v_f) / np.where(da != 0.0, da, 1.0), 0.0), 0.0, dt)
+        t = np.stack(np.broadcast_arrays(ts_f, self.ts_l, tau, np.full_like(ts_f, dt)))
+        xf, vf = advance(0.0, v_f, a, t)
+        xl_moving, _ = advance(slack, v_l, -self.d, np.stack([ts_f, tau]))
+        in_period = np.minimum(
+            np.minimum(slack, np.minimum(xl_moving[0] - xf[0], self.xl_stop - xf[1])),
+            np.minimum(xl_moving[1] - xf[2], self.xl_end - xf[3]),
+        ) >= 0.0
+        with np.errstate(all="ignore"):
+            z = min_follow_decel(ARRAY, self.xl_end - xf[3], vf[3], self.vl_end, self.d)
+        return in_period & (z <= self.prm.a_x_d)
 
 
 def responsible_accel(a_wanted, slack, v_f, v_l, lead_decel, prm: Params):
@@ -61,13 +83,13 @@ def responsible_accel(a_wanted, slack, v_f, v_l, lead_decel, prm: Params):
         *(np.asarray(a, dtype=float) for a in (a_wanted, slack, v_f, v_l, lead_decel))
     )
     out = a_wanted.copy()
-    rows = np.flatnonzero(~responsible_ok(a_wanted, slack, v_f, v_l, lead_decel, prm))
+    rows = np.flatnonzero(~_ResponsibleCheck(slack, v_f, v_l, lead_decel, prm)(a_wanted))
     if rows.size:
-        args = (slack[rows], v_f[rows], v_l[rows], lead_decel[rows])
+        check = _ResponsibleCheck(slack[rows], v_f[rows], v_l[rows], lead_decel[rows], prm)
         lo, hi = np.full(rows.size, -prm.a_x_d), a_wanted[rows]
         for _ in range(_BISECTION_STEPS):
             mid = 0.5 * (lo + hi)
-            ok = responsible_ok(mid, *args, prm)
+            ok = check(mid)
             lo, hi = np.where(ok, mid, lo), np.where(ok, hi, mid)
         out[rows] = lo
     return out
