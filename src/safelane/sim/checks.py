@@ -10,7 +10,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..params import Params
-from .kinematics import Motion, crossing_knots, extrema, gap_extrema, windowed_gap_extrema
+from .kinematics import Motion, crossing_knots, extrema, free_max, gap_extrema, windowed_gap_extrema
 
 
 def _rows(m: Motion, rows) -> Motion:
@@ -28,7 +28,10 @@ def ego_checks(
     """
     dt = prm.dt
     bsz, k = s.x.shape
-    _, y_max = extrema(lat)
+    one = _one_segment(lat, dt)
+    y_max = np.where(one, free_max(lat.x[:, 0], lat.v[:, 0], lat.acc[:, 0], dt), -np.inf)
+    if not one.all():
+        y_max[~one] = extrema(_rows(lat, ~one))[1]
     d0 = s.x - s.ego[0][:, None]
     a_bound = max(prm.a_x_a, prm.a_x_d) + np.abs(others.acc).max(-1)
     reach = np.abs(s.v - s.ego[2][:, None]) * dt + 0.5 * a_bound * dt * dt

@@ -96,6 +96,15 @@ def gap_extrema(behind: Motion, ahead: Motion):
     return _extrema(knots, xa - xb, va - vb)
 
 
+def free_max(y0, vy0, a, dt: float):
+    """Exact maximum over ``[0, dt]`` of ``y0 + vy0 t + a t²/2`` (one constant-acceleration segment)."""
+    end = y0 + vy0 * dt + 0.5 * a * dt * dt
+    safe = np.where(a < 0.0, a, -1.0)
+    tau = np.where(a < 0.0, -vy0 / safe, -1.0)
+    vertex = np.where((tau > 0.0) & (tau < dt), y0 + 0.5 * vy0 * tau, -np.inf)
+    return np.maximum(np.maximum(y0, end), vertex)
+
+
 def extrema(m: Motion):
     """Exact ``(min, max)`` of ``m.x`` over the period."""
     return _extrema(m.t, m.x, m.v)

@@ -31,7 +31,7 @@ from ..safety.evasion import EvasionPlan, evasion_core, plan_from_core
 from ..safety.lateral import LATERAL_TOL_M
 from ..safety.longitudinal import FEASIBILITY_TOL_M
 from .behaviours import pair_min_gap
-from .kinematics import Motion, advance, extrema
+from .kinematics import Motion, advance, free_max
 
 PROCEED, HESITATE, ABORT, COMPLETED = 0, 1, 2, 3
 BEHAVIOURS = ("proceed", "hesitate", "abort", "completed")
@@ -59,7 +59,7 @@ def check_candidate(
     a_f = np.where(f_aggressive, prm.a_x_a, -prm.a_x_d)
     fx, fv = advance(f_x, f_v, a_f, dt)
 
-    conflict = extrema(Motion.free(ego_y, ego_vy, a_y, dt))[1] > prm.y_safe + LATERAL_TOL_M
+    conflict = free_max(ego_y, ego_vy, a_y, dt) > prm.y_safe + LATERAL_TOL_M
     gap_l = pair_min_gap(l1_x - ego_x - prm.p_m, ego_vx, a_x, l1_v, -l1_decel, dt)
     gap_f = pair_min_gap(ego_x - f_x - prm.p_m, f_v, a_f, ego_vx, a_x, dt)
     period_ok = ~conflict | ((gap_l >= -tol) & (gap_f >= -tol))
