@@ -76,17 +76,43 @@ class _ResponsibleCheck:
         return in_period & (z <= self.prm.a_x_d)
 
 
+def final_stop_accel(slack, v_f, v_l, lead_decel, prm: Params):
+    """Largest ``a`` for which the follower's final stopping point (``a`` for one period, then ``a_x_d``) stays
+    behind the leader's (braking at ``lead_decel``): a necessary condition of :func:`responsible_ok`, in
+    closed form. ``+inf`` where the leader never stops; ``-inf`` where even stopping at once is too late.
+
+    With ``w = v_f + a·dt >= 0`` the follower stops at ``(v_f + w)·dt/2 + w²/(2 a_x_d)``; setting that equal to the
+    leader's stop ``Y = slack + v_l²/(2 lead_decel)`` gives ``w = −B dt/2 + sqrt(B² dt²/4 + B (2Y − v_f dt))``.
+    When that ``w`` is negative the follower stops inside the period, at ``v_f²/(2|a|)``, so ``a = −v_f²/(2Y)``.
+    """
+    dt, brake = prm.dt, prm.a_x_d
+    with np.errstate(all="ignore"):
+        lead_stop = np.where(lead_decel > 0.0, v_l * v_l / (2.0 * np.where(lead_decel > 0.0, lead_decel, 1.0)),
+                             np.where(v_l > 0.0, np.inf, 0.0))
+        y = slack + lead_stop
+        w = -0.5 * brake * dt + np.sqrt(np.maximum(0.25 * brake * brake * dt * dt + brake * (2.0 * y - v_f * dt), 0.0))
+        a_moving = (w - v_f) / dt
+        a_stopping = np.where(y > 0.0, -v_f * v_f / (2.0 * np.where(y > 0.0, y, 1.0)), -np.inf)
+        a = np.where(w >= 0.0, a_moving, a_stopping)
+    return np.where(np.isinf(y) & (y > 0), np.inf, np.where(y <= 0.0, -np.inf, a))
+
+
 def responsible_accel(a_wanted, slack, v_f, v_l, lead_decel, prm: Params):
-    """Largest ``a`` in ``[−a_x_d, a_wanted]`` passing :func:`responsible_ok` (bisection, conservative side);
-    ``−a_x_d`` when none does. Only the rows where ``a_wanted`` itself fails are bisected."""
+    """Largest ``a`` in ``[−a_x_d, a_wanted]`` passing :func:`responsible_ok`; ``−a_x_d`` when none does.
+
+    The candidate ``min(a_wanted, final_stop_accel)`` is exact wherever it passes the full check (nothing larger
+    can: the final-stop condition is necessary); only the remaining rows are bisected below it (conservative
+    side, 12 halvings).
+    """
     a_wanted, slack, v_f, v_l, lead_decel = np.broadcast_arrays(
         *(np.asarray(a, dtype=float) for a in (a_wanted, slack, v_f, v_l, lead_decel))
     )
-    out = a_wanted.copy()
-    rows = np.flatnonzero(~_ResponsibleCheck(slack, v_f, v_l, lead_decel, prm)(a_wanted))
+    cap = np.minimum(a_wanted, np.maximum(final_stop_accel(slack, v_f, v_l, lead_decel, prm), -prm.a_x_d))
+    out = cap.copy()
+    rows = np.flatnonzero(~_ResponsibleCheck(slack, v_f, v_l, lead_decel, prm)(cap))
     if rows.size:
         check = _ResponsibleCheck(slack[rows], v_f[rows], v_l[rows], lead_decel[rows], prm)
-        lo, hi = np.full(rows.size, -prm.a_x_d), a_wanted[rows]
+        lo, hi = np.full(rows.size, -prm.a_x_d), cap[rows]
         for _ in range(_BISECTION_STEPS):
             mid = 0.5 * (lo + hi)
             ok = check(mid)
