@@ -185,3 +185,19 @@ def test_dagger_round_collects_visited_states(tmp_path):
     assert set(result.metrics["round"]) == {0, 1}
     assert result.summary["n_train"] + result.summary["n_val"] == 1500 + 100  # 8 scenarios x 20 steps visited, 100 kept
     assert not (tmp_path / "model.onnx").exists()
+
+
+def test_weight_init_uses_an_explicit_generator():
+    torch = pytest.importorskip("torch")
+    from safelane.training.torch_model import TorchPlanner, init_weights
+
+    args = (np.zeros(12), np.ones(12), (16, 16), "tanh", {"a_x": (-8.0, 2.5), "a_y": (-1.5, 1.5)})
+    module = TorchPlanner(*args)
+    before = torch.get_rng_state()
+    init_weights(module, torch.Generator().manual_seed(3))
+    assert torch.equal(before, torch.get_rng_state())  # the global generator is untouched
+    with torch.random.fork_rng(devices=[]):  # the same draws nn.Linear makes from a seeded global generator
+        torch.manual_seed(3)
+        reference = TorchPlanner(*args)
+    for got, want in zip(module.state_dict().values(), reference.state_dict().values(), strict=True):
+        assert torch.equal(got, want)

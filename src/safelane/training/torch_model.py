@@ -7,6 +7,8 @@ loss. This module imports PyTorch at import time; import it lazily (see :func:`r
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 from ..planners.nn import HEADS, MLPPlanner
@@ -33,6 +35,20 @@ def _mlp(n_in: int, hidden: tuple[int, ...], activation: str) -> nn.Sequential:
         n_in = width
     layers.append(nn.Linear(n_in, 1))
     return nn.Sequential(*layers)
+
+
+def init_weights(module: nn.Module, generator: torch.Generator) -> None:
+    """Re-draw every ``nn.Linear`` with PyTorch's default distributions from an explicit ``generator``.
+
+    ``U(±1/sqrt(fan_in))`` for weights (``kaiming_uniform_(a=sqrt(5))``) and biases, layer by layer in module
+    order — the same draws ``nn.Linear`` makes from the global generator, without touching it.
+    """
+    with torch.no_grad():
+        for layer in module.modules():
+            if isinstance(layer, nn.Linear):
+                bound = 1.0 / math.sqrt(layer.in_features)
+                layer.weight.uniform_(-bound, bound, generator=generator)
+                layer.bias.uniform_(-bound, bound, generator=generator)
 
 
 class TorchPlanner(nn.Module):

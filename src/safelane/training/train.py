@@ -2,8 +2,8 @@
 
 A run is described completely by a :class:`TrainConfig` (YAML ↔ config 1:1, unknown keys are errors; see
 ``safelane/models/default_train.yaml``); its SHA-256 (:meth:`TrainConfig.config_hash`) is stored in the model.
-Same config → same weights: NumPy randomness comes from ``numpy.random.default_rng(seed)`` streams and PyTorch's
-from ``torch.manual_seed(seed)`` inside a forked torch RNG state in :func:`train`, on ``threads`` CPU threads.
+Same config → same weights: NumPy randomness comes from ``numpy.random.default_rng(seed)`` streams, the weight
+initialisation from an explicit ``torch.Generator`` seeded with ``seed``; training runs on ``threads`` CPU threads.
 
 Loss: mean squared error of the actions divided by each head's half range (``a_x`` and ``a_y`` errors weigh
 alike). Adam, learning rate halved on validation plateaus, early stopping on the validation loss (best weights
@@ -145,7 +145,7 @@ def _fit(module, torch, data, cfg: TrainConfig, max_epochs: int, rng, progress, 
 
 def train(cfg: TrainConfig, out_dir: Path | str, progress: bool = True) -> TrainResult:
     """Run the whole pipeline of the module docstring; returns the planner and writes the files to ``out_dir``."""
-    from .torch_model import TorchPlanner, require_torch, to_planner
+    from .torch_model import TorchPlanner, init_weights, require_torch, to_planner
 
     torch = require_torch()
     out_dir = Path(out_dir)
@@ -174,11 +174,8 @@ def train(cfg: TrainConfig, out_dir: Path | str, progress: bool = True) -> Train
         mean = parts[0].mean(axis=0)
         std = parts[0].std(axis=0)
         std = np.where(std > 1e-8, std, 1.0)  # a constant feature (e.g. no connected followers) passes through
-        # Weight initialisation draws from torch's global generator: seed it inside a forked state so the
-        # caller's torch RNG is left as it was.
-        with torch.random.fork_rng(devices=[]):
-            torch.manual_seed(cfg.seed)
-            module = TorchPlanner(mean, std, cfg.model.hidden, cfg.model.activation, head_bounds(prm))
+        module = TorchPlanner(mean, std, cfg.model.hidden, cfg.model.activation, head_bounds(prm))
+        init_weights(module, torch.Generator().manual_seed(cfg.seed))  # explicit generator, no global seeding
         t0 = time.perf_counter()
         _fit(module, torch, as_tensors(parts), cfg, cfg.optim.max_epochs, rng, bar, 0, log)
         timings["fit_s"] = time.perf_counter() - t0
