@@ -67,10 +67,45 @@ def _responsible_ok(a, slack, v_f, v_l, lead_decel, prm, dt):
     return _min_follow_decel(xl - xf, vf, vl, lead_decel) <= prm.a_x_d
 
 
+def _final_stop_accel(slack, v_f, v_l, lead_decel, prm, dt):
+    brake = prm.a_x_d
+    if lead_decel <= 0.0 and v_l > 0.0:
+        return math.inf
+    y = slack + (v_l * v_l / (2.0 * lead_decel) if lead_decel > 0.0 else 0.0)
+    if y <= 0.0:
+        return -math.inf
+    w = -0.5 * brake * dt + math.sqrt(max(0.25 * brake * brake * dt * dt + brake * (2.0 * y - v_f * dt), 0.0))
+    return (w - v_f) / dt if w >= 0.0 else -v_f * v_f / (2.0 * y)
+
+
+def _responsible_bound(a_wanted, slack, v_f, v_l, d, prm, dt):
+    if slack < 0.0:
+        return -math.inf
+    bound = min(a_wanted, _final_stop_accel(slack, v_f, v_l, d, prm, dt))
+    xl_end, u1 = _advance(slack, v_l, -d, dt)
+    g = xl_end - v_f * dt
+    dv = v_f - v_l
+    if dv > 0.0 and slack > 0.0:
+        tau = 2.0 * slack / dv
+        if tau < dt and v_l - d * tau > 0.0:
+            bound = min(bound, -d - dv * dv / (2.0 * slack))
+    c = prm.a_x_d - d
+    r0 = v_f - u1
+    disc = c * c * dt * dt + 4.0 * c * (2.0 * g + dt * r0)
+    if c > 0.0 and disc >= 0.0 and u1 > 0.0:
+        q = 0.5 * (-c * dt + math.sqrt(disc))
+        if q > 0.0 and q * d <= c * u1:
+            bound = min(bound, (q - r0) / dt)
+    return bound
+
+
 def _responsible_accel(a_wanted, slack, v_f, v_l, lead_decel, prm, dt):
-    if _responsible_ok(a_wanted, slack, v_f, v_l, lead_decel, prm, dt):
-        return a_wanted
-    lo, hi = -prm.a_x_d, a_wanted
+    floor = -prm.a_x_d
+    bound = _responsible_bound(a_wanted, slack, v_f, v_l, lead_decel, prm, dt)
+    cap = a_wanted if bound >= a_wanted else max(bound - 1e-9, floor)
+    if cap <= floor or _responsible_ok(cap, slack, v_f, v_l, lead_decel, prm, dt):
+        return cap
+    lo, hi = floor, cap
     for _ in range(12):
         mid = 0.5 * (lo + hi)
         lo, hi = (mid, hi) if _responsible_ok(mid, slack, v_f, v_l, lead_decel, prm, dt) else (lo, mid)

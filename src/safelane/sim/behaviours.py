@@ -26,8 +26,6 @@ from ..safety._backend import ARRAY
 from ..safety.chain import min_follow_decel
 from .kinematics import advance, stop_time
 
-_BISECTION_STEPS = 12
-
 
 def pair_min_gap(slack, v_f, a_f, v_l, a_l, dt):
     """Exact minimum over ``[0, dt]`` of ``x_l − x_f − margin`` for two constant-acceleration motions with
@@ -67,10 +65,13 @@ class _ResponsibleCheck:
         t = np.stack(np.broadcast_arrays(ts_f, self.ts_l, tau, np.full_like(ts_f, dt)))
         xf, vf = advance(0.0, v_f, a, t)
         xl_moving, _ = advance(slack, v_l, -self.d, np.stack([ts_f, tau]))
-        in_period = np.minimum(
-            np.minimum(slack, np.minimum(xl_moving[0] - xf[0], self.xl_stop - xf[1])),
-            np.minimum(xl_moving[1] - xf[2], self.xl_end - xf[3]),
-        ) >= 0.0
+        in_period = (
+            np.minimum(
+                np.minimum(slack, np.minimum(xl_moving[0] - xf[0], self.xl_stop - xf[1])),
+                np.minimum(xl_moving[1] - xf[2], self.xl_end - xf[3]),
+            )
+            >= 0.0
+        )
         with np.errstate(all="ignore"):
             z = min_follow_decel(ARRAY, self.xl_end - xf[3], vf[3], self.vl_end, self.d)
         return in_period & (z <= self.prm.a_x_d)
@@ -87,8 +88,11 @@ def final_stop_accel(slack, v_f, v_l, lead_decel, prm: Params):
     """
     dt, brake = prm.dt, prm.a_x_d
     with np.errstate(all="ignore"):
-        lead_stop = np.where(lead_decel > 0.0, v_l * v_l / (2.0 * np.where(lead_decel > 0.0, lead_decel, 1.0)),
-                             np.where(v_l > 0.0, np.inf, 0.0))
+        lead_stop = np.where(
+            lead_decel > 0.0,
+            v_l * v_l / (2.0 * np.where(lead_decel > 0.0, lead_decel, 1.0)),
+            np.where(v_l > 0.0, np.inf, 0.0),
+        )
         y = slack + lead_stop
         w = -0.5 * brake * dt + np.sqrt(np.maximum(0.25 * brake * brake * dt * dt + brake * (2.0 * y - v_f * dt), 0.0))
         a_moving = (w - v_f) / dt
@@ -97,28 +101,86 @@ def final_stop_accel(slack, v_f, v_l, lead_decel, prm: Params):
     return np.where(np.isinf(y) & (y > 0), np.inf, np.where(y <= 0.0, -np.inf, a))
 
 
+_ROOT_EPS = 1e-9  # m/s²: the closed-form bound is applied this far on the safe side (rounding at the boundary)
+_BISECTION_STEPS = 12
+
+
+def responsible_bounds(a_wanted, slack, v_f, v_l, lead_decel, prm: Params) -> dict[str, np.ndarray]:
+    """The closed-form upper bounds whose minimum is :func:`responsible_accel`'s answer, by the way the margin
+    binds (``+inf`` where a case does not hold at its root). The follower is at ``a`` for one period, then brakes
+    at ``B = a_x_d``; the leader brakes at ``d = lead_decel`` throughout; ``x_l(dt)``, ``u1``: the leader's
+    gap position and speed at ``dt``. Each root is kept only where its case holds at the root; it is then an
+    upper bound on the safe ``a``, and the binding one is the answer. (The gap at ``dt`` itself never binds
+    alone: where it is decreasing at ``dt`` it keeps decreasing after, so a later bound is smaller.)
+
+    * ``wanted`` — the planner's own wish;
+    * ``inside`` — already inside the margin (``slack < 0``): nothing is safe, ``−inf``;
+    * ``final`` — the follower stops where the leader stops (:func:`final_stop_accel`); always a bound;
+    * ``in_period`` — equal speeds while both move (follower braking harder than the leader):
+      ``a = −d − (v_f − v_l)² / (2 slack)``, where the equal-speed instant ``2 slack / (v_f − v_l)`` lies inside
+      the period before the leader stops;
+    * ``after_period`` — equal speeds while both move (``B > d``): with ``q = v_f + a dt − u1``,
+      ``G = x_l(dt) − v_f dt`` and ``c = B − d``, the gap at that instant ``G − a dt²/2 − q²/(2c)`` is zero at
+      ``q = (−c dt + sqrt(c² dt² + 4c (2G + dt (v_f − u1)))) / 2``, where ``q > 0`` and the instant ``q / c``
+      after the period comes before the leader stops.
+    """
+    dt, brake = prm.dt, prm.a_x_d
+    with np.errstate(all="ignore"):
+        xl_end, u1 = advance(slack, v_l, -lead_decel, dt)
+        g = xl_end - v_f * dt
+        dv = v_f - v_l
+        tau = 2.0 * slack / dv
+        vertex = -lead_decel - dv * dv / (2.0 * slack)
+        in_period = (dv > 0.0) & (slack > 0.0) & (tau < dt) & (v_l - lead_decel * tau > 0.0)
+        c = brake - lead_decel
+        r0 = v_f - u1
+        disc = c * c * dt * dt + 4.0 * c * (2.0 * g + dt * r0)
+        q = 0.5 * (-c * dt + np.sqrt(disc))
+        after = (q - r0) / dt
+        after_period = (c > 0.0) & (disc >= 0.0) & (q > 0.0) & (u1 > 0.0) & (q * lead_decel <= c * u1)
+        return {
+            "wanted": a_wanted,
+            "inside": np.where(slack >= 0.0, np.inf, -np.inf),
+            "final": final_stop_accel(slack, v_f, v_l, lead_decel, prm),
+            "in_period": np.where(in_period, vertex, np.inf),
+            "after_period": np.where(after_period, after, np.inf),
+        }
+
+
+def responsible_bound(a_wanted, slack, v_f, v_l, lead_decel, prm: Params):
+    """The smallest of :func:`responsible_bounds`: the largest safe acceleration, in closed form."""
+    bounds = iter(responsible_bounds(a_wanted, slack, v_f, v_l, lead_decel, prm).values())
+    out = next(bounds)
+    for b in bounds:
+        out = np.minimum(out, b)
+    return out
+
+
 def responsible_accel(a_wanted, slack, v_f, v_l, lead_decel, prm: Params):
     """Largest ``a`` in ``[−a_x_d, a_wanted]`` passing :func:`responsible_ok`; ``−a_x_d`` when none does.
 
-    The candidate ``min(a_wanted, final_stop_accel)`` is exact wherever it passes the full check (nothing larger
-    can: the final-stop condition is necessary); only the remaining rows are bisected below it (conservative
-    side, 12 halvings).
+    The safe ``a`` form an interval ``[−a_x_d, a*]`` (a larger ``a`` puts the follower further ahead at every
+    instant), and ``a*`` is :func:`responsible_bound`, applied ``1e-9`` m/s² on the safe side and verified by the
+    full check. Rows where the check fails anyway (none are known) are bisected below it, 12 halvings on the
+    conservative side.
     """
     a_wanted, slack, v_f, v_l, lead_decel = np.broadcast_arrays(
         *(np.asarray(a, dtype=float) for a in (a_wanted, slack, v_f, v_l, lead_decel))
     )
-    cap = np.minimum(a_wanted, np.maximum(final_stop_accel(slack, v_f, v_l, lead_decel, prm), -prm.a_x_d))
-    out = cap.copy()
-    rows = np.flatnonzero(~_ResponsibleCheck(slack, v_f, v_l, lead_decel, prm)(cap))
+    floor = -prm.a_x_d
+    bound = responsible_bound(a_wanted, slack, v_f, v_l, lead_decel, prm)
+    cap = np.where(bound >= a_wanted, a_wanted, np.maximum(bound - _ROOT_EPS, floor))
+    rows = np.flatnonzero((cap > floor) & ~_ResponsibleCheck(slack, v_f, v_l, lead_decel, prm)(cap))
     if rows.size:
+        cap = cap.copy()
         check = _ResponsibleCheck(slack[rows], v_f[rows], v_l[rows], lead_decel[rows], prm)
-        lo, hi = np.full(rows.size, -prm.a_x_d), cap[rows]
+        lo, hi = np.full(rows.size, floor), cap[rows]
         for _ in range(_BISECTION_STEPS):
             mid = 0.5 * (lo + hi)
             ok = check(mid)
             lo, hi = np.where(ok, mid, lo), np.where(ok, hi, mid)
-        out[rows] = lo
-    return out
+        cap[rows] = lo
+    return cap
 
 
 def leader_accels(
