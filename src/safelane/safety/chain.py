@@ -116,7 +116,7 @@ def leader_chain(p, v, promise_decel, params: Params, *, human_driven=None) -> C
     else:
         cols = tuple(np.moveaxis(np.broadcast_to(a, (*batch, a.shape[-1])), -1, 0) for a in (p, v, promise, human))
     with np.errstate(all="ignore"):
-        decel, required, unsafe = _propagate(xp, *cols, params, n_links)
+        decel, required, unsafe = propagate_chain(xp, *cols, params, n_links)
     l1 = xp.where(unsafe, params.a_x_d, decel[0])
     if xp is SCALAR:
         stack = lambda xs: np.asarray(xs, dtype=np.float64)  # noqa: E731
@@ -131,7 +131,9 @@ def leader_chain(p, v, promise_decel, params: Params, *, human_driven=None) -> C
     )
 
 
-def _propagate(xp, p, v, promise, human, params: Params, n_links: int):
+def propagate_chain(xp, p, v, promise, human, params: Params, n_links: int):
+    """Unchecked scan of :func:`leader_chain` over per-vehicle rows ``p[i]``, ``v[i]`` (``L1`` first; ``promise``
+    and ``human`` for ``L1..LN``). Returns ``(decel, required, unsafe)`` as lists front-last and a flag."""
     decel = [params.a_x_d]  # L(N+1), not connected: mechanical worst case
     required = []
     unsafe = False

@@ -205,7 +205,7 @@ def leader_accels(
     period; ``violate_pick``: (B, K) uniforms placing its deceleration in ``U[z_i, a_x_N+1_d]``.
     """
     bsz, k = x.shape
-    acc = np.zeros((bsz, k))
+    acc = np.zeros((bsz, k), order="F")  # column-major: filled vehicle by vehicle
     last = n_connected + 1
     for i in range(k - 1, 0, -1):  # front to back: each link reacts to the one ahead (a scan, not a batch loop)
         is_last = last == i

@@ -33,7 +33,7 @@ def ego_checks(
     if not one.all():
         y_max[~one] = extrema(_rows(lat, ~one))[1]
     d0 = s.x - s.ego[0][:, None]
-    a_bound = max(prm.a_x_a, prm.a_x_d) + np.abs(others.acc).max(-1)
+    a_bound = max(prm.a_x_a, prm.a_x_d) + _abs_acc(others)
     reach = np.abs(s.v - s.ego[2][:, None]) * dt + 0.5 * a_bound * dt * dt
     near = b.valid & (np.abs(d0) - reach < prm.p_m + 1e-6) & (y_max > conflict_level)[:, None]
     r, c = np.nonzero(near)
@@ -63,14 +63,46 @@ def ego_checks(
     return collided, violated, min_gap_f, min_gap_l1
 
 
+def _abs_acc(m: Motion) -> np.ndarray:
+    """Largest ``|acceleration|`` of each motion over the period (a slice-wise maximum: reductions over a short
+    last axis are slow in NumPy)."""
+    out = np.abs(m.acc[..., 0])
+    for j in range(1, m.acc.shape[-1]):
+        out = np.maximum(out, np.abs(m.acc[..., j]))
+    return out
+
+
 def _one_segment(m: Motion, dt: float) -> np.ndarray:
     """True where the motion has no knot strictly inside the period (one constant acceleration throughout)."""
     return (m.t[..., 1:-1] >= dt).all(-1)
 
 
+def _quadratic_extrema(d0, dv0, rel_acc, dt: float):
+    """``(min, max)`` over ``[0, dt]`` of ``d0 + dv0 t + rel_acc t²/2``."""
+    end = d0 + dv0 * dt + 0.5 * rel_acc * dt * dt
+    tau = np.where(rel_acc != 0.0, -dv0 / np.where(rel_acc != 0.0, rel_acc, 1.0), -1.0)
+    inside = (tau > 0.0) & (tau < dt)
+    vertex = d0 + dv0 * tau + 0.5 * rel_acc * tau * tau
+    lo = np.minimum(np.minimum(d0, end), np.where(inside & (rel_acc > 0.0), vertex, np.inf))
+    hi = np.maximum(np.maximum(d0, end), np.where(inside & (rel_acc < 0.0), vertex, -np.inf))
+    return lo, hi
+
+
 def _windowed_quadratic(d0, dv0, rel_acc, y0, vy0, ay, level: float, dt: float):
     """``(min, max)`` of ``d0 + dv0 t + rel_acc t²/2`` over the instants of ``[0, dt]`` where
-    ``y0 + vy0 t + ay t²/2 > level`` — the one-segment case of :func:`windowed_gap_extrema`, in closed form."""
+    ``y0 + vy0 t + ay t²/2 > level`` — the one-segment case of :func:`windowed_gap_extrema`, in closed form.
+    Where the lateral position stays above ``level`` all period (the ego settled in the target lane) the window
+    is the whole period."""
+    lo, hi = _quadratic_extrema(d0, dv0, rel_acc, dt)
+    part = np.flatnonzero(-free_max(-y0, -vy0, -ay, dt) <= level)
+    if part.size:
+        sub = (a[part] for a in (d0, dv0, rel_acc, y0, vy0, ay))
+        lo[part], hi[part] = _window_crossings(*sub, level, dt)
+    return lo, hi
+
+
+def _window_crossings(d0, dv0, rel_acc, y0, vy0, ay, level: float, dt: float):
+    """:func:`_windowed_quadratic` where the window is cut by crossings of ``level`` (or empty)."""
     one = Motion(
         t=np.stack([np.zeros_like(y0), np.full_like(y0, dt)], -1),
         x=np.stack([y0, y0 + vy0 * dt + 0.5 * ay * dt * dt], -1),
@@ -109,7 +141,7 @@ def lane_checks(b, prm: Params, others: Motion):
     dt = prm.dt
     x0, v0 = others.x[..., 0], others.v[..., 0]
     gap0 = x0[:, 1:] - x0[:, :-1]
-    a_abs = np.abs(others.acc).max(-1)
+    a_abs = _abs_acc(others)
     reach = np.abs(v0[:, 1:] - v0[:, :-1]) * dt + 0.5 * (a_abs[:, 1:] + a_abs[:, :-1]) * dt * dt
     margin = np.where(b.human[:, :-1], prm.p_m_human, prm.p_m)
     near = b.valid[:, 1:] & b.valid[:, :-1] & (gap0 - reach < margin + 1e-6)

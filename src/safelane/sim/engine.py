@@ -18,7 +18,7 @@ from ..params import Params
 from ..planners.base import ExpertPlanner, NominalPlanner, Observation
 from ..planners.variants import VARIANT_NAMES, VARIANTS
 from ..safety._backend import ARRAY
-from ..safety.chain import leader_chain
+from ..safety.chain import propagate_chain
 from ..safety.evasion import EvasionPlan, evasion_core, plan_from_core
 from ..safety.lateral import LATERAL_TOL_M
 from . import assessment as assess
@@ -29,7 +29,7 @@ from .kinematics import Motion
 from .results import SimResult, results_table, trace_rows
 from .rng import counter_normal, counter_uniform
 from .scenario import ScenarioBatch, ScenarioConfig, check_batch, paper_scenarios
-from .supervisor import ABORT, HESITATE, PROCEED, check_candidate, hesitate_lateral, plan_motion, select_motion
+from .supervisor import ABORT, HESITATE, PROCEED, check_candidate, hesitate_lateral, plan_motion, replace_rows
 
 
 @dataclass(frozen=True)
@@ -157,6 +157,11 @@ class _Sim:
     """Holds the constant per-scenario arrays; ``step`` is a pure function of the state."""
 
     def __init__(self, batch: ScenarioBatch, seed: int, prm: Params, cfg: SimConfig, nominal: NominalPlanner):
+        # (B, K) arrays are kept column-major: the engine works vehicle by vehicle (x[:, i]), and a strided
+        # column costs NumPy several times a contiguous one.
+        batch = dataclasses.replace(
+            batch, **{f.name: _columns(getattr(batch, f.name)) for f in dataclasses.fields(batch)}
+        )
         self.b, self.seed, self.prm, self.cfg, self.nominal = batch, seed, prm, cfg, nominal
         variants = [VARIANTS[name] for name in VARIANT_NAMES]
         self.uses_chain = np.array([v.uses_chain for v in variants])[batch.variant]
@@ -164,12 +169,13 @@ class _Sim:
         self.uses_assessment = np.array([v.uses_assessment for v in variants])[batch.variant]
         k = batch.x.shape[1]
         slots = np.arange(1, k)
-        self.chain_promise = np.where(
-            slots[None, :] <= batch.n_connected[:, None], batch.promise_decel[:, 1:], prm.a_x_d
-        )[:, :-1]
-        self.chain_human = (batch.human[:, 1:] & (slots[None, :] <= batch.n_connected[:, None]))[:, :-1]
+        in_chain = slots[None, :] <= batch.n_connected[:, None]
+        # The chain's inputs as contiguous rows (vehicle-major), for the unchecked scan of the chain.
+        self.chain_promise = np.where(in_chain, batch.promise_decel[:, 1:], prm.a_x_d)[:, :-1].T.copy()
+        self.chain_human = (batch.human[:, 1:] & in_chain)[:, :-1].T.copy()
         self.gap0 = batch.ego_x - batch.x[:, 0]
-        self.v_desired = batch.v.copy()
+        self.any_violation = bool((batch.p_v > 0.0).any())
+        self.v_desired = batch.v.copy(order="F")
 
     def initial_state(self) -> SimState:
         b, prm = self.b, self.prm
@@ -196,9 +202,9 @@ class _Sim:
             t=0.0,
             step=0,
             ego=(b.ego_x.copy(), b.ego_y.copy(), b.ego_vx.copy(), b.ego_vy.copy()),
-            x=b.x.copy(),
-            v=b.v.copy(),
-            acc=np.zeros_like(b.x),
+            x=b.x.copy(order="F"),
+            v=b.v.copy(order="F"),
+            acc=np.zeros_like(b.x, order="F"),
             completed=np.zeros(n, bool),
             t_complete=np.full(n, np.nan),
             plan=plan,
@@ -238,8 +244,12 @@ class _Sim:
     def worst_case(self, s: SimState, belief: assess.AssessmentState):
         """L1's worst-case deceleration and F's assumed type, from the information each variant uses."""
         b, prm = self.b, self.prm
-        chain = leader_chain(s.x[:, 1:], s.v[:, 1:], self.chain_promise, prm, human_driven=self.chain_human)
-        l1_decel = np.where(self.uses_chain, chain.l1_decel, prm.a_x_d)
+        n_links = s.x.shape[1] - 2
+        with np.errstate(all="ignore"):  # inputs were checked with the batch: the scan alone, unchecked
+            decel, _, unsafe = propagate_chain(
+                ARRAY, s.x.T[1:], s.v.T[1:], self.chain_promise, self.chain_human, prm, n_links
+            )
+        l1_decel = np.where(self.uses_chain & ~np.asarray(unsafe, bool), decel[0], prm.a_x_d)
         assessed = b.follower_aggressive if self.cfg.assessment == "truth" else belief.aggressive
         trusted = self.uses_f_v2x & b.connected[:, 0]
         f_aggr = np.where(trusted, False, np.where(self.uses_assessment, assessed, True))
@@ -250,8 +260,10 @@ class _Sim:
         dt = prm.dt
         ex, ey, evx, evy = s.ego
         obs = self.observe(s)
-        noise = cfg.sensor_noise_std * counter_normal(self.seed, b.scenario_id, s.step, 0)
-        belief = assess.update(s.belief, s.v[:, 0] + noise, s.t, dt, cfg.assess_threshold)
+        observed_f_v = s.v[:, 0]
+        if cfg.sensor_noise_std > 0.0:  # counter-based: skipping the draws when unused changes nothing else
+            observed_f_v = observed_f_v + cfg.sensor_noise_std * counter_normal(self.seed, b.scenario_id, s.step, 0)
+        belief = assess.update(s.belief, observed_f_v, s.t, dt, cfg.assess_threshold)
         l1_decel, f_aggr = self.worst_case(s, belief)
         a_x, a_y = self.nominal(obs, prm)
         a_x = np.clip(np.asarray(a_x, float), -prm.a_x_d, prm.a_x_a)
@@ -292,11 +304,10 @@ class _Sim:
             ay_cmd[done] = np.clip(0.8 * (prm.lane_width - ey[done]) - 1.6 * evy[done], -prm.a_y_m, prm.a_y_m)
         lon = Motion.constant(ex, evx, ax_cmd, dt)
         lat = Motion.free(ey, evy, ay_cmd, dt)
-        aborting = behaviour == ABORT
-        if aborting.any():
-            age = s.t - s.plan_t0
-            p_lon, p_lat = plan_motion(s.plan, age, dt)
-            lon, lat = select_motion(aborting, p_lon, lon), select_motion(aborting, p_lat, lat)
+        rows = np.flatnonzero(behaviour == ABORT)
+        if rows.size:  # only the aborting rows follow their plan: evaluate it there alone
+            p_lon, p_lat = plan_motion(s.plan.take(rows), s.t - s.plan_t0[rows], dt)
+            lon, lat = replace_rows(lon, rows, p_lon), replace_rows(lat, rows, p_lat)
 
         acc = self.others_accels(s, ex, evx)
         others = Motion.constant(s.x, s.v, acc, dt)
@@ -307,8 +318,11 @@ class _Sim:
         b, prm, cfg = self.b, self.prm, self.cfg
         k = s.x.shape[1]
         slots = np.arange(k)
-        violating = counter_uniform(self.seed, b.scenario_id[:, None], s.step, slots[None, :], 7) < b.p_v[:, None]
-        pick = counter_uniform(self.seed, b.scenario_id[:, None], s.step, slots[None, :], 8)
+        if self.any_violation:  # counter-based: skipping the draws when p_v = 0 everywhere changes nothing else
+            violating = counter_uniform(self.seed, b.scenario_id[:, None], s.step, slots[None, :], 7) < b.p_v[:, None]
+            pick = counter_uniform(self.seed, b.scenario_id[:, None], s.step, slots[None, :], 8)
+        else:
+            violating, pick = np.zeros(s.x.shape, bool), np.zeros(s.x.shape)
         braking = np.full(len(b), s.t + 1e-9 >= cfg.brake_start_s)
         acc = leader_accels(
             s.x,
@@ -379,6 +393,11 @@ class _Sim:
             min_gap_l1=min_gap_l1,
             counts=counts,
         )
+
+
+def _columns(a):
+    """2-D per-vehicle arrays column-major; everything else as it is."""
+    return np.asfortranarray(a) if isinstance(a, np.ndarray) and a.ndim == 2 else a
 
 
 def _set_rows(plan: EvasionPlan, rows, sub: EvasionPlan) -> EvasionPlan:

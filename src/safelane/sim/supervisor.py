@@ -108,9 +108,11 @@ def pad_knots(m: Motion, n_knots: int) -> Motion:
     return Motion(t=rep(m.t), x=rep(m.x), v=rep(m.v), acc=rep(m.acc, 0.0))
 
 
-def select_motion(mask, a: Motion, b: Motion) -> Motion:
-    """``a`` where ``mask`` else ``b`` (knot counts padded to match)."""
-    n = max(a.t.shape[-1], b.t.shape[-1])
-    a, b = pad_knots(a, n), pad_knots(b, n)
-    m = mask[..., None]
-    return Motion(*(np.where(m, getattr(a, f), getattr(b, f)) for f in ("t", "x", "v", "acc")))
+def replace_rows(m: Motion, rows, sub: Motion) -> Motion:
+    """``m`` (batch on the first axis) with ``rows`` replaced by ``sub``'s rows (knot counts padded to match)."""
+    n = max(m.t.shape[-1], sub.t.shape[-1])
+    m, sub = pad_knots(m, n), pad_knots(sub, n)
+    out = Motion(*(getattr(m, f).copy() for f in ("t", "x", "v", "acc")))
+    for f in ("t", "x", "v", "acc"):
+        getattr(out, f)[rows] = getattr(sub, f)
+    return out
