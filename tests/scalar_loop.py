@@ -59,14 +59,6 @@ def _min_follow_decel(slack, v_f, v_l, a_l):
     return v_f * v_f / (2.0 * slack + lead)
 
 
-def _responsible_ok(a, slack, v_f, v_l, lead_decel, prm, dt):
-    if _pair_min_gap(slack, v_f, a, v_l, -lead_decel, dt) < 0.0:
-        return False
-    xf, vf = _advance(0.0, v_f, a, dt)
-    xl, vl = _advance(slack, v_l, -lead_decel, dt)
-    return _min_follow_decel(xl - xf, vf, vl, lead_decel) <= prm.a_x_d
-
-
 def _final_stop_accel(slack, v_f, v_l, lead_decel, prm, dt):
     brake = prm.a_x_d
     if lead_decel <= 0.0 and v_l > 0.0:
@@ -78,17 +70,22 @@ def _final_stop_accel(slack, v_f, v_l, lead_decel, prm, dt):
     return (w - v_f) / dt if w >= 0.0 else -v_f * v_f / (2.0 * y)
 
 
-def _responsible_bound(a_wanted, slack, v_f, v_l, d, prm, dt):
+def _responsible_bound(slack, v_f, v_l, d, prm, dt):
     if slack < 0.0:
         return -math.inf
-    bound = min(a_wanted, _final_stop_accel(slack, v_f, v_l, d, prm, dt))
+    bound = _final_stop_accel(slack, v_f, v_l, d, prm, dt)
     xl_end, u1 = _advance(slack, v_l, -d, dt)
     g = xl_end - v_f * dt
+    if xl_end > 0.0:
+        end = 2.0 * g / (dt * dt)
+        bound = min(bound, end if v_f + end * dt >= 0.0 else -v_f * v_f / (2.0 * xl_end))
+    else:
+        bound = min(bound, -math.inf if xl_end < 0.0 else 0.0)
     dv = v_f - v_l
-    if dv > 0.0 and slack > 0.0:
+    if dv > 0.0:
         tau = 2.0 * slack / dv
         if tau < dt and v_l - d * tau > 0.0:
-            bound = min(bound, -d - dv * dv / (2.0 * slack))
+            bound = min(bound, -d - dv * dv / (2.0 * slack) if slack > 0.0 else -math.inf)
     c = prm.a_x_d - d
     r0 = v_f - u1
     disc = c * c * dt * dt + 4.0 * c * (2.0 * g + dt * r0)
@@ -100,16 +97,8 @@ def _responsible_bound(a_wanted, slack, v_f, v_l, d, prm, dt):
 
 
 def _responsible_accel(a_wanted, slack, v_f, v_l, lead_decel, prm, dt):
-    floor = -prm.a_x_d
-    bound = _responsible_bound(a_wanted, slack, v_f, v_l, lead_decel, prm, dt)
-    cap = a_wanted if bound >= a_wanted else max(bound - 1e-9, floor)
-    if cap <= floor or _responsible_ok(cap, slack, v_f, v_l, lead_decel, prm, dt):
-        return cap
-    lo, hi = floor, cap
-    for _ in range(12):
-        mid = 0.5 * (lo + hi)
-        lo, hi = (mid, hi) if _responsible_ok(mid, slack, v_f, v_l, lead_decel, prm, dt) else (lo, mid)
-    return lo
+    bound = _responsible_bound(slack, v_f, v_l, lead_decel, prm, dt)
+    return a_wanted if bound > a_wanted else max(bound - 1e-9, -prm.a_x_d)
 
 
 def loop_scenario(b, i: int, prm: Params, steps: int, open_decel=0.5, open_gap=3.0, window=5, thr=0.2) -> dict:

@@ -20,6 +20,7 @@ from safelane import Params
 from safelane.safety import plan_evasion
 from safelane.sim.checks import ego_checks
 from safelane.sim.kinematics import (
+    Fleet,
     Motion,
     advance,
     crossing_knots,
@@ -241,6 +242,23 @@ def test_windowed_extrema_count_only_instants_inside_the_lateral_window(crossing
     assert lo_n[0] == np.inf and hi_n[0] == -np.inf
 
 
+def test_fleet_is_motion_constant_without_the_knots():
+    """``Fleet`` keeps ``Motion.constant``'s numbers per vehicle; its ``motion(idx)`` is that motion exactly."""
+    rng = np.random.default_rng(5)
+    dt = PARAMS.dt
+    x, v, a = rng.uniform(-50, 50, (300, 4)), rng.uniform(0, 35, (300, 4)), rng.uniform(-8, 2.5, (300, 4))
+    v[::7] = 0.0  # at rest, some "braking"
+    v[::5, 1] = 0.3  # stopping inside the period
+    fleet, full = Fleet.constant(x, v, a, dt), Motion.constant(x, v, a, dt)
+    rows, cols = rng.integers(0, 300, 50), rng.integers(0, 4, 50)
+    picked = fleet.motion(rows, cols)
+    for f in ("t", "x", "v", "acc"):
+        np.testing.assert_array_equal(getattr(picked, f), getattr(full, f)[rows, cols])
+    np.testing.assert_array_equal(fleet.end[0], full.end[0])
+    np.testing.assert_array_equal(fleet.end[1], full.end[1])
+    assert (fleet.t_stop < dt).any() and (fleet.acc == 0.0).any()
+
+
 def _ego_check_inputs(gap_l1_m, dip=True, ego_y=3.5):
     """One scenario: the ego (fully in the target lane at ``ego_y``) braking at 8 m/s² behind L1, which
     accelerates; the gap is ``gap_l1_m`` at both period ends and dips by 10.5 dt²/8 in between if ``dip``."""
@@ -251,7 +269,7 @@ def _ego_check_inputs(gap_l1_m, dip=True, ego_y=3.5):
     x0 = np.array([[-40.0, gap_l1_m]])
     v0 = np.array([[30.0, 30.0 - closing]])
     acc = np.array([[0.0, 2.5 if dip else -8.0]])
-    others = Motion.constant(x0, v0, acc, dt)
+    others = Fleet.constant(x0, v0, acc, dt)
     b = SimpleNamespace(valid=np.ones((1, 2), bool))
     s = SimpleNamespace(
         x=x0, v=v0, ego=(np.zeros(1), np.full(1, ego_y), np.full(1, 30.0), np.zeros(1)),

@@ -10,16 +10,14 @@ from __future__ import annotations
 import numpy as np
 
 from ..params import Params
-from .kinematics import Motion, crossing_knots, extrema, free_max, gap_extrema, windowed_gap_extrema
+from .kinematics import Fleet, Motion, crossing_knots, extrema, free_max, gap_extrema, windowed_gap_extrema
 
 
 def _rows(m: Motion, rows) -> Motion:
     return Motion(*(getattr(m, f)[rows] for f in ("t", "x", "v", "acc")))
 
 
-def ego_checks(
-    b, prm: Params, s, lon: Motion, lat: Motion, others: Motion, conflict_level: float, overlap_level: float
-):
+def ego_checks(b, prm: Params, s, lon: Motion, lat: Motion, others: Fleet, conflict_level: float, overlap_level: float):
     """Exact ego collision / p_m-violation checks for the period, counted only at the instants the ego is
     in the conflict zone (violations) or overlaps the target lane's vehicles laterally (collisions).
 
@@ -27,49 +25,44 @@ def ego_checks(
     a gap can move in one period filters the rest); the result is the same, faster.
     """
     dt = prm.dt
-    bsz, k = s.x.shape
     one = _one_segment(lat, dt)
     y_max = np.where(one, free_max(lat.x[:, 0], lat.v[:, 0], lat.acc[:, 0], dt), -np.inf)
     if not one.all():
         y_max[~one] = extrema(_rows(lat, ~one))[1]
     d0 = s.x - s.ego[0][:, None]
-    a_bound = max(prm.a_x_a, prm.a_x_d) + _abs_acc(others)
+    a_bound = max(prm.a_x_a, prm.a_x_d) + np.abs(others.acc)
     reach = np.abs(s.v - s.ego[2][:, None]) * dt + 0.5 * a_bound * dt * dt
     near = b.valid & (np.abs(d0) - reach < prm.p_m + 1e-6) & (y_max > conflict_level)[:, None]
     r, c = np.nonzero(near)
-    c_min = np.full((bsz, k), np.inf)
-    c_max = np.full((bsz, k), -np.inf)
-    o_min, o_max = c_min.copy(), c_max.copy()
-    if r.size:
-        # Most pairs are one quadratic over the whole period (nobody stops or switches inside it): closed form.
-        simple = _one_segment(lon, dt)[r] & _one_segment(lat, dt)[r] & (others.t[r, c, 1] >= dt)
-        rs, cs, rg, cg = r[simple], c[simple], r[~simple], c[~simple]
-        ego_lon, ego_lat = _rows(lon, rg), _rows(lat, rg)
-        other = Motion(*(getattr(others, f)[rg, cg] for f in ("t", "x", "v", "acc")))
-        d0 = others.x[rs, cs, 0] - lon.x[rs, 0]
-        dv0 = others.v[rs, cs, 0] - lon.v[rs, 0]
-        rel_acc = others.acc[rs, cs, 0] - lon.acc[rs, 0]
-        lateral = (lat.x[rs, 0], lat.v[rs, 0], lat.acc[rs, 0])
-        for level, lo, hi in ((conflict_level, c_min, c_max), (overlap_level, o_min, o_max)):
-            lo[rs, cs], hi[rs, cs] = _windowed_quadratic(d0, dv0, rel_acc, *lateral, level, dt)
-            if rg.size:
-                knots = crossing_knots(ego_lat, level)
-                lo[rg, cg], hi[rg, cg] = windowed_gap_extrema(ego_lon, other, ego_lat, knots, level)
+    bsz = len(y_max)
+    collided, violated = np.zeros(bsz, bool), np.zeros(bsz, bool)
+    min_gap_f, min_gap_l1 = s.min_gap_f.copy(), s.min_gap_l1.copy()
+    if r.size == 0:
+        return collided, violated, min_gap_f, min_gap_l1
+    # Pair by pair (the near ones only): (min, max) of the gap over the windows of both lateral levels.
+    c_min, c_max, o_min, o_max = (np.empty(r.size) for _ in range(4))
+    # Most pairs are one quadratic over the whole period (nobody stops or switches inside it): closed form.
+    simple = _one_segment(lon, dt)[r] & _one_segment(lat, dt)[r] & (others.t_stop[r, c] >= dt)
+    ps, pg = np.flatnonzero(simple), np.flatnonzero(~simple)
+    rs, cs, rg, cg = r[ps], c[ps], r[pg], c[pg]
+    d0 = others.x[rs, cs] - lon.x[rs, 0]
+    dv0 = others.v[rs, cs] - lon.v[rs, 0]
+    rel_acc = others.acc[rs, cs] - lon.acc[rs, 0]
+    lateral = (lat.x[rs, 0], lat.v[rs, 0], lat.acc[rs, 0])
+    if pg.size:
+        ego_lon, ego_lat, other = _rows(lon, rg), _rows(lat, rg), others.motion(rg, cg)
+    for level, lo, hi in ((conflict_level, c_min, c_max), (overlap_level, o_min, o_max)):
+        lo[ps], hi[ps] = _windowed_quadratic(d0, dv0, rel_acc, *lateral, level, dt)
+        if pg.size:
+            knots = crossing_knots(ego_lat, level)
+            lo[pg], hi[pg] = windowed_gap_extrema(ego_lon, other, ego_lat, knots, level)
     length = prm.vehicle_length
-    collided = ((o_min < length) & (o_max > -length)).any(1)
-    violated = ((c_min < prm.p_m - 1e-9) & (c_max > -prm.p_m + 1e-9)).any(1)
-    min_gap_f = np.minimum(s.min_gap_f, -c_max[:, 0])
-    min_gap_l1 = np.minimum(s.min_gap_l1, c_min[:, 1])
+    collided[r[(o_min < length) & (o_max > -length)]] = True
+    violated[r[(c_min < prm.p_m - 1e-9) & (c_max > -prm.p_m + 1e-9)]] = True
+    f, l1 = c == 0, c == 1  # each (row, vehicle) pair occurs once
+    min_gap_f[r[f]] = np.minimum(min_gap_f[r[f]], -c_max[f])
+    min_gap_l1[r[l1]] = np.minimum(min_gap_l1[r[l1]], c_min[l1])
     return collided, violated, min_gap_f, min_gap_l1
-
-
-def _abs_acc(m: Motion) -> np.ndarray:
-    """Largest ``|acceleration|`` of each motion over the period (a slice-wise maximum: reductions over a short
-    last axis are slow in NumPy)."""
-    out = np.abs(m.acc[..., 0])
-    for j in range(1, m.acc.shape[-1]):
-        out = np.maximum(out, np.abs(m.acc[..., j]))
-    return out
 
 
 def _one_segment(m: Motion, dt: float) -> np.ndarray:
@@ -136,26 +129,31 @@ def _quadratic_min(d0, dv0, rel_acc, dt: float):
     return np.minimum(np.minimum(d0, end), vertex)
 
 
-def lane_checks(b, prm: Params, others: Motion):
+def lane_checks(b, prm: Params, others: Fleet):
     """Exact collision / margin checks between consecutive target-lane vehicles (F–L1, L1–L2, …)."""
     dt = prm.dt
-    x0, v0 = others.x[..., 0], others.v[..., 0]
+    x0, v0 = others.x, others.v
     gap0 = x0[:, 1:] - x0[:, :-1]
-    a_abs = _abs_acc(others)
+    a_abs = np.abs(others.acc)
     reach = np.abs(v0[:, 1:] - v0[:, :-1]) * dt + 0.5 * (a_abs[:, 1:] + a_abs[:, :-1]) * dt * dt
     margin = np.where(b.human[:, :-1], prm.p_m_human, prm.p_m)
     near = b.valid[:, 1:] & b.valid[:, :-1] & (gap0 - reach < margin + 1e-6)
     r, c = np.nonzero(near)
-    pair_min = np.full(gap0.shape, np.inf)
-    if r.size:
-        simple = _one_segment(others, dt)[r, c] & _one_segment(others, dt)[r, c + 1]
-        rs, cs, rg, cg = r[simple], c[simple], r[~simple], c[~simple]
-        d0 = others.x[rs, cs + 1, 0] - others.x[rs, cs, 0]
-        dv0 = others.v[rs, cs + 1, 0] - others.v[rs, cs, 0]
-        rel_acc = others.acc[rs, cs + 1, 0] - others.acc[rs, cs, 0]
-        pair_min[rs, cs] = _quadratic_min(d0, dv0, rel_acc, dt)
-        if rg.size:
-            behind = Motion(*(getattr(others, f)[rg, cg] for f in ("t", "x", "v", "acc")))
-            ahead = Motion(*(getattr(others, f)[rg, cg + 1] for f in ("t", "x", "v", "acc")))
-            pair_min[rg, cg], _ = gap_extrema(behind, ahead)
-    return (pair_min < prm.vehicle_length).any(1), (pair_min < margin - 1e-9).any(1)
+    bsz = len(x0)
+    collided, violated = np.zeros(bsz, bool), np.zeros(bsz, bool)
+    if r.size == 0:
+        return collided, violated
+    pair_min = np.empty(r.size)
+    one = others.t_stop >= dt
+    simple = one[r, c] & one[r, c + 1]
+    ps, pg = np.flatnonzero(simple), np.flatnonzero(~simple)
+    rs, cs, rg, cg = r[ps], c[ps], r[pg], c[pg]
+    d0 = x0[rs, cs + 1] - x0[rs, cs]
+    dv0 = v0[rs, cs + 1] - v0[rs, cs]
+    rel_acc = others.acc[rs, cs + 1] - others.acc[rs, cs]
+    pair_min[ps] = _quadratic_min(d0, dv0, rel_acc, dt)
+    if pg.size:
+        pair_min[pg], _ = gap_extrema(others.motion(rg, cg), others.motion(rg, cg + 1))
+    collided[r[pair_min < prm.vehicle_length]] = True
+    violated[r[pair_min < margin[r, c] - 1e-9]] = True
+    return collided, violated

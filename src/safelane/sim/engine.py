@@ -22,10 +22,11 @@ from ..safety.chain import propagate_chain
 from ..safety.evasion import EvasionPlan, evasion_core, plan_from_core
 from ..safety.lateral import LATERAL_TOL_M
 from . import assessment as assess
+from ._alloc import tune_allocator
 from .behaviours import follower_accel, leader_accels, responsible_accel
 from .checks import ego_checks, lane_checks
 from .config import SimConfig
-from .kinematics import Motion
+from .kinematics import Fleet, Motion
 from .results import SimResult, results_table, trace_rows
 from .rng import counter_normal, counter_uniform
 from .scenario import ScenarioBatch, ScenarioConfig, check_batch, paper_scenarios
@@ -113,6 +114,7 @@ def simulate_batch(
     cfg = config or SimConfig()
     nominal = nominal or ExpertPlanner()
     check_batch(batch, prm)
+    tune_allocator()
     if workers > 1 and len(batch) >= 2 * workers and not (trace or record_observations):
         return _simulate_parallel(batch, seed, prm, cfg, nominal, workers)
     sim = _Sim(batch, seed, prm, cfg, nominal)
@@ -310,7 +312,7 @@ class _Sim:
             lon, lat = replace_rows(lon, rows, p_lon), replace_rows(lat, rows, p_lat)
 
         acc = self.others_accels(s, ex, evx)
-        others = Motion.constant(s.x, s.v, acc, dt)
+        others = Fleet.constant(s.x, s.v, acc, dt)
         new = self.check_and_advance(s, lon, lat, others, behaviour, completing, new_plan, acc, belief)
         return new, obs, behaviour
 

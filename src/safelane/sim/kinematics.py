@@ -86,6 +86,44 @@ class Motion:
         return self.x[..., -1], self.v[..., -1]
 
 
+@dataclass(frozen=True)
+class Fleet:
+    """Many vehicles each at one constant acceleration with stopping over the period, as flat per-vehicle arrays
+    (any shape, e.g. ``(B, K)`` column-major): :meth:`Motion.constant`'s numbers without its stacked knots,
+    which are built by :meth:`motion` only for the entries that need them."""
+
+    x: np.ndarray
+    v: np.ndarray
+    acc: np.ndarray  # 0 for a vehicle already at rest
+    t_stop: np.ndarray  # dt where it does not stop inside the period
+    x_end: np.ndarray
+    v_end: np.ndarray
+    dt: float
+
+    @classmethod
+    def constant(cls, x, v, a, dt: float) -> Fleet:
+        ts = stop_time(v, a, dt)
+        at_rest = ts <= 0.0
+        a, ts = np.where(at_rest, 0.0, a), np.where(at_rest, dt, ts)
+        xs = x + v * ts + 0.5 * a * ts * ts
+        vs = np.where(ts < dt, 0.0, np.maximum(v + a * ts, 0.0))
+        return cls(x=x, v=v, acc=a, t_stop=ts, x_end=xs, v_end=vs, dt=dt)
+
+    @property
+    def end(self):
+        return self.x_end, self.v_end
+
+    def motion(self, *idx) -> Motion:
+        """The :class:`Motion` (knots ``0, t_stop, dt``) of the entries ``self.x[idx]``."""
+        ts, xs, vs = self.t_stop[idx], self.x_end[idx], self.v_end[idx]
+        return Motion(
+            t=np.stack([np.zeros_like(ts), ts, np.full_like(ts, self.dt)], -1),
+            x=np.stack([self.x[idx], xs, xs], -1),
+            v=np.stack([self.v[idx], vs, vs], -1),
+            acc=np.stack([self.acc[idx], np.zeros_like(ts)], -1),
+        )
+
+
 def gap_extrema(behind: Motion, ahead: Motion):
     """Exact ``(min, max)`` over the period of ``ahead.x(t) − behind.x(t)``."""
     batch = np.broadcast_shapes(behind.t.shape[:-1], ahead.t.shape[:-1])

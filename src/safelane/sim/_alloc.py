@@ -1,0 +1,37 @@
+"""Allocator tuning for the batched engine (glibc only; opt out with ``SAFELANE_MALLOC_TUNING=0``).
+
+A step of a 10,000-scenario batch makes hundreds of short-lived temporaries of up to a megabyte each. With
+glibc's defaults the heap's top is trimmed back to the OS and regrown over and over, and every regrowth
+page-faults: at N = 10 that costs about a quarter of the run. Keeping 16 MiB of padding at the heap's top
+(``mallopt(M_TOP_PAD)``) removes it. This changes no result, only speed; it is process-wide and permanent,
+so it is applied once, on the first batched simulation, and can be disabled.
+"""
+
+from __future__ import annotations
+
+import ctypes
+import ctypes.util
+import os
+import sys
+
+_M_TOP_PAD = -2  # glibc <malloc.h>
+TOP_PAD_BYTES = 16 * 2**20
+_applied: bool | None = None
+
+
+def tune_allocator() -> bool:
+    """Apply the tuning once per process; True where glibc accepted it."""
+    global _applied
+    if _applied is None:
+        _applied = _apply()
+    return _applied
+
+
+def _apply() -> bool:
+    if os.environ.get("SAFELANE_MALLOC_TUNING", "1") == "0" or not sys.platform.startswith("linux"):
+        return False
+    try:
+        libc = ctypes.CDLL(ctypes.util.find_library("c") or "libc.so.6")
+        return bool(libc.mallopt(_M_TOP_PAD, TOP_PAD_BYTES))
+    except (OSError, AttributeError):  # no libc found, or one without mallopt (musl)
+        return False
