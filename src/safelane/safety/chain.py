@@ -37,12 +37,27 @@ def min_follow_decel(xp, slack, v_f, v_l, a_l):
 
     Returns ``z`` (``inf`` when ``slack <= 0``).
     """
+    if xp is ARRAY:
+        return _min_follow_decel_array(slack, v_f, v_l, a_l)
     lead_stop2 = 2.0 * xp.stop_dist(v_l, a_l)  # v_l² / a_l
     z_b = xp.div(v_f * v_f, 2.0 * slack + lead_stop2, 0.0)
     dv = v_f - v_l
     z_a = a_l + xp.div(dv * dv, 2.0 * slack, INF)
     interior = (dv > 0.0) & (2.0 * slack * a_l <= v_l * dv)
     return xp.where(slack > 0.0, xp.where(interior, z_a, z_b), INF)
+
+
+def _min_follow_decel_array(slack, v_f, v_l, a_l):
+    """:func:`min_follow_decel` for NumPy arrays: the same arithmetic, with the guarded divisions written as raw
+    ones under ``errstate`` and masked after (the hot path of the simulator's scans)."""
+    with np.errstate(all="ignore"):
+        lead_stop2 = 2.0 * np.where(a_l > 0.0, v_l * v_l / (2.0 * a_l), np.where(v_l > 0.0, INF, 0.0))
+        den = 2.0 * slack + lead_stop2
+        z_b = np.where(den != 0.0, v_f * v_f / den, 0.0)
+        dv = v_f - v_l
+        z_a = a_l + dv * dv / (2.0 * slack)
+        interior = (dv > 0.0) & (2.0 * slack * a_l <= v_l * dv)
+        return np.where(slack > 0.0, np.where(interior, z_a, z_b), INF)
 
 
 @dataclass(frozen=True)
@@ -111,10 +126,11 @@ def leader_chain(p, v, promise_decel, params: Params, *, human_driven=None) -> C
         ) from exc
 
     xp = SCALAR if batch == () else ARRAY
+    margin = np.where(human, params.p_m_human, params.p_m)
     if xp is SCALAR:
-        cols = (p.tolist(), v.tolist(), promise.tolist(), human.tolist())
+        cols = (p.tolist(), v.tolist(), promise.tolist(), margin.tolist())
     else:
-        cols = tuple(np.moveaxis(np.broadcast_to(a, (*batch, a.shape[-1])), -1, 0) for a in (p, v, promise, human))
+        cols = tuple(np.moveaxis(np.broadcast_to(a, (*batch, a.shape[-1])), -1, 0) for a in (p, v, promise, margin))
     with np.errstate(all="ignore"):
         decel, required, unsafe = propagate_chain(xp, *cols, params, n_links)
     l1 = xp.where(unsafe, params.a_x_d, decel[0])
@@ -131,16 +147,16 @@ def leader_chain(p, v, promise_decel, params: Params, *, human_driven=None) -> C
     )
 
 
-def propagate_chain(xp, p, v, promise, human, params: Params, n_links: int):
+def propagate_chain(xp, p, v, promise, margin, params: Params, n_links: int):
     """Unchecked scan of :func:`leader_chain` over per-vehicle rows ``p[i]``, ``v[i]`` (``L1`` first; ``promise``
-    and ``human`` for ``L1..LN``). Returns ``(decel, required, unsafe)`` as lists front-last and a flag."""
+    and ``margin`` — ``p_m``, or ``p_m_human`` for a human-driven link — for ``L1..LN``). Returns
+    ``(decel, required, unsafe)``: lists front-last and a flag."""
     decel = [params.a_x_d]  # L(N+1), not connected: mechanical worst case
     required = []
     unsafe = False
     a_ahead = params.a_x_d
     for i in range(n_links - 1, -1, -1):
-        margin = xp.where(human[i], params.p_m_human, params.p_m)
-        slack = p[i + 1] - p[i] - margin
+        slack = p[i + 1] - p[i] - margin[i]
         z = min_follow_decel(xp, slack, v[i], v[i + 1], a_ahead)
         unsafe = unsafe | (z > params.a_x_d)
         a_ahead = xp.minimum(xp.maximum(promise[i], z), params.a_x_d)

@@ -181,12 +181,17 @@ def evasion_core(
         xp.div(f_v - l1_v, a_d - l1_decel, 0.0),
         T,
     )
-    follow_gap = None
-    for c in candidates:
-        c = xp.clip(c, 0.0, T)
+    if xp is ARRAY:  # every candidate in one stacked evaluation (the same arithmetic)
+        c = xp.clip(np.stack(np.broadcast_arrays(*candidates)), 0.0, T)
         ego = ego_position(xp, c, ego_px, ego_vx, u, V, t2, match, l1_p, l1_v, l1_decel, prm, l1_stop)
-        gap = ego - follower_offset(xp, c, f_p, f_v, aggressive, prm, f_stop) - follow_margin
-        follow_gap = gap if follow_gap is None else xp.minimum(follow_gap, gap)
+        follow_gap = (ego - follower_offset(xp, c, f_p, f_v, aggressive, prm, f_stop) - follow_margin).min(0)
+    else:
+        follow_gap = None
+        for c in candidates:
+            c = xp.clip(c, 0.0, T)
+            ego = ego_position(xp, c, ego_px, ego_vx, u, V, t2, match, l1_p, l1_v, l1_decel, prm, l1_stop)
+            gap = ego - follower_offset(xp, c, f_p, f_v, aggressive, prm, f_stop) - follow_margin
+            follow_gap = gap if follow_gap is None else xp.minimum(follow_gap, gap)
     follow_ok = follow_gap >= -tol
     nothing = T <= 0.0
     exists = nothing | (lead_ok & follow_ok)

@@ -32,7 +32,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..params import Params
-from ._backend import INF
+from ._backend import ARRAY, INF
 from ._checks import check_params, finish, prepare
 from .chain import braked_position
 
@@ -124,11 +124,15 @@ def longitudinal_core(xp, p, v, p1, v1, a1, T, margin, prm: Params, tol: float =
     k = a_a + a1
     u_c = (-w + xp.sqrt(w * w - k * (w * w - 2.0 * (a_d - a1) * d0) / s)) / k
     best = 0.0 * T
-    best_gap = leader_gap_min(xp, best, T, d0, p, v, p1, v1, a1, margin, prm, l1_stop, l1_at_T)
+    cands = [xp.clip(c, 0.0, T) for c in (u_a, u_b, u_c, T)]
+    if xp is ARRAY:  # every candidate in one stacked evaluation: the same arithmetic, a fifth of the calls
+        stacked = np.stack(np.broadcast_arrays(best, *cands))
+        gaps = list(leader_gap_min(xp, stacked, T, d0, p, v, p1, v1, a1, margin, prm, l1_stop, l1_at_T))
+    else:
+        gaps = [leader_gap_min(xp, c, T, d0, p, v, p1, v1, a1, margin, prm, l1_stop, l1_at_T) for c in (best, *cands)]
+    best_gap = gaps[0]
     feasible = best_gap >= -tol
-    for cand in (u_a, u_b, u_c, T):
-        cand = xp.clip(cand, 0.0, T)
-        g = leader_gap_min(xp, cand, T, d0, p, v, p1, v1, a1, margin, prm, l1_stop, l1_at_T)
+    for cand, g in zip(cands, gaps[1:], strict=True):
         better = (g >= -tol) & (cand >= best)
         best = xp.where(better, cand, best)
         best_gap = xp.where(better, g, best_gap)

@@ -152,16 +152,23 @@ def responsible_accel(a_wanted, slack, v_f, v_l, lead_decel, prm: Params):
     return np.where(bound > a_wanted, a_wanted, np.maximum(bound - _ROOT_EPS, -prm.a_x_d))
 
 
+def leader_roles(valid, connected, n_connected):
+    """Per-slot roles for :func:`leader_accels`, constant over a run: ``(is_last, acts)``, both ``(B, K)``
+    column-major — slot ``i`` is ``L(N+1)``, or a connected ``L_i`` acting on its own (slot 0, F, is neither)."""
+    slots = np.arange(valid.shape[1])[None, :]
+    is_last = np.asfortranarray(slots == n_connected[:, None] + 1)
+    acts = np.asfortranarray(connected & valid & (slots >= 1) & (slots <= n_connected[:, None]) & ~is_last)
+    return is_last, acts
+
+
 def leader_accels(
     x,
     v,
-    valid,
-    connected,
-    human,
+    margin,
+    roles,
     promise_decel,
     promise_accel,
     v_desired,
-    n_connected,
     decel_last,
     braking,
     violating,
@@ -170,29 +177,29 @@ def leader_accels(
 ):
     """Accelerations of L1..L(N+1) for this period, ``(B, K)`` with index 0 (F) left at 0.
 
-    ``braking``: (B,) L(N+1) is braking this period. ``violating``: (B, K) bool, an unexpected violation this
-    period; ``violate_pick``: (B, K) uniforms placing its deceleration in ``U[z_i, a_x_N+1_d]``.
+    ``margin``: (B, K) each vehicle's margin to the one ahead (``p_m`` or ``p_m_human``); ``roles``: from
+    :func:`leader_roles`. ``braking``: (B,) L(N+1) is braking this period. ``violating``: (B, K) bool, an
+    unexpected violation this period, or ``None`` for none anywhere; ``violate_pick``: (B, K) uniforms placing its
+    deceleration in ``U[z_i, a_x_N+1_d]``.
     """
     bsz, k = x.shape
+    is_last, acts = roles
     acc = np.zeros((bsz, k), order="F")  # column-major: filled vehicle by vehicle
-    last = n_connected + 1
-    for i in range(k - 1, 0, -1):  # front to back: each link reacts to the one ahead (a scan, not a batch loop)
-        is_last = last == i
-        a_last = np.where(braking, -decel_last, 0.0)
-        if i + 1 < k:
-            margin = np.where(human[:, i], prm.p_m_human, prm.p_m)
-            slack = x[:, i + 1] - x[:, i] - margin
-            ahead_decel = np.maximum(-acc[:, i + 1], 0.0)
-            with np.errstate(all="ignore"):
-                z = min_follow_decel(ARRAY, slack, v[:, i], v[:, i + 1], ahead_decel)
-            z = np.minimum(z, prm.a_x_d)
-        else:
-            z = np.zeros(bsz)
-        task = np.clip(0.5 * (v_desired[:, i] - v[:, i]), -promise_decel[:, i], promise_accel[:, i])
-        a_conn = np.minimum(task, -z)
-        lo, hi = np.minimum(z, decel_last), np.maximum(z, decel_last)
-        a_conn = np.where(violating[:, i], -(lo + violate_pick[:, i] * (hi - lo)), a_conn)
-        acc[:, i] = np.where(is_last, a_last, np.where(connected[:, i] & valid[:, i] & (i <= n_connected), a_conn, 0.0))
+    a_last = np.where(braking, -decel_last, 0.0)
+    with np.errstate(all="ignore"):
+        for i in range(k - 1, 0, -1):  # front to back: each link reacts to the one ahead (a scan over vehicles)
+            if i + 1 < k:
+                slack = x[:, i + 1] - x[:, i] - margin[:, i]
+                ahead_decel = np.maximum(-acc[:, i + 1], 0.0)
+                z = np.minimum(min_follow_decel(ARRAY, slack, v[:, i], v[:, i + 1], ahead_decel), prm.a_x_d)
+            else:
+                z = np.zeros(bsz)
+            task = np.minimum(np.maximum(0.5 * (v_desired[:, i] - v[:, i]), -promise_decel[:, i]), promise_accel[:, i])
+            a_conn = np.minimum(task, -z)
+            if violating is not None:
+                lo, hi = np.minimum(z, decel_last), np.maximum(z, decel_last)
+                a_conn = np.where(violating[:, i], -(lo + violate_pick[:, i] * (hi - lo)), a_conn)
+            acc[:, i] = np.where(is_last[:, i], a_last, np.where(acts[:, i], a_conn, 0.0))
     return acc
 
 

@@ -23,7 +23,7 @@ from ..safety.evasion import EvasionPlan, evasion_core, plan_from_core
 from ..safety.lateral import LATERAL_TOL_M
 from . import assessment as assess
 from ._alloc import tune_allocator
-from .behaviours import follower_accel, leader_accels, responsible_accel
+from .behaviours import follower_accel, leader_accels, leader_roles, responsible_accel
 from .checks import ego_checks, lane_checks
 from .config import SimConfig
 from .kinematics import Fleet, Motion
@@ -174,10 +174,12 @@ class _Sim:
         in_chain = slots[None, :] <= batch.n_connected[:, None]
         # The chain's inputs as contiguous rows (vehicle-major), for the unchecked scan of the chain.
         self.chain_promise = np.where(in_chain, batch.promise_decel[:, 1:], prm.a_x_d)[:, :-1].T.copy()
-        self.chain_human = (batch.human[:, 1:] & in_chain)[:, :-1].T.copy()
+        self.chain_margin = np.where((batch.human[:, 1:] & in_chain)[:, :-1].T, prm.p_m_human, prm.p_m)
         self.gap0 = batch.ego_x - batch.x[:, 0]
         self.any_violation = bool((batch.p_v > 0.0).any())
         self.v_desired = batch.v.copy(order="F")
+        self.margin = np.where(batch.human, prm.p_m_human, prm.p_m)
+        self.roles = leader_roles(batch.valid, batch.connected, batch.n_connected)
 
     def initial_state(self) -> SimState:
         b, prm = self.b, self.prm
@@ -249,7 +251,7 @@ class _Sim:
         n_links = s.x.shape[1] - 2
         with np.errstate(all="ignore"):  # inputs were checked with the batch: the scan alone, unchecked
             decel, _, unsafe = propagate_chain(
-                ARRAY, s.x.T[1:], s.v.T[1:], self.chain_promise, self.chain_human, prm, n_links
+                ARRAY, s.x.T[1:], s.v.T[1:], self.chain_promise, self.chain_margin, prm, n_links
             )
         l1_decel = np.where(self.uses_chain & ~np.asarray(unsafe, bool), decel[0], prm.a_x_d)
         assessed = b.follower_aggressive if self.cfg.assessment == "truth" else belief.aggressive
@@ -320,22 +322,19 @@ class _Sim:
         b, prm, cfg = self.b, self.prm, self.cfg
         k = s.x.shape[1]
         slots = np.arange(k)
-        if self.any_violation:  # counter-based: skipping the draws when p_v = 0 everywhere changes nothing else
+        violating = pick = None  # counter-based: skipping the draws when p_v = 0 everywhere changes nothing else
+        if self.any_violation:
             violating = counter_uniform(self.seed, b.scenario_id[:, None], s.step, slots[None, :], 7) < b.p_v[:, None]
             pick = counter_uniform(self.seed, b.scenario_id[:, None], s.step, slots[None, :], 8)
-        else:
-            violating, pick = np.zeros(s.x.shape, bool), np.zeros(s.x.shape)
         braking = np.full(len(b), s.t + 1e-9 >= cfg.brake_start_s)
         acc = leader_accels(
             s.x,
             s.v,
-            b.valid,
-            b.connected,
-            b.human,
+            self.margin,
+            self.roles,
             b.promise_decel,
             b.promise_accel,
             self.v_desired,
-            b.n_connected,
             b.decel_last,
             braking,
             violating,
