@@ -270,3 +270,19 @@ def test_parity_chain(n_links):
             np.testing.assert_allclose(got, expected, err_msg=field.name, **PARITY_TOL)
         else:
             np.testing.assert_array_equal(got, expected, err_msg=field.name)
+
+
+def test_min_follow_decel_numpy_path_equals_the_scalar_backend():
+    """The NumPy fast path of ``min_follow_decel`` (raw divisions, masked) is the scalar formula, bit for bit,
+    including zero slack, zero speeds and a leader that never brakes."""
+    from safelane.safety._backend import ARRAY, SCALAR
+    from safelane.safety.chain import min_follow_decel
+
+    rng = np.random.default_rng(3)
+    n = 5000
+    slack, v_f, v_l, a_l = rng.uniform(-5, 40, n), rng.uniform(0, 35, n), rng.uniform(0, 35, n), rng.uniform(0, 8, n)
+    slack[::9], v_f[::7], v_l[::5], a_l[::4] = 0.0, 0.0, 0.0, 0.0
+    batched = min_follow_decel(ARRAY, slack, v_f, v_l, a_l)
+    scalar = [min_follow_decel(SCALAR, *map(float, row)) for row in zip(slack, v_f, v_l, a_l, strict=True)]
+    np.testing.assert_array_equal(batched, np.array(scalar))
+    assert np.isinf(batched).any() and (batched == 0.0).any()
