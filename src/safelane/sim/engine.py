@@ -277,7 +277,7 @@ class _Sim:
         active = ~s.completed
         behaviour = np.where(active, PROCEED, -1)
         completing = np.zeros(len(b), bool)
-        new_plan = s.plan
+        accepted = []  # (rows, their verified plans) of this period
         a_yh = hesitate_lateral(evy, prm)
         if cfg.supervised:
             # The supervisor runs only where the lane change is under way; hesitate only where proceed failed.
@@ -291,7 +291,7 @@ class _Sim:
                 ok_rows = rows[verdict.ok]
                 behaviour[ok_rows] = code
                 completing[ok_rows] = verdict.completing[verdict.ok]
-                new_plan = _set_rows(new_plan, ok_rows, verdict.plan.take(verdict.ok))
+                accepted.append((ok_rows, verdict.plan))
                 rows = rows[~verdict.ok]
             behaviour[rows] = ABORT
         else:
@@ -315,6 +315,7 @@ class _Sim:
 
         acc = self.others_accels(s, ex, evx)
         others = Fleet.constant(s.x, s.v, acc, dt)
+        new_plan = _set_rows(s.plan, accepted)
         new = self.check_and_advance(s, lon, lat, others, behaviour, completing, new_plan, acc, belief)
         return new, obs, behaviour
 
@@ -401,15 +402,18 @@ def _columns(a):
     return np.asfortranarray(a) if isinstance(a, np.ndarray) and a.ndim == 2 else a
 
 
-def _set_rows(plan: EvasionPlan, rows, sub: EvasionPlan) -> EvasionPlan:
-    """``plan`` with ``rows`` replaced by the rows of ``sub`` (same order)."""
-    if rows.size == 0:
+def _set_rows(plan: EvasionPlan, pieces) -> EvasionPlan:
+    """``plan`` with the rows of each ``(rows, sub_plan)`` piece replaced by ``sub_plan`` (same order); each field
+    is copied once."""
+    pieces = [(rows, sub) for rows, sub in pieces if rows.size]
+    if not pieces:
         return plan
     out = {}
     for f in dataclasses.fields(plan):
         if f.name == "params":
             continue
         arr = getattr(plan, f.name).copy()
-        arr[rows] = getattr(sub, f.name)
+        for rows, sub in pieces:
+            arr[rows] = getattr(sub, f.name)
         out[f.name] = arr
     return EvasionPlan(**out, params=plan.params)

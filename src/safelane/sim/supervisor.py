@@ -43,14 +43,14 @@ class Verdict:
 
     ok: np.ndarray
     completing: np.ndarray
-    plan: EvasionPlan
+    plan: EvasionPlan  # the plans of the accepted rows only (``ok``'s True rows, in order)
 
 
 def check_candidate(
     ego_x, ego_y, ego_vx, ego_vy, a_x, a_y, l1_x, l1_v, l1_decel, f_x, f_v, f_aggressive, prm: Params
 ) -> Verdict:
-    """Is applying ``(a_x, a_y)`` for one period safe under the worst case? Returns the verdict and the plan
-    verified from the predicted state (time origin at the end of the period)."""
+    """Is applying ``(a_x, a_y)`` for one period safe under the worst case? Returns the verdict and, for the rows
+    it accepts, the plan verified from the predicted state (time origin at the end of the period)."""
     dt, tol = prm.dt, FEASIBILITY_TOL_M
     ex, evx = advance(ego_x, ego_vx, a_x, dt)
     ey = ego_y + ego_vy * dt + 0.5 * a_y * dt * dt
@@ -66,13 +66,27 @@ def check_candidate(
 
     completing = ey >= prm.y_boundary
     with np.errstate(all="ignore"):
-        z_l = min_follow_decel(ARRAY, lx - ex - prm.p_m, evx, lv, l1_decel)
-        z_f = min_follow_decel(ARRAY, ex - fx - prm.p_m, fv, evx, prm.a_x_d)
-        args = (ex, ey, evx, evy, lx, lv, l1_decel, fx, fv, f_aggressive, prm.p_m, prm.p_m)
-        exists, parts = evasion_core(ARRAY, *args, prm)
-    guard = (z_l <= prm.a_x_d) & (z_f <= prm.a_x_d)
-    plan = plan_from_core(ARRAY, np.shape(ex), args, exists, parts, prm.p_m, prm.p_m, prm)
-    ok = period_ok & np.where(completing, guard, exists)
+        args = (ex, ey, evx, evy, lx, lv, l1_decel, fx, fv, f_aggressive)
+        exists, parts = evasion_core(ARRAY, *args, prm.p_m, prm.p_m, prm)
+        ok = period_ok & exists
+        done = np.flatnonzero(completing)  # the completion guard replaces the evasion check (few rows)
+        if done.size:
+            z_l = min_follow_decel(ARRAY, (lx - ex - prm.p_m)[done], evx[done], lv[done], l1_decel[done])
+            z_f = min_follow_decel(ARRAY, (ex - fx - prm.p_m)[done], fv[done], evx[done], prm.a_x_d)
+            ok[done] = period_ok[done] & (z_l <= prm.a_x_d) & (z_f <= prm.a_x_d)
+    rows = np.flatnonzero(ok)
+    n = np.shape(ex)
+    sub = lambda a: np.broadcast_to(a, n)[rows]  # noqa: E731
+    plan = plan_from_core(
+        ARRAY,
+        rows.shape,
+        (*(sub(a) for a in args), prm.p_m, prm.p_m),
+        exists[rows],
+        {k: sub(v) for k, v in parts.items()},
+        prm.p_m,
+        prm.p_m,
+        prm,
+    )
     return Verdict(ok=ok, completing=completing, plan=plan)
 
 
