@@ -18,7 +18,7 @@ from hypothesis import strategies as st
 
 from safelane import Params
 from safelane.safety import plan_evasion
-from safelane.sim.checks import ego_checks
+from safelane.sim.checks import ego_checks, stop_pair_extrema
 from safelane.sim.kinematics import (
     Fleet,
     Motion,
@@ -210,6 +210,25 @@ def test_gap_extrema_match_dense_sampling():
     ylo, yhi = extrema(behind)
     xs = behind.at(np.broadcast_to(tq, (n, tq.size)))[0]
     assert (ylo <= xs.min(1) + 1e-12).all() and (yhi >= xs.max(1) - 1e-12).all()
+
+
+def test_stop_pair_extrema_equal_the_general_extrema_and_dense_sampling():
+    """The closed form over the stop knots (used where someone stops inside the period) agrees with the general
+    knot-merging extrema and bounds a dense sampling of the gap."""
+    rng = np.random.default_rng(8)
+    n, dt = 2000, 0.5
+    cols = [(rng.uniform(-10, 10, n), rng.uniform(0, 6, n), rng.uniform(-8, 2.5, n)) for _ in range(2)]
+    cols[0][1][::3] = 0.0  # some already at rest
+    one, two = (Fleet.constant(x, v, a, dt) for x, v, a in cols)
+    lo, hi = stop_pair_extrema(one.x, one.v, one.acc, one.t_stop, two.x, two.v, two.acc, two.t_stop, dt)
+    m1, m2 = one.motion(slice(None)), two.motion(slice(None))
+    ref_lo, ref_hi = gap_extrema(m1, m2)
+    assert ((one.t_stop < dt) & (two.t_stop < dt)).sum() > 50  # both stop inside the period, often
+    np.testing.assert_allclose(lo, ref_lo, rtol=0, atol=1e-12)
+    np.testing.assert_allclose(hi, ref_hi, rtol=0, atol=1e-12)
+    tq = np.broadcast_to(np.linspace(0.0, dt, 2001), (n, 2001))
+    d = m2.at(tq)[0] - m1.at(tq)[0]
+    assert (lo <= d.min(1) + 1e-12).all() and (hi >= d.max(1) - 1e-12).all()
 
 
 def test_continuous_check_finds_contact_that_period_end_samples_miss():

@@ -10,21 +10,34 @@ from __future__ import annotations
 import numpy as np
 
 from ..params import Params
-from .kinematics import Fleet, Motion, crossing_knots, extrema, free_max, gap_extrema, windowed_gap_extrema
+from .kinematics import Fleet, Motion, crossing_knots, extrema, free_max, windowed_gap_extrema
 
 
 def _rows(m: Motion, rows) -> Motion:
     return Motion(*(getattr(m, f)[rows] for f in ("t", "x", "v", "acc")))
 
 
-def ego_checks(b, prm: Params, s, lon: Motion, lat: Motion, others: Fleet, conflict_level: float, overlap_level: float):
+def ego_checks(
+    b,
+    prm: Params,
+    s,
+    lon: Motion,
+    lat: Motion,
+    others: Fleet,
+    conflict_level: float,
+    overlap_level: float,
+    planned=None,
+):
     """Exact ego collision / p_m-violation checks for the period, counted only at the instants the ego is
     in the conflict zone (violations) or overlaps the target lane's vehicles laterally (collisions).
 
     Only pairs that could come within ``p_m`` during the period are evaluated exactly (a bound on how far
-    a gap can move in one period filters the rest); the result is the same, faster.
+    a gap can move in one period filters the rest); the result is the same, faster. ``planned``: (B,) True where
+    the ego follows a multi-segment evasion plan this period; elsewhere ``lon`` is a :meth:`Motion.constant`
+    (knots ``0, t_stop, dt``), which has a closed form against the others.
     """
     dt = prm.dt
+    max_level = max(conflict_level, overlap_level)
     one = _one_segment(lat, dt)
     y_max = np.where(one, free_max(lat.x[:, 0], lat.v[:, 0], lat.acc[:, 0], dt), -np.inf)
     if not one.all():
@@ -43,7 +56,19 @@ def ego_checks(b, prm: Params, s, lon: Motion, lat: Motion, others: Fleet, confl
     c_min, c_max, o_min, o_max = (np.empty(r.size) for _ in range(4))
     # Most pairs are one quadratic over the whole period (nobody stops or switches inside it): closed form.
     simple = _one_segment(lon, dt)[r] & _one_segment(lat, dt)[r] & (others.t_stop[r, c] >= dt)
-    ps, pg = np.flatnonzero(simple), np.flatnonzero(~simple)
+    # Next most: someone stops inside the period while the ego, on a constant command, stays laterally beyond
+    # both levels all period (the windows are the whole period): closed form over the stop knots.
+    settled = _one_segment(lat, dt) & (-free_max(-lat.x[:, 0], -lat.v[:, 0], -lat.acc[:, 0], dt) > max_level)
+    if planned is not None:
+        settled &= ~planned
+    stops = ~simple & settled[r]
+    ps, pk, pg = np.flatnonzero(simple), np.flatnonzero(stops), np.flatnonzero(~simple & ~stops)
+    if pk.size:
+        rk, ck = r[pk], c[pk]
+        ego = (lon.x[rk, 0], lon.v[rk, 0], lon.acc[rk, 0], lon.t[rk, 1])
+        other = (others.x[rk, ck], others.v[rk, ck], others.acc[rk, ck], others.t_stop[rk, ck])
+        c_min[pk], c_max[pk] = stop_pair_extrema(*ego, *other, dt)
+        o_min[pk], o_max[pk] = c_min[pk], c_max[pk]
     rs, cs, rg, cg = r[ps], c[ps], r[pg], c[pg]
     d0 = others.x[rs, cs] - lon.x[rs, 0]
     dv0 = others.v[rs, cs] - lon.v[rs, 0]
@@ -63,6 +88,31 @@ def ego_checks(b, prm: Params, s, lon: Motion, lat: Motion, others: Fleet, confl
     min_gap_f[r[f]] = np.minimum(min_gap_f[r[f]], -c_max[f])
     min_gap_l1[r[l1]] = np.minimum(min_gap_l1[r[l1]], c_min[l1])
     return collided, violated, min_gap_f, min_gap_l1
+
+
+def stop_pair_extrema(x1, v1, a1, t1, x2, v2, a2, t2, dt: float):
+    """Exact ``(min, max)`` over ``[0, dt]`` of ``x2(t) − x1(t)`` for two :meth:`Motion.constant`-type motions:
+    each at constant acceleration until its knot ``t_i <= dt`` (a stop inside the period, or ``dt``), at rest
+    after it. On the three pieces between ``0``, the two knots and ``dt`` the gap is one quadratic each."""
+    knots = (np.zeros_like(t1), np.minimum(t1, t2), np.maximum(t1, t2), np.full_like(t1, dt))
+
+    def gap(t):
+        m1, m2 = np.minimum(t, t1), np.minimum(t, t2)
+        return (x2 + v2 * m2 + 0.5 * a2 * m2 * m2) - (x1 + v1 * m1 + 0.5 * a1 * m1 * m1)
+
+    d = [gap(k) for k in knots]
+    lo, hi = np.minimum(d[0], d[3]), np.maximum(d[0], d[3])
+    with np.errstate(all="ignore"):
+        for start, end, d_start, d_end in zip(knots[:-1], knots[1:], d[:-1], d[1:], strict=True):
+            moving1, moving2 = start < t1, start < t2
+            dv = np.where(moving2, v2 + a2 * start, 0.0) - np.where(moving1, v1 + a1 * start, 0.0)
+            acc = np.where(moving2, a2, 0.0) - np.where(moving1, a1, 0.0)
+            tau = -dv / acc
+            inside = (tau > 0.0) & (tau < end - start)
+            vertex = d_start + dv * tau + 0.5 * acc * tau * tau
+            lo = np.minimum(np.minimum(lo, d_end), np.where(inside & (acc > 0.0), vertex, np.inf))
+            hi = np.maximum(np.maximum(hi, d_end), np.where(inside & (acc < 0.0), vertex, -np.inf))
+    return lo, hi
 
 
 def _one_segment(m: Motion, dt: float) -> np.ndarray:
@@ -152,8 +202,10 @@ def lane_checks(b, prm: Params, others: Fleet):
     dv0 = v0[rs, cs + 1] - v0[rs, cs]
     rel_acc = others.acc[rs, cs + 1] - others.acc[rs, cs]
     pair_min[ps] = _quadratic_min(d0, dv0, rel_acc, dt)
-    if pg.size:
-        pair_min[pg], _ = gap_extrema(others.motion(rg, cg), others.motion(rg, cg + 1))
+    if pg.size:  # someone stops inside the period: closed form over the stop knots
+        behind = (others.x[rg, cg], others.v[rg, cg], others.acc[rg, cg], others.t_stop[rg, cg])
+        ahead = (others.x[rg, cg + 1], others.v[rg, cg + 1], others.acc[rg, cg + 1], others.t_stop[rg, cg + 1])
+        pair_min[pg], _ = stop_pair_extrema(*behind, *ahead, dt)
     collided[r[pair_min < prm.vehicle_length]] = True
     violated[r[pair_min < margin[r, c] - 1e-9]] = True
     return collided, violated

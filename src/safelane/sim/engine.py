@@ -364,7 +364,7 @@ class _Sim:
         conflict_level = prm.y_safe + LATERAL_TOL_M
         overlap_level = prm.lane_width - prm.vehicle_width
         collided, violated, min_gap_f, min_gap_l1 = ego_checks(
-            self.b, prm, s, lon, lat, others, conflict_level, overlap_level
+            self.b, prm, s, lon, lat, others, conflict_level, overlap_level, behaviour == ABORT
         )
 
         leader_collided, leader_violated = lane_checks(self.b, prm, others)
