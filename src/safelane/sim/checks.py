@@ -31,8 +31,10 @@ def ego_checks(
     """Exact ego collision / p_m-violation checks for the period, counted only at the instants the ego is
     in the conflict zone (violations) or overlaps the target lane's vehicles laterally (collisions).
 
-    Only pairs that could come within ``p_m`` during the period are evaluated exactly (a bound on how far
-    a gap can move in one period filters the rest); the result is the same, faster. ``planned``: (B,) True where
+    Only pairs that could come within ``p_m`` during the period are evaluated exactly (a bound on how far a gap
+    can move in one period — ``|Δv| dt + (a_max,ego + a_max,others) dt²/2`` — filters the rest); the result is the
+    same, faster. The reported minimum gaps to F and L1 are exact where the pair came that near, and sampled at
+    the period's ends (while the ego is in the conflict zone) where it stayed farther. ``planned``: (B,) True where
     the ego follows a multi-segment evasion plan this period; elsewhere ``lon`` is a :meth:`Motion.constant`
     (knots ``0, t_stop, dt``), which has a closed form against the others.
     """
@@ -43,13 +45,13 @@ def ego_checks(
     if not one.all():
         y_max[~one] = extrema(_rows(lat, ~one))[1]
     d0 = s.x - s.ego[0][:, None]
-    a_bound = max(prm.a_x_a, prm.a_x_d) + np.abs(others.acc)
-    reach = np.abs(s.v - s.ego[2][:, None]) * dt + 0.5 * a_bound * dt * dt
-    near = b.valid & (np.abs(d0) - reach < prm.p_m + 1e-6) & (y_max > conflict_level)[:, None]
+    a_bound = max(prm.a_x_a, prm.a_x_d) + float(np.abs(others.acc).max(initial=0.0))
+    reach = np.abs(s.v - s.ego[2][:, None]) * dt
+    near = b.valid & (np.abs(d0) - reach < prm.p_m + 0.5 * a_bound * dt * dt + 1e-6) & (y_max > conflict_level)[:, None]
     r, c = np.nonzero(near)
     bsz = len(y_max)
     collided, violated = np.zeros(bsz, bool), np.zeros(bsz, bool)
-    min_gap_f, min_gap_l1 = s.min_gap_f.copy(), s.min_gap_l1.copy()
+    min_gap_f, min_gap_l1 = _far_gaps(b, s, lon, lat, others, near, conflict_level)
     if r.size == 0:
         return collided, violated, min_gap_f, min_gap_l1
     # Pair by pair (the near ones only): (min, max) of the gap over the windows of both lateral levels.
@@ -88,6 +90,18 @@ def ego_checks(
     min_gap_f[r[f]] = np.minimum(min_gap_f[r[f]], -c_max[f])
     min_gap_l1[r[l1]] = np.minimum(min_gap_l1[r[l1]], c_min[l1])
     return collided, violated, min_gap_f, min_gap_l1
+
+
+def _far_gaps(b, s, lon: Motion, lat: Motion, others: Fleet, near, level: float):
+    """The running minimum gaps to F and L1 updated with the pairs that stayed far this period, sampled at the
+    period's ends where the ego is in the conflict zone (the near pairs are added exactly afterwards)."""
+    out = []
+    for col, sign, running in ((0, -1.0, s.min_gap_f), (1, 1.0, s.min_gap_l1)):
+        far = b.valid[:, col] & ~near[:, col]
+        g0 = np.where(far & (lat.x[:, 0] > level), sign * (s.x[:, col] - lon.x[:, 0]), np.inf)
+        g1 = np.where(far & (lat.x[:, -1] > level), sign * (others.x_end[:, col] - lon.x[:, -1]), np.inf)
+        out.append(np.minimum(running, np.minimum(g0, g1)))
+    return out
 
 
 def stop_pair_extrema(x1, v1, a1, t1, x2, v2, a2, t2, dt: float):
@@ -179,15 +193,24 @@ def _quadratic_min(d0, dv0, rel_acc, dt: float):
     return np.minimum(np.minimum(d0, end), vertex)
 
 
-def lane_checks(b, prm: Params, others: Fleet):
-    """Exact collision / margin checks between consecutive target-lane vehicles (F–L1, L1–L2, …)."""
+def lane_pairs(b, prm: Params):
+    """Constant inputs of :func:`lane_checks`: ``(valid, margin)`` of each consecutive pair, ``(B, K−1)``."""
+    return b.valid[:, 1:] & b.valid[:, :-1], np.where(b.human[:, :-1], prm.p_m_human, prm.p_m)
+
+
+def lane_checks(b, prm: Params, others: Fleet, pairs=None):
+    """Exact collision / margin checks between consecutive target-lane vehicles (F–L1, L1–L2, …).
+
+    Only pairs whose gap could come within the margin during the period are evaluated exactly: a gap moves by at
+    most ``|Δv| dt + a_max dt²`` in a period, with ``a_max`` the largest ``|acceleration|`` in the batch.
+    ``pairs``: :func:`lane_pairs` (computed here unless given).
+    """
     dt = prm.dt
+    valid, margin = pairs if pairs is not None else lane_pairs(b, prm)
     x0, v0 = others.x, others.v
     gap0 = x0[:, 1:] - x0[:, :-1]
-    a_abs = np.abs(others.acc)
-    reach = np.abs(v0[:, 1:] - v0[:, :-1]) * dt + 0.5 * (a_abs[:, 1:] + a_abs[:, :-1]) * dt * dt
-    margin = np.where(b.human[:, :-1], prm.p_m_human, prm.p_m)
-    near = b.valid[:, 1:] & b.valid[:, :-1] & (gap0 - reach < margin + 1e-6)
+    slack = float(np.abs(others.acc).max(initial=0.0)) * dt * dt + 1e-6
+    near = valid & (gap0 - np.abs(v0[:, 1:] - v0[:, :-1]) * dt < margin + slack)
     r, c = np.nonzero(near)
     bsz = len(x0)
     collided, violated = np.zeros(bsz, bool), np.zeros(bsz, bool)

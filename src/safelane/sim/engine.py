@@ -24,7 +24,7 @@ from ..safety.lateral import LATERAL_TOL_M
 from . import assessment as assess
 from ._alloc import tune_allocator
 from .behaviours import follower_accel, leader_accels, leader_roles, responsible_accel
-from .checks import ego_checks, lane_checks
+from .checks import ego_checks, lane_checks, lane_pairs
 from .config import SimConfig
 from .kinematics import Fleet, Motion
 from .results import SimResult, results_table, trace_rows
@@ -180,6 +180,7 @@ class _Sim:
         self.v_desired = batch.v.copy(order="F")
         self.margin = np.where(batch.human, prm.p_m_human, prm.p_m)
         self.roles = leader_roles(batch.valid, batch.connected, batch.n_connected)
+        self.lane_pairs = lane_pairs(batch, prm)
 
     def initial_state(self) -> SimState:
         b, prm = self.b, self.prm
@@ -367,7 +368,7 @@ class _Sim:
             self.b, prm, s, lon, lat, others, conflict_level, overlap_level, behaviour == ABORT
         )
 
-        leader_collided, leader_violated = lane_checks(self.b, prm, others)
+        leader_collided, leader_violated = lane_checks(self.b, prm, others, self.lane_pairs)
 
         ex1, evx1 = lon.end
         ey1, evy1 = lat.end
