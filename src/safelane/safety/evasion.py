@@ -181,6 +181,8 @@ def evasion_core(
         xp.div(f_v - l1_v, a_d - l1_decel, 0.0),
         T,
     )
+    if xp is ARRAY and bool(np.all(T == 0.0)):  # nothing to evade anywhere: every candidate clips to 0
+        candidates = candidates[:1]
     if xp is ARRAY:  # every candidate in one stacked evaluation (the same arithmetic)
         c = xp.clip(np.stack(np.broadcast_arrays(*candidates)), 0.0, T)
         ego = ego_position(xp, c, ego_px, ego_vx, u, V, t2, match, l1_p, l1_v, l1_decel, prm, l1_stop)

@@ -124,7 +124,9 @@ def longitudinal_core(xp, p, v, p1, v1, a1, T, margin, prm: Params, tol: float =
     k = a_a + a1
     u_c = (-w + xp.sqrt(w * w - k * (w * w - 2.0 * (a_d - a1) * d0) / s)) / k
     best = 0.0 * T
-    cands = [xp.clip(c, 0.0, T) for c in (u_a, u_b, u_c, T)]
+    # With nothing to evade anywhere (T = 0) every candidate clips to 0, the first: evaluate it alone.
+    at_rest = xp is ARRAY and bool(np.all(T == 0.0))
+    cands = [] if at_rest else [xp.clip(c, 0.0, T) for c in (u_a, u_b, u_c, T)]
     if xp is ARRAY:  # every candidate in one stacked evaluation: the same arithmetic, a fifth of the calls
         stacked = np.stack(np.broadcast_arrays(best, *cands))
         gaps = list(leader_gap_min(xp, stacked, T, d0, p, v, p1, v1, a1, margin, prm, l1_stop, l1_at_T))

@@ -48,7 +48,7 @@ def ego_checks(
     a_bound = max(prm.a_x_a, prm.a_x_d) + float(np.abs(others.acc).max(initial=0.0))
     reach = np.abs(s.v - s.ego[2][:, None]) * dt
     near = b.valid & (np.abs(d0) - reach < prm.p_m + 0.5 * a_bound * dt * dt + 1e-6) & (y_max > conflict_level)[:, None]
-    r, c = np.nonzero(near)
+    c, r = np.nonzero(near.T)  # the (B, K) masks are column-major: scan them vehicle by vehicle
     bsz = len(y_max)
     collided, violated = np.zeros(bsz, bool), np.zeros(bsz, bool)
     min_gap_f, min_gap_l1 = _far_gaps(b, s, lon, lat, others, near, conflict_level)
@@ -211,7 +211,7 @@ def lane_checks(b, prm: Params, others: Fleet, pairs=None):
     gap0 = x0[:, 1:] - x0[:, :-1]
     slack = float(np.abs(others.acc).max(initial=0.0)) * dt * dt + 1e-6
     near = valid & (gap0 - np.abs(v0[:, 1:] - v0[:, :-1]) * dt < margin + slack)
-    r, c = np.nonzero(near)
+    c, r = np.nonzero(near.T)  # the (B, K) masks are column-major: scan them vehicle by vehicle
     bsz = len(x0)
     collided, violated = np.zeros(bsz, bool), np.zeros(bsz, bool)
     if r.size == 0:

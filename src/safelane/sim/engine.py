@@ -292,7 +292,7 @@ class _Sim:
                 ok_rows = rows[verdict.ok]
                 behaviour[ok_rows] = code
                 completing[ok_rows] = verdict.completing[verdict.ok]
-                accepted.append((ok_rows, verdict.plan))
+                accepted.extend((rows[idx], plan) for idx, plan in verdict.plans)
                 rows = rows[~verdict.ok]
             behaviour[rows] = ABORT
         else:

@@ -28,7 +28,7 @@ from ..params import Params
 from ..safety._backend import ARRAY
 from ..safety.chain import min_follow_decel
 from ..safety.evasion import EvasionPlan, evasion_core, plan_from_core
-from ..safety.lateral import LATERAL_TOL_M
+from ..safety.lateral import LATERAL_TOL_M, lateral_core
 from ..safety.longitudinal import FEASIBILITY_TOL_M
 from .behaviours import pair_min_gap
 from .kinematics import Motion, advance, free_max
@@ -43,7 +43,7 @@ class Verdict:
 
     ok: np.ndarray
     completing: np.ndarray
-    plan: EvasionPlan  # the plans of the accepted rows only (``ok``'s True rows, in order)
+    plans: list[tuple[np.ndarray, EvasionPlan]]  # (accepted rows, their plans), covering ``ok``'s True rows
 
 
 def check_candidate(
@@ -60,34 +60,50 @@ def check_candidate(
     fx, fv = advance(f_x, f_v, a_f, dt)
 
     conflict = free_max(ego_y, ego_vy, a_y, dt) > prm.y_safe + LATERAL_TOL_M
-    gap_l = pair_min_gap(l1_x - ego_x - prm.p_m, ego_vx, a_x, l1_v, -l1_decel, dt)
-    gap_f = pair_min_gap(ego_x - f_x - prm.p_m, f_v, a_f, ego_vx, a_x, dt)
+    # Both worst-case gaps (ego behind L1, F behind the ego) over the period, in one stacked evaluation.
+    gap_l, gap_f = pair_min_gap(
+        np.stack([l1_x - ego_x - prm.p_m, ego_x - f_x - prm.p_m]),
+        np.stack([ego_vx, f_v]),
+        np.stack([a_x, a_f]),
+        np.stack([l1_v, ego_vx]),
+        np.stack([-l1_decel, a_x]),
+        dt,
+    )
     period_ok = ~conflict | ((gap_l >= -tol) & (gap_f >= -tol))
 
     completing = ey >= prm.y_boundary
+    n = np.shape(ex)
+    ok = np.zeros(n, bool)
+    plans = []
     with np.errstate(all="ignore"):
-        args = (ex, ey, evx, evy, lx, lv, l1_decel, fx, fv, f_aggressive)
-        exists, parts = evasion_core(ARRAY, *args, prm.p_m, prm.p_m, prm)
-        ok = period_ok & exists
+        guard = np.ones(n, bool)
         done = np.flatnonzero(completing)  # the completion guard replaces the evasion check (few rows)
         if done.size:
             z_l = min_follow_decel(ARRAY, (lx - ex - prm.p_m)[done], evx[done], lv[done], l1_decel[done])
             z_f = min_follow_decel(ARRAY, (ex - fx - prm.p_m)[done], fv[done], evx[done], prm.a_x_d)
-            ok[done] = period_ok[done] & (z_l <= prm.a_x_d) & (z_f <= prm.a_x_d)
-    rows = np.flatnonzero(ok)
-    n = np.shape(ex)
-    sub = lambda a: np.broadcast_to(a, n)[rows]  # noqa: E731
-    plan = plan_from_core(
-        ARRAY,
-        rows.shape,
-        (*(sub(a) for a in args), prm.p_m, prm.p_m),
-        exists[rows],
-        {k: sub(v) for k, v in parts.items()},
-        prm.p_m,
-        prm.p_m,
-        prm,
-    )
-    return Verdict(ok=ok, completing=completing, plan=plan)
+            guard[done] = (z_l <= prm.a_x_d) & (z_f <= prm.a_x_d)
+        args = (ex, ey, evx, evy, lx, lv, l1_decel, fx, fv, f_aggressive)
+        # Rows with nothing to evade (in the own lane, not moving out: t_y_f = 0) go through the evasion core
+        # apart: with t_y_f = 0 throughout it takes its short path (same results).
+        idle = lateral_core(ARRAY, ey, evy, prm)[0] == 0.0
+        groups = [np.arange(n[0])] if idle.all() or not idle.any() else [np.flatnonzero(idle), np.flatnonzero(~idle)]
+        for rows in groups:
+            sub_args = tuple(a[rows] for a in args)
+            exists, parts = evasion_core(ARRAY, *sub_args, prm.p_m, prm.p_m, prm)
+            keep = np.flatnonzero(period_ok[rows] & np.where(completing[rows], guard[rows], exists))
+            ok[rows[keep]] = True
+            plan = plan_from_core(
+                ARRAY,
+                keep.shape,
+                (*(a[keep] for a in sub_args), prm.p_m, prm.p_m),
+                exists[keep],
+                {k: np.broadcast_to(v, rows.shape)[keep] for k, v in parts.items()},
+                prm.p_m,
+                prm.p_m,
+                prm,
+            )
+            plans.append((rows[keep], plan))
+    return Verdict(ok=ok, completing=completing, plans=plans)
 
 
 def hesitate_lateral(ego_vy, prm: Params):
