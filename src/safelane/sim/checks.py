@@ -26,63 +26,75 @@ def ego_checks(
     others: Fleet,
     conflict_level: float,
     overlap_level: float,
-    planned=None,
+    plan=None,
 ):
     """Exact ego collision / p_m-violation checks for the period, counted only at the instants the ego is
     in the conflict zone (violations) or overlaps the target lane's vehicles laterally (collisions).
 
-    Only pairs that could come within ``p_m`` during the period are evaluated exactly (a bound on how far a gap
-    can move in one period — ``|Δv| dt + (a_max,ego + a_max,others) dt²/2`` — filters the rest); the result is the
-    same, faster. The reported minimum gaps to F and L1 are exact where the pair came that near, and sampled at
-    the period's ends (while the ego is in the conflict zone) where it stayed farther. ``planned``: (B,) True where
-    the ego follows a multi-segment evasion plan this period; elsewhere ``lon`` is a :meth:`Motion.constant`
-    (knots ``0, t_stop, dt``), which has a closed form against the others.
+    ``lon``, ``lat``: the ego's constant-command motions (:meth:`Motion.constant`, :meth:`Motion.free`);
+    ``plan``: ``(rows, plan_lon, plan_lat)`` for the rows executing an evasion plan instead (multi-segment motions,
+    see :func:`~safelane.sim.supervisor.plan_motion`), or None. Only pairs that could come within ``p_m`` during
+    the period are evaluated exactly (a bound on how far a gap can move in one period —
+    ``|Δv| dt + (a_max,ego + a_max,others) dt²/2`` — filters the rest); the result is the same, faster. The
+    reported minimum gaps to F and L1 are exact where the pair came that near, and sampled at the period's ends
+    (while the ego is in the conflict zone) where it stayed farther.
     """
     dt = prm.dt
+    bsz = len(lon.x)
     max_level = max(conflict_level, overlap_level)
-    one = _one_segment(lat, dt)
-    y_max = np.where(one, free_max(lat.x[:, 0], lat.v[:, 0], lat.acc[:, 0], dt), -np.inf)
-    if not one.all():
-        y_max[~one] = extrema(_rows(lat, ~one))[1]
+    planned = np.zeros(bsz, bool)
+    y_max = free_max(lat.x[:, 0], lat.v[:, 0], lat.acc[:, 0], dt)
+    x_end, y_end = lon.x[:, -1], lat.x[:, -1]
+    if plan is not None and plan[0].size:
+        rows, plan_lon, plan_lat = plan
+        planned[rows] = True
+        at = np.zeros(bsz, np.intp)
+        at[rows] = np.arange(rows.size)
+        y_max[rows] = extrema(plan_lat)[1]
+        x_end, y_end = x_end.copy(), y_end.copy()
+        x_end[rows], y_end[rows] = plan_lon.x[:, -1], plan_lat.x[:, -1]
     d0 = s.x - s.ego[0][:, None]
     a_bound = max(prm.a_x_a, prm.a_x_d) + float(np.abs(others.acc).max(initial=0.0))
     reach = np.abs(s.v - s.ego[2][:, None]) * dt
     near = b.valid & (np.abs(d0) - reach < prm.p_m + 0.5 * a_bound * dt * dt + 1e-6) & (y_max > conflict_level)[:, None]
     c, r = np.nonzero(near.T)  # the (B, K) masks are column-major: scan them vehicle by vehicle
-    bsz = len(y_max)
     collided, violated = np.zeros(bsz, bool), np.zeros(bsz, bool)
-    min_gap_f, min_gap_l1 = _far_gaps(b, s, lon, lat, others, near, conflict_level)
+    min_gap_f, min_gap_l1 = _far_gaps(b, s, lat.x[:, 0], x_end, y_end, others, near, conflict_level)
     if r.size == 0:
         return collided, violated, min_gap_f, min_gap_l1
     # Pair by pair (the near ones only): (min, max) of the gap over the windows of both lateral levels.
     c_min, c_max, o_min, o_max = (np.empty(r.size) for _ in range(4))
     # Most pairs are one quadratic over the whole period (nobody stops or switches inside it): closed form.
-    simple = _one_segment(lon, dt)[r] & _one_segment(lat, dt)[r] & (others.t_stop[r, c] >= dt)
+    on_plan = planned[r]
+    simple = ~on_plan & (lon.t[r, 1] >= dt) & (others.t_stop[r, c] >= dt)
     # Next most: someone stops inside the period while the ego, on a constant command, stays laterally beyond
     # both levels all period (the windows are the whole period): closed form over the stop knots.
-    settled = _one_segment(lat, dt) & (-free_max(-lat.x[:, 0], -lat.v[:, 0], -lat.acc[:, 0], dt) > max_level)
-    if planned is not None:
-        settled &= ~planned
+    settled = ~planned & (-free_max(-lat.x[:, 0], -lat.v[:, 0], -lat.acc[:, 0], dt) > max_level)
     stops = ~simple & settled[r]
-    ps, pk, pg = np.flatnonzero(simple), np.flatnonzero(stops), np.flatnonzero(~simple & ~stops)
+    ps, pk = np.flatnonzero(simple), np.flatnonzero(stops)
+    rest = ~simple & ~stops
+    general = [(np.flatnonzero(rest & ~on_plan), lon, lat, None)]
+    if planned.any():
+        general.append((np.flatnonzero(rest & on_plan), plan_lon, plan_lat, at))
     if pk.size:
         rk, ck = r[pk], c[pk]
         ego = (lon.x[rk, 0], lon.v[rk, 0], lon.acc[rk, 0], lon.t[rk, 1])
         other = (others.x[rk, ck], others.v[rk, ck], others.acc[rk, ck], others.t_stop[rk, ck])
         c_min[pk], c_max[pk] = stop_pair_extrema(*ego, *other, dt)
         o_min[pk], o_max[pk] = c_min[pk], c_max[pk]
-    rs, cs, rg, cg = r[ps], c[ps], r[pg], c[pg]
+    rs, cs = r[ps], c[ps]
     d0 = others.x[rs, cs] - lon.x[rs, 0]
     dv0 = others.v[rs, cs] - lon.v[rs, 0]
     rel_acc = others.acc[rs, cs] - lon.acc[rs, 0]
     lateral = (lat.x[rs, 0], lat.v[rs, 0], lat.acc[rs, 0])
-    if pg.size:
-        ego_lon, ego_lat, other = _rows(lon, rg), _rows(lat, rg), others.motion(rg, cg)
     for level, lo, hi in ((conflict_level, c_min, c_max), (overlap_level, o_min, o_max)):
         lo[ps], hi[ps] = _windowed_quadratic(d0, dv0, rel_acc, *lateral, level, dt)
-        if pg.size:
-            knots = crossing_knots(ego_lat, level)
-            lo[pg], hi[pg] = windowed_gap_extrema(ego_lon, other, ego_lat, knots, level)
+        for pg, m_lon, m_lat, index in general:
+            if pg.size:
+                idx = r[pg] if index is None else index[r[pg]]
+                ego_lon, ego_lat = _rows(m_lon, idx), _rows(m_lat, idx)
+                knots = crossing_knots(ego_lat, level)
+                lo[pg], hi[pg] = windowed_gap_extrema(ego_lon, others.motion(r[pg], c[pg]), ego_lat, knots, level)
     length = prm.vehicle_length
     collided[r[(o_min < length) & (o_max > -length)]] = True
     violated[r[(c_min < prm.p_m - 1e-9) & (c_max > -prm.p_m + 1e-9)]] = True
@@ -92,14 +104,14 @@ def ego_checks(
     return collided, violated, min_gap_f, min_gap_l1
 
 
-def _far_gaps(b, s, lon: Motion, lat: Motion, others: Fleet, near, level: float):
+def _far_gaps(b, s, y_start, x_end, y_end, others: Fleet, near, level: float):
     """The running minimum gaps to F and L1 updated with the pairs that stayed far this period, sampled at the
     period's ends where the ego is in the conflict zone (the near pairs are added exactly afterwards)."""
     out = []
     for col, sign, running in ((0, -1.0, s.min_gap_f), (1, 1.0, s.min_gap_l1)):
         far = b.valid[:, col] & ~near[:, col]
-        g0 = np.where(far & (lat.x[:, 0] > level), sign * (s.x[:, col] - lon.x[:, 0]), np.inf)
-        g1 = np.where(far & (lat.x[:, -1] > level), sign * (others.x_end[:, col] - lon.x[:, -1]), np.inf)
+        g0 = np.where(far & (y_start > level), sign * (s.x[:, col] - s.ego[0]), np.inf)
+        g1 = np.where(far & (y_end > level), sign * (others.x_end[:, col] - x_end), np.inf)
         out.append(np.minimum(running, np.minimum(g0, g1)))
     return out
 

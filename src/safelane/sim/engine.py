@@ -30,7 +30,7 @@ from .kinematics import Fleet, Motion
 from .results import SimResult, results_table, trace_rows
 from .rng import counter_normal, counter_uniform
 from .scenario import ScenarioBatch, ScenarioConfig, check_batch, paper_scenarios
-from .supervisor import ABORT, HESITATE, PROCEED, check_candidate, hesitate_lateral, plan_motion, replace_rows
+from .supervisor import ABORT, HESITATE, PROCEED, check_candidate, hesitate_lateral, plan_motion
 
 
 @dataclass(frozen=True)
@@ -309,15 +309,15 @@ class _Sim:
             ay_cmd[done] = np.clip(0.8 * (prm.lane_width - ey[done]) - 1.6 * evy[done], -prm.a_y_m, prm.a_y_m)
         lon = Motion.constant(ex, evx, ax_cmd, dt)
         lat = Motion.free(ey, evy, ay_cmd, dt)
+        plan = None
         rows = np.flatnonzero(behaviour == ABORT)
         if rows.size:  # only the aborting rows follow their plan: evaluate it there alone
-            p_lon, p_lat = plan_motion(s.plan.take(rows), s.t - s.plan_t0[rows], dt)
-            lon, lat = replace_rows(lon, rows, p_lon), replace_rows(lat, rows, p_lat)
+            plan = (rows, *plan_motion(s.plan.take(rows), s.t - s.plan_t0[rows], dt))
 
         acc = self.others_accels(s, ex, evx)
         others = Fleet.constant(s.x, s.v, acc, dt)
         new_plan = _set_rows(s.plan, accepted)
-        new = self.check_and_advance(s, lon, lat, others, behaviour, completing, new_plan, acc, belief)
+        new = self.check_and_advance(s, lon, lat, plan, others, behaviour, completing, new_plan, acc, belief)
         return new, obs, behaviour
 
     def others_accels(self, s: SimState, ex, evx):
@@ -359,19 +359,23 @@ class _Sim:
         )
         return acc
 
-    def check_and_advance(self, s, lon, lat, others, behaviour, completing, new_plan, acc, belief) -> SimState:
+    def check_and_advance(self, s, lon, lat, plan, others, behaviour, completing, new_plan, acc, belief) -> SimState:
         prm = self.prm
         dt = prm.dt
         conflict_level = prm.y_safe + LATERAL_TOL_M
         overlap_level = prm.lane_width - prm.vehicle_width
         collided, violated, min_gap_f, min_gap_l1 = ego_checks(
-            self.b, prm, s, lon, lat, others, conflict_level, overlap_level, behaviour == ABORT
+            self.b, prm, s, lon, lat, others, conflict_level, overlap_level, plan
         )
 
         leader_collided, leader_violated = lane_checks(self.b, prm, others, self.lane_pairs)
 
         ex1, evx1 = lon.end
         ey1, evy1 = lat.end
+        if plan is not None:  # the aborting rows end where their plans take them
+            rows, plan_lon, plan_lat = plan
+            ex1, evx1, ey1, evy1 = (a.copy() for a in (ex1, evx1, ey1, evy1))
+            (ex1[rows], evx1[rows]), (ey1[rows], evy1[rows]) = plan_lon.end, plan_lat.end
         x1, v1 = others.end
         completed_now = ~s.completed & completing
         replanned = (behaviour == PROCEED) | (behaviour == HESITATE)

@@ -123,26 +123,3 @@ def plan_motion(plan: EvasionPlan, age, dt: float):
     knots = np.sort(np.stack([np.zeros_like(age), *rel, np.full_like(age, dt)], -1), -1)
     px, py, vx, vy = plan.take((..., None)).state(age[..., None] + knots)
     return Motion.from_samples(knots, px, vx), Motion.from_samples(knots, py, vy)
-
-
-def pad_knots(m: Motion, n_knots: int) -> Motion:
-    """Repeat the last knot so motions with different knot counts can be selected element-wise."""
-    extra = n_knots - m.t.shape[-1]
-    if extra <= 0:
-        return m
-
-    def rep(a, last_value=None):
-        tail = np.repeat(a[..., -1:], extra, -1) if last_value is None else np.full((*a.shape[:-1], extra), 0.0)
-        return np.concatenate([a, tail], -1)
-
-    return Motion(t=rep(m.t), x=rep(m.x), v=rep(m.v), acc=rep(m.acc, 0.0))
-
-
-def replace_rows(m: Motion, rows, sub: Motion) -> Motion:
-    """``m`` (batch on the first axis) with ``rows`` replaced by ``sub``'s rows (knot counts padded to match)."""
-    n = max(m.t.shape[-1], sub.t.shape[-1])
-    m, sub = pad_knots(m, n), pad_knots(sub, n)
-    out = Motion(*(getattr(m, f).copy() for f in ("t", "x", "v", "acc")))
-    for f in ("t", "x", "v", "acc"):
-        getattr(out, f)[rows] = getattr(sub, f)
-    return out
