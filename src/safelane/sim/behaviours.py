@@ -186,16 +186,17 @@ def leader_accels(
     is_last, acts = roles
     acc = np.zeros((bsz, k), order="F")  # column-major: filled vehicle by vehicle
     a_last = np.where(braking, -decel_last, 0.0)
+    # What does not depend on the scan, for every vehicle at once: gaps to the vehicle ahead, own driving task.
+    slack = x[:, 1:] - x[:, :-1] - margin[:, :-1]
+    task = np.minimum(np.maximum(0.5 * (v_desired - v), -promise_decel), promise_accel)
     with np.errstate(all="ignore"):
         for i in range(k - 1, 0, -1):  # front to back: each link reacts to the one ahead (a scan over vehicles)
             if i + 1 < k:
-                slack = x[:, i + 1] - x[:, i] - margin[:, i]
                 ahead_decel = np.maximum(-acc[:, i + 1], 0.0)
-                z = np.minimum(min_follow_decel(ARRAY, slack, v[:, i], v[:, i + 1], ahead_decel), prm.a_x_d)
+                z = np.minimum(min_follow_decel(ARRAY, slack[:, i], v[:, i], v[:, i + 1], ahead_decel), prm.a_x_d)
             else:
                 z = np.zeros(bsz)
-            task = np.minimum(np.maximum(0.5 * (v_desired[:, i] - v[:, i]), -promise_decel[:, i]), promise_accel[:, i])
-            a_conn = np.minimum(task, -z)
+            a_conn = np.minimum(task[:, i], -z)
             if violating is not None:
                 lo, hi = np.minimum(z, decel_last), np.maximum(z, decel_last)
                 a_conn = np.where(violating[:, i], -(lo + violate_pick[:, i] * (hi - lo)), a_conn)
