@@ -54,8 +54,7 @@ def _min_follow_decel_array(slack, v_f, v_l, a_l):
         # 2·(v²/(2a)) = v²/a and 2·slack are exact rescalings: the same bits as the scalar formula, fewer passes.
         lead_stop2 = np.where(a_l > 0.0, v_l * v_l / a_l, np.where(v_l > 0.0, INF, 0.0))
         two_slack = 2.0 * slack
-        den = two_slack + lead_stop2
-        z_b = np.where(den != 0.0, v_f * v_f / den, 0.0)
+        z_b = v_f * v_f / (two_slack + lead_stop2)  # the denominator is > 0 wherever slack > 0, the only rows kept
         dv = v_f - v_l
         z_a = a_l + dv * dv / two_slack
         interior = (dv > 0.0) & (two_slack * a_l <= v_l * dv)

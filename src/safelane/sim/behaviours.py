@@ -184,6 +184,7 @@ def leader_accels(
     """
     bsz, k = x.shape
     is_last, acts = roles
+    mixed = is_last.any(0) | ~acts.all(0)  # per slot: not every row an acting connected leader (then a mask)
     acc = np.zeros((bsz, k), order="F")  # column-major: filled vehicle by vehicle
     a_last = np.where(braking, -decel_last, 0.0)
     # What does not depend on the scan, for every vehicle at once: gaps to the vehicle ahead, own driving task.
@@ -200,7 +201,7 @@ def leader_accels(
             if violating is not None:
                 lo, hi = np.minimum(z, decel_last), np.maximum(z, decel_last)
                 a_conn = np.where(violating[:, i], -(lo + violate_pick[:, i] * (hi - lo)), a_conn)
-            acc[:, i] = np.where(is_last[:, i], a_last, np.where(acts[:, i], a_conn, 0.0))
+            acc[:, i] = np.where(is_last[:, i], a_last, np.where(acts[:, i], a_conn, 0.0)) if mixed[i] else a_conn
     return acc
 
 
