@@ -35,8 +35,10 @@ def pair_min_gap(slack, v_f, a_f, v_l, a_l, dt):
     tau = np.where(da != 0.0, dv / np.where(da != 0.0, da, 1.0), 0.0)
     # All candidate instants at once (stops, equal speeds, end of period): one stacked evaluation.
     t = np.stack(np.broadcast_arrays(ts_f, ts_l, np.clip(tau, 0.0, dt), np.full_like(ts_f, dt)))
-    xf, _ = advance(0.0, v_f, a_f, t)
-    xl, _ = advance(slack, v_l, a_l, t)
+    # Positions at those instants, stopping at rest: each vehicle moves until min(t, its stop time).
+    m_f, m_l = np.minimum(t, ts_f), np.minimum(t, ts_l)
+    xf = v_f * m_f + 0.5 * a_f * m_f * m_f
+    xl = slack + v_l * m_l + 0.5 * a_l * m_l * m_l
     return np.minimum(slack, (xl - xf).min(0))
 
 
