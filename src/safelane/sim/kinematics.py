@@ -24,9 +24,7 @@ def stop_time(v, a, horizon):
 
 def advance(x, v, a, dt):
     """Exact state after ``dt`` at constant acceleration ``a``, stopping at rest: ``(x', v')``."""
-    braking = a < 0.0
-    with np.errstate(over="ignore"):  # as in stop_time
-        ts = np.where(braking, np.minimum(v / np.where(braking, -a, 1.0), dt), dt)
+    ts = stop_time(v, a, dt)
     return x + v * ts + 0.5 * a * ts * ts, np.where(ts < dt, 0.0, np.maximum(v + a * dt, 0.0))
 
 
