@@ -223,6 +223,9 @@ def lane_checks(b, prm: Params, others: Fleet, pairs=None):
     gap0 = x0[:, 1:] - x0[:, :-1]
     slack = float(np.abs(others.acc).max(initial=0.0)) * dt * dt + 1e-6
     near = valid & (gap0 - np.abs(v0[:, 1:] - v0[:, :-1]) * dt < margin + slack)
+    # Vehicles at rest all period keep their gap: such a pair at or beyond its margin needs no exact check.
+    resting = (others.v_end == 0.0) & (v0 == 0.0)
+    near &= ~(resting[:, 1:] & resting[:, :-1] & (gap0 >= margin))
     c, r = np.nonzero(near.T)  # the (B, K) masks are column-major: scan them vehicle by vehicle
     bsz = len(x0)
     collided, violated = np.zeros(bsz, bool), np.zeros(bsz, bool)
