@@ -18,7 +18,7 @@ from hypothesis import strategies as st
 
 from safelane import Params
 from safelane.safety import plan_evasion
-from safelane.sim.checks import ego_checks, stop_pair_extrema
+from safelane.sim.checks import ego_checks, lane_checks, stop_pair_extrema
 from safelane.sim.kinematics import (
     Fleet,
     Motion,
@@ -313,3 +313,21 @@ def test_ego_checks_catch_between_sample_contact_and_violation(gap, dip, ego_y, 
     assert (bool(collided[0]), bool(violated[0])) == expect
     if ego_y > conflict:
         assert min_gap_l1[0] == pytest.approx(gap - 10.5 * PARAMS.dt**2 / 8.0 if dip else gap, abs=1e-12)
+
+
+@pytest.mark.parametrize(
+    ("gap", "speeds", "expect"),
+    [
+        (PARAMS.p_m + 0.5, (0.0, 0.0), (False, False)),  # both at rest beyond the margin: skipped, clean
+        (PARAMS.p_m - 0.5, (0.0, 0.0), (False, True)),  # both at rest inside the margin: still a violation
+        (PARAMS.vehicle_length - 0.5, (0.0, 0.0), (True, True)),  # … and overlap is a collision
+        (PARAMS.p_m + 0.05, (20.0, 19.0), (False, True)),  # closing at 1 m/s: the margin is crossed in the period
+    ],
+)
+def test_lane_checks_between_target_lane_vehicles(gap, speeds, expect):
+    x = np.asfortranarray([[0.0, gap]])
+    v = np.asfortranarray([list(speeds)])
+    others = Fleet.constant(x, v, np.zeros((1, 2), order="F"), PARAMS.dt)
+    b = SimpleNamespace(valid=np.ones((1, 2), bool), human=np.zeros((1, 2), bool))
+    collided, violated = lane_checks(b, PARAMS, others)
+    assert (bool(collided[0]), bool(violated[0])) == expect
