@@ -5,9 +5,10 @@ Every function takes scalars or arrays of any broadcastable batch shape (float64
 """
 
 from .chain import ChainResult, leader_chain, leader_position, worst_case_leader_decel
-from .evasion import EvasionPlan, Reason, evasion_exists, follower_position, plan_evasion
+from .evasion import evasion_exists, follower_position, plan_evasion
 from .lateral import lateral_evasion_time
 from .longitudinal import FEASIBILITY_TOL_M, LongitudinalEvasion, longitudinal_evasion
+from .plan import EvasionPlan, Reason
 
 __all__ = [
     "FEASIBILITY_TOL_M",

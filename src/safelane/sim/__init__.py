@@ -1,8 +1,9 @@
 """Batched closed-loop simulation of the lane change (scenarios, behaviours, supervisor, metrics)."""
 
-from .engine import SimConfig, SimResult, SimState, simulate, simulate_batch
+from .engine import SimConfig, SimResult, simulate, simulate_batch
 from .metrics import summarize, wilson_interval
 from .scenario import ScenarioBatch, ScenarioConfig, concat, paper_scenarios, penetration_scenarios
+from .step import SimState
 
 __all__ = [
     "ScenarioBatch",

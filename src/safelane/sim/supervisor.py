@@ -27,9 +27,10 @@ import numpy as np
 from ..params import Params
 from ..safety._backend import ARRAY
 from ..safety.chain import min_follow_decel
-from ..safety.evasion import EvasionPlan, evasion_core, plan_from_core
+from ..safety.evasion import evasion_core
 from ..safety.lateral import LATERAL_TOL_M, lateral_core
 from ..safety.longitudinal import FEASIBILITY_TOL_M
+from ..safety.plan import EvasionPlan, plan_from_core
 from .behaviours import pair_min_gap
 from .kinematics import Motion, advance, free_max
 

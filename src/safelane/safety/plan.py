@@ -1,0 +1,162 @@
+"""The evasion plan: what :func:`~safelane.safety.evasion.plan_evasion` returns, evaluable at any time.
+
+An :class:`EvasionPlan` holds, per batch element, the verdict, its :class:`Reason` bits, the switch times of the
+lateral return (Eq. 5) and of the longitudinal profile (Eqs. 6–8), and the state it was planned from, so the
+planned trajectory can be evaluated exactly at any ``t >= 0`` (:meth:`EvasionPlan.state`).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import enum
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..params import Params
+from ._backend import ARRAY
+from ._checks import finish, float_array
+from .lateral import lateral_state
+from .longitudinal import ego_position, ego_speed
+
+
+class Reason(enum.IntFlag):
+    """Per-element reason bits of an :class:`EvasionPlan` (stored as ``uint8``)."""
+
+    OK = 0
+    #: Even full braking from ``t = 0`` cannot keep ``p_m`` behind ``L1``'s worst case.
+    LEADER_INFEASIBLE = 1
+    #: The leader constraint is satisfiable, but the worst-case follower comes closer than ``p_m``.
+    FOLLOWER_TOO_CLOSE = 2
+    #: Informational: the chain ahead could not be shown collision-free, so ``L1``'s worst case is ``a_x_d``.
+    CHAIN_UNSAFE = 4
+    #: Informational: the ego never leaves its lane (``t_y_f = 0``); nothing to evade.
+    NOTHING_TO_EVADE = 8
+
+
+@dataclass(frozen=True)
+class EvasionPlan:
+    """A verified (or refuted) evasion trajectory for a batch of states; all arrays share the batch shape.
+
+    Times are measured from the state the plan was computed for. Evaluate the ego's planned motion with
+    :meth:`position` / :meth:`velocity`; after ``t_y_f`` the plan holds the longitudinal speed reached (the
+    ego is back in its own lane, whose road ahead is free).
+    """
+
+    feasible: np.ndarray
+    reason: np.ndarray
+    t_y_f: np.ndarray
+    t_y_switch: np.ndarray
+    t_x1: np.ndarray
+    t_x2: np.ndarray
+    min_gap_leader: np.ndarray
+    min_gap_follower: np.ndarray
+    # Everything needed to evaluate the plan exactly.
+    ego_px: np.ndarray
+    ego_py: np.ndarray
+    ego_vx: np.ndarray
+    ego_vy: np.ndarray
+    l1_p: np.ndarray
+    l1_v: np.ndarray
+    l1_decel: np.ndarray
+    v_switch: np.ndarray
+    t_brake_end: np.ndarray
+    follows_leader: np.ndarray
+    y_acc_1: np.ndarray
+    y_acc_2: np.ndarray
+    t_y_end: np.ndarray
+    params: Params
+
+    def state(self, t):
+        """Planned ego ``(p_x, p_y, v_x, v_y)`` at time ``t >= 0`` after the plan's state (exact).
+
+        ``t`` broadcasts with the batch shape.
+        """
+        t = float_array("t", t)
+        if (t < 0).any() or not np.isfinite(t).all():
+            raise ValueError(f"t must be finite and >= 0; got {t!r}")
+        T = self.t_y_f
+        check_broadcasts("t", t.shape, np.shape(T))
+        lon = (self.ego_px, self.ego_vx, self.t_x1, self.v_switch, self.t_brake_end, self.follows_leader)
+        p, v, u, V, t2, match = lon
+        lead = (self.l1_p, self.l1_v, self.l1_decel)
+        with np.errstate(all="ignore"):
+            tt = np.minimum(t, T)
+            px = ego_position(ARRAY, tt, p, v, u, V, t2, match, *lead, self.params)
+            vx = ego_speed(ARRAY, tt, v, u, V, t2, match, self.l1_v, self.l1_decel, self.params)
+            px = px + vx * np.maximum(t - T, 0.0)
+            lat = (self.t_y_switch, self.y_acc_1, self.y_acc_2, self.t_y_end)
+            py, vy = lateral_state(ARRAY, t, self.ego_py, self.ego_vy, *lat)
+        return px, py, vx, vy
+
+    def where(self, mask, other: EvasionPlan) -> EvasionPlan:
+        """Element-wise choice: this plan where ``mask`` is True, ``other`` elsewhere."""
+        chosen = {
+            f.name: np.where(mask, getattr(self, f.name), getattr(other, f.name))
+            for f in dataclasses.fields(self)
+            if f.name != "params"
+        }
+        return EvasionPlan(**chosen, params=self.params)
+
+    def take(self, idx) -> EvasionPlan:
+        """Rows ``idx`` of a batched plan."""
+        rows = {f.name: getattr(self, f.name)[idx] for f in dataclasses.fields(self) if f.name != "params"}
+        return EvasionPlan(**rows, params=self.params)
+
+    def position(self, t):
+        """Planned ego ``(p_x, p_y)`` at time ``t``."""
+        px, py, _, _ = self.state(t)
+        return px, py
+
+    def velocity(self, t):
+        """Planned ego ``(v_x, v_y)`` at time ``t``."""
+        _, _, vx, vy = self.state(t)
+        return vx, vy
+
+
+def check_broadcasts(name: str, shape, batch_shape) -> tuple[int, ...]:
+    try:
+        return np.broadcast_shapes(shape, batch_shape)
+    except ValueError as exc:
+        raise ValueError(f"{name} of shape {shape} does not broadcast with the batch shape {batch_shape}") from exc
+
+
+def plan_from_core(xp, shape, args, exists, parts, lead_margin, follow_margin, params: Params, chain_unsafe=False):
+    """Assemble an :class:`EvasionPlan` from :func:`evasion_core`'s inputs and outputs (used by the simulator,
+    which calls the unchecked core on states it built itself)."""
+    with np.errstate(all="ignore"):
+        reason = (
+            xp.where(parts["lead_ok"], 0, int(Reason.LEADER_INFEASIBLE))
+            + xp.where(parts["lead_ok"], xp.where(parts["follow_ok"], 0, int(Reason.FOLLOWER_TOO_CLOSE)), 0)
+            + xp.where(parts["nothing"], int(Reason.NOTHING_TO_EVADE), 0)
+        )
+    if xp is not ARRAY:
+        args = tuple(np.float64(x) if not isinstance(x, bool) else np.bool_(x) for x in args)
+    reason = np.asarray(finish(xp, shape, reason, np.uint8))
+    reason = reason | np.where(np.asarray(chain_unsafe, dtype=bool), np.uint8(Reason.CHAIN_UNSAFE), np.uint8(0))
+    f = lambda v, dt=np.float64: finish(xp, shape, v, dt)  # noqa: E731
+    ego_px, ego_py, ego_vx, ego_vy, l1_p, l1_v, l1_decel = (f(x) for x in args[:7])
+    return EvasionPlan(
+        feasible=f(exists, np.bool_),
+        reason=reason.astype(np.uint8),
+        t_y_f=f(parts["t_y_f"]),
+        t_y_switch=f(parts["t_y_switch"]),
+        t_x1=f(parts["t_x1"]),
+        t_x2=f(np.minimum(parts["t_brake_end"], parts["t_y_f"])),
+        min_gap_leader=f(parts["lead_gap"] + lead_margin),
+        min_gap_follower=f(parts["follow_gap"] + follow_margin),
+        ego_px=ego_px,
+        ego_py=ego_py,
+        ego_vx=ego_vx,
+        ego_vy=ego_vy,
+        l1_p=l1_p,
+        l1_v=l1_v,
+        l1_decel=l1_decel,
+        v_switch=f(parts["v_switch"]),
+        t_brake_end=f(parts["t_brake_end"]),
+        follows_leader=f(parts["follows_leader"], np.bool_),
+        y_acc_1=f(parts["y_acc_1"]),
+        y_acc_2=f(parts["y_acc_2"]),
+        t_y_end=f(parts["t_y_end"]),
+        params=params,
+    )
