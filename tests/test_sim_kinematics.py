@@ -262,7 +262,7 @@ def test_windowed_extrema_count_only_instants_inside_the_lateral_window(crossing
 
 
 def test_fleet_is_motion_constant_without_the_knots():
-    """``Fleet`` keeps ``Motion.constant``'s numbers per vehicle; its ``motion(idx)`` is that motion exactly."""
+    """``Fleet.motion(idx)`` picks exactly the entries of the whole batch's motion, and ``end`` is its last knot."""
     rng = np.random.default_rng(5)
     dt = PARAMS.dt
     x, v, a = rng.uniform(-50, 50, (300, 4)), rng.uniform(0, 35, (300, 4)), rng.uniform(-8, 2.5, (300, 4))

@@ -196,15 +196,6 @@ def _window_crossings(d0, dv0, rel_acc, y0, vy0, ay, level: float, dt: float):
     return np.where(active, lo, np.inf).min(-1), np.where(active, hi, -np.inf).max(-1)
 
 
-def _quadratic_min(d0, dv0, rel_acc, dt: float):
-    """Minimum over ``[0, dt]`` of ``d0 + dv0 t + rel_acc t²/2``."""
-    end = d0 + dv0 * dt + 0.5 * rel_acc * dt * dt
-    safe = np.where(rel_acc > 0.0, rel_acc, 1.0)
-    tau = np.where(rel_acc > 0.0, -dv0 / safe, -1.0)
-    vertex = np.where((tau > 0.0) & (tau < dt), d0 + 0.5 * dv0 * tau, np.inf)
-    return np.minimum(np.minimum(d0, end), vertex)
-
-
 def lane_pairs(b, prm: Params):
     """Constant inputs of :func:`lane_checks`: ``(valid, margin)`` of each consecutive pair, ``(B, K−1)``."""
     return b.valid[:, 1:] & b.valid[:, :-1], np.where(b.human[:, :-1], prm.p_m_human, prm.p_m)
@@ -239,7 +230,7 @@ def lane_checks(b, prm: Params, others: Fleet, pairs=None):
     d0 = x0[rs, cs + 1] - x0[rs, cs]
     dv0 = v0[rs, cs + 1] - v0[rs, cs]
     rel_acc = others.acc[rs, cs + 1] - others.acc[rs, cs]
-    pair_min[ps] = _quadratic_min(d0, dv0, rel_acc, dt)
+    pair_min[ps] = _quadratic_extrema(d0, dv0, rel_acc, dt)[0]
     if pg.size:  # someone stops inside the period: closed form over the stop knots
         behind = (others.x[rg, cg], others.v[rg, cg], others.acc[rg, cg], others.t_stop[rg, cg])
         ahead = (others.x[rg, cg + 1], others.v[rg, cg + 1], others.acc[rg, cg + 1], others.t_stop[rg, cg + 1])

@@ -39,18 +39,10 @@ class Motion:
 
     @classmethod
     def constant(cls, x, v, a, dt) -> Motion:
-        """Constant acceleration with stopping: knots ``0, t_stop, dt``."""
+        """Constant acceleration with stopping: knots ``0, t_stop, dt`` (a vehicle already at rest that "brakes"
+        simply stays: one segment of zero acceleration). The knots of :meth:`Fleet.constant`."""
         x, v, a = np.broadcast_arrays(np.asarray(x, float), np.asarray(v, float), np.asarray(a, float))
-        ts = stop_time(v, a, dt)
-        # A vehicle already at rest that "brakes" simply stays: one segment of zero acceleration.
-        at_rest = ts <= 0.0
-        a, ts = np.where(at_rest, 0.0, a), np.where(at_rest, dt, ts)
-        xs = x + v * ts + 0.5 * a * ts * ts
-        vs = np.where(ts < dt, 0.0, np.maximum(v + a * ts, 0.0))
-        t = np.stack([np.zeros_like(ts), ts, np.full_like(ts, dt)], -1)
-        # After the stop knot the vehicle is at rest (or, if it never stops, the stop knot is dt itself).
-        acc = np.stack([a, np.zeros_like(a)], -1)
-        return cls(t=t, x=np.stack([x, xs, xs], -1), v=np.stack([v, vs, vs], -1), acc=acc)
+        return Fleet.constant(x, v, a, dt).motion(...)
 
     @classmethod
     def free(cls, x, v, a, dt) -> Motion:
@@ -114,7 +106,8 @@ class Fleet:
         return self.x_end, self.v_end
 
     def motion(self, *idx) -> Motion:
-        """The :class:`Motion` (knots ``0, t_stop, dt``) of the entries ``self.x[idx]``."""
+        """The :class:`Motion` (knots ``0, t_stop, dt``) of the entries ``self.x[idx]`` (``...`` for all). After
+        the stop knot the vehicle is at rest (or, if it never stops, the stop knot is ``dt`` itself)."""
         ts, xs, vs = self.t_stop[idx], self.x_end[idx], self.v_end[idx]
         return Motion(
             t=np.stack([np.zeros_like(ts), ts, np.full_like(ts, self.dt)], -1),
