@@ -106,6 +106,7 @@ def responsible_bounds(slack, v_f, v_l, lead_decel, prm: Params) -> dict[str, np
       after the period comes before the leader stops.
     """
     dt, brake = prm.dt, prm.a_x_d
+    slack = slack + 0.0  # −0.0 → +0.0: the in-period vertex divides by it, and −0.0 would flip its infinity's sign
     with np.errstate(all="ignore"):
         xl_end, u1 = advance(slack, v_l, -lead_decel, dt)
         g = xl_end - v_f * dt
