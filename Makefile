@@ -4,7 +4,7 @@ VENV   := .venv
 PY     := $(VENV)/bin/python
 STAMP  := $(VENV)/.installed
 
-.PHONY: run test lint bench clean install
+.PHONY: run test lint bench fuzz clean install
 
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
@@ -25,6 +25,11 @@ test: $(STAMP)
 
 lint: $(STAMP)
 	$(VENV)/bin/ruff check src tests benchmarks
+
+# Property tests with fresh random examples (the test run itself is derandomized: see tests/conftest.py).
+fuzz: $(STAMP)
+	for i in 1 2 3 4 5; do HYPOTHESIS_PROFILE=explore $(PY) -m pytest -q -p no:cacheprovider \
+		tests/test_sim_responsible.py tests/test_sim_kinematics.py tests/test_v2x.py || exit 1; done
 
 bench: $(STAMP)
 	$(PY) benchmarks/bench_safety.py
