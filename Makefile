@@ -29,7 +29,8 @@ lint: $(STAMP)
 # Property tests with fresh random examples (the test run itself is derandomized: see tests/conftest.py).
 fuzz: $(STAMP)
 	for i in 1 2 3 4 5; do HYPOTHESIS_PROFILE=explore $(PY) -m pytest -q -p no:cacheprovider \
-		tests/test_sim_responsible.py tests/test_sim_kinematics.py tests/test_v2x.py || exit 1; done
+		tests/test_sim_responsible.py tests/test_sim_kinematics.py tests/test_v2x.py \
+		tests/test_safety_reference.py || exit 1; done
 
 bench: $(STAMP)
 	$(PY) benchmarks/bench_safety.py

@@ -65,8 +65,6 @@ N_EXAMPLES = 100
 SETTINGS = settings(
     max_examples=N_EXAMPLES,
     deadline=None,
-    derandomize=True,
-    database=None,
     suppress_health_check=[HealthCheck.too_slow, HealthCheck.data_too_large],
 )
 SEEDS = st.integers(min_value=0, max_value=2**63 - 1)
