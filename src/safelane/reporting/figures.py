@@ -88,13 +88,8 @@ def _rate_axis(ax, label: str = "lane-change success rate") -> None:
 def fig4(summary: pd.DataFrame, out_dir: Path, *, n_leaders: int = 5, stem: str = "fig4_n5") -> list[Path]:
     """Paper Fig. 4: success rate vs ``a_x_N+1_d`` for ``N = n_leaders``, one line per planner."""
     frame = summary[(summary["n_leaders"] == n_leaders) & (summary["p_v"] == 0.0)]
-    fig, (ax,) = _figure()
-    _by_planner(ax, frame, "decel", dodge=0.06)
-    _rate_axis(ax)
-    ax.set_xlabel(_DECEL_LABEL)
-    ax.set_title(f"Success rate, N = {n_leaders} (cf. paper Fig. 4)", fontsize=10)
-    ax.legend(fontsize=8)
-    return _save(fig, out_dir, stem)
+    title = f"Success rate, N = {n_leaders} (cf. paper Fig. 4)"
+    return _success_vs(frame, out_dir, "decel", _DECEL_LABEL, title, stem, dodge=0.06)
 
 
 def table1(summary: pd.DataFrame, out_dir: Path, *, stem: str = "table1") -> list[Path]:
@@ -168,24 +163,28 @@ def fig6(summary: pd.DataFrame, out_dir: Path, *, stem: str = "fig6_violation") 
 
 def penetration(summary: pd.DataFrame, out_dir: Path, *, stem: str = "penetration") -> list[Path]:
     """Ours: success rate vs the share of connected vehicles (random placement), one line per planner."""
-    fig, (ax,) = _figure()
-    _by_planner(ax, summary, "penetration", dodge=0.008)
-    _rate_axis(ax)
-    ax.set_xlabel("share of connected vehicles (penetration)")
-    decels = ", ".join(f"{d:g}" for d in sorted(summary["decel"].unique()))
-    ax.set_title(f"Ours: success vs penetration, $a_{{x,N+1,d}}$ = {decels}", fontsize=10)
-    ax.legend(fontsize=8)
-    return _save(fig, out_dir, stem)
+    title = f"Ours: success vs penetration, $a_{{x,N+1,d}}$ = {_decels(summary)}"
+    xlabel = "share of connected vehicles (penetration)"
+    return _success_vs(summary, out_dir, "penetration", xlabel, title, stem, dodge=0.008)
 
 
 def leaders(summary: pd.DataFrame, out_dir: Path, *, stem: str = "leaders") -> list[Path]:
     """Ours: success rate vs the number of connected leaders N, one line per planner."""
+    title = f"Ours: success vs N, $a_{{x,N+1,d}}$ = {_decels(summary)}"
+    return _success_vs(summary, out_dir, "n_leaders", "number of connected leaders N", title, stem, dodge=0.08)
+
+
+def _decels(summary: pd.DataFrame) -> str:
+    return ", ".join(f"{d:g}" for d in sorted(summary["decel"].unique()))
+
+
+def _success_vs(frame, out_dir: Path, x: str, xlabel: str, title: str, stem: str, dodge: float) -> list[Path]:
+    """One panel: success rate against ``x``, one line per planner (see :func:`_by_planner`)."""
     fig, (ax,) = _figure()
-    _by_planner(ax, summary, "n_leaders", dodge=0.08)
+    _by_planner(ax, frame, x, dodge=dodge)
     _rate_axis(ax)
-    ax.set_xlabel("number of connected leaders N")
-    decels = ", ".join(f"{d:g}" for d in sorted(summary["decel"].unique()))
-    ax.set_title(f"Ours: success vs N, $a_{{x,N+1,d}}$ = {decels}", fontsize=10)
+    ax.set_xlabel(xlabel)
+    ax.set_title(title, fontsize=10)
     ax.legend(fontsize=8)
     return _save(fig, out_dir, stem)
 
