@@ -109,6 +109,15 @@ def test_trends_detect_planted_reversals():
     assert by_key(check_claims({"leaders": noisy}))["rises_with_n"].holds is True
 
 
+def test_trends_with_nothing_to_compare_are_not_checkable():
+    """One value along the trend's axis gives no step to compare: not checkable, never vacuously true."""
+    one = summary([("CV_all", 5, 4.0, 0.0, 50, 100), ("CV_none", 5, 4.0, 0.0, 40, 100)])
+    claims = by_key(check_claims({"fig4_n5": one}))
+    assert claims["falls_with_decel"].holds is None and "two values of decel" in claims["falls_with_decel"].evidence
+    assert claims["rises_with_n"].holds is None
+    assert by_key(check_claims({}))["rises_with_n"].evidence == "no grid experiment ran"
+
+
 def test_zero_collisions_counts_only_perfect_coordination():
     clean = summary([("CV_all", 10, 4.0, 0.0, 90, 100), ("CV_all", 10, 4.0, 0.5, 60, 100, 7)])
     dirty = summary([("CV_all", 10, 4.0, 0.0, 90, 100, 1)])

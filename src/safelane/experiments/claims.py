@@ -138,32 +138,26 @@ def _trend(grid: pd.DataFrame, along: str, group: list[str], decreasing: bool) -
     return bad, compared
 
 
-def _falls_with_decel(summaries) -> Claim:
-    text = "Success falls as the sudden braking a_x_N+1_d grows."
+def _trend_claim(summaries, key: str, text: str, along: str, group: list[str], *, decreasing: bool) -> Claim:
+    """A monotone trend of success along ``along`` within each ``group`` cell, violated only where clear."""
     grid = _grid(summaries)
     if grid.empty:
-        return Claim("falls_with_decel", text, None, "no grid experiment ran")
-    bad, n = _trend(grid, "decel", ["planner", "n_leaders", "p_v"], decreasing=True)
-    return Claim(
-        "falls_with_decel",
-        text,
-        not bad,
-        f"{len(bad)} clear increases in {n} steps" + (": " + "; ".join(bad[:6]) if bad else ""),
-    )
+        return Claim(key, text, None, "no grid experiment ran")
+    if grid[along].nunique() < 2:  # no step to compare: the claim is not checkable, not vacuously true
+        return Claim(key, text, None, f"needs at least two values of {along}")
+    bad, n = _trend(grid, along, group, decreasing=decreasing)
+    evidence = f"{len(bad)} clear {'increases' if decreasing else 'decreases'} in {n} steps"
+    return Claim(key, text, not bad, evidence + (": " + "; ".join(bad[:6]) if bad else ""))
+
+
+def _falls_with_decel(summaries) -> Claim:
+    text = "Success falls as the sudden braking a_x_N+1_d grows."
+    return _trend_claim(summaries, "falls_with_decel", text, "decel", ["planner", "n_leaders", "p_v"], decreasing=True)
 
 
 def _rises_with_n(summaries) -> Claim:
     text = "Success rises with the number of connected leaders N."
-    grid = _grid(summaries)
-    if grid.empty or grid["n_leaders"].nunique() < 2:
-        return Claim("rises_with_n", text, None, "needs at least two values of N")
-    bad, n = _trend(grid, "n_leaders", ["planner", "decel", "p_v"], decreasing=False)
-    return Claim(
-        "rises_with_n",
-        text,
-        not bad,
-        f"{len(bad)} clear decreases in {n} steps" + (": " + "; ".join(bad[:6]) if bad else ""),
-    )
+    return _trend_claim(summaries, "rises_with_n", text, "n_leaders", ["planner", "decel", "p_v"], decreasing=False)
 
 
 def _robustness(fig6: pd.DataFrame | None) -> list[Claim]:
