@@ -69,6 +69,30 @@ def test_seed_changes_the_numbers_and_repeats_them():
     assert not np.allclose(a.table["completion_time_s"].fillna(-1), c.table["completion_time_s"].fillna(-1))
 
 
+def test_a_cell_is_simulated_once_and_shared_through_the_cache(monkeypatch):
+    """Listed twice, or cached by an earlier call, a cell is not simulated again, and its rows are exactly those
+    of a fresh run (a cell's rows never depend on the batch)."""
+    from safelane.experiments import grid
+
+    simulated = []
+    real = grid.simulate_batch
+    monkeypatch.setattr(grid, "simulate_batch", lambda batch, **kw: simulated.append(len(batch)) or real(batch, **kw))
+    kw = dict(config=SimConfig(horizon_s=3.0))
+    a, b = grid.Cell("CV_all", 3, 4.0), grid.Cell("CV_none", 1, 6.0)
+    cache = {}
+    both = grid.run_cells([a, b, a], 5, seed=2, cache=cache, **kw)
+    assert simulated == [10] and list(both["cell"]) == [0] * 5 + [1] * 5 + [2] * 5
+    again = grid.run_cells([b], 5, seed=2, cache=cache, **kw)
+    assert simulated == [10]
+    fresh = grid.run_cells([b], 5, seed=2, **kw)
+    assert simulated == [10, 5]
+    pd.testing.assert_frame_equal(again, fresh)
+    first = both[both["cell"] == 0].drop(columns="cell").reset_index(drop=True)
+    third = both[both["cell"] == 2].drop(columns="cell").reset_index(drop=True)
+    pd.testing.assert_frame_equal(first, third)
+    pd.testing.assert_frame_equal(first, grid.run_cells([a], 5, seed=2, **kw).drop(columns="cell"))
+
+
 def test_penetration_cells_are_not_split_by_realised_n():
     cfg = EXPERIMENTS["penetration"].config_type(samples=6, penetration=(0.5,), planners=("CV_all",))
     res = run_experiment("penetration", cfg, preset=PRESET)
@@ -124,6 +148,13 @@ def test_zero_collisions_counts_only_perfect_coordination():
     assert by_key(check_claims({"fig6_violation": clean}))["zero_collisions"].holds is True
     claim = by_key(check_claims({"fig4_n5": dirty}))["zero_collisions"]
     assert claim.holds is False and claim.evidence.startswith("1 collisions")
+
+
+def test_zero_collisions_counts_a_cell_listed_twice_once():
+    cell = summary([("CV_all", 10, 4.0, 0.0, 90, 100)])
+    other = summary([("CV_all", 10, 2.0, 0.0, 100, 100)])
+    claim = by_key(check_claims({"table1": cell, "leaders": pd.concat([cell, other])}))["zero_collisions"]
+    assert "in 200 scenarios (2 cells" in claim.evidence
 
 
 def test_robustness_claims():

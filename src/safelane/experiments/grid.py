@@ -45,29 +45,33 @@ def run_cells(
     progress: bool = False,
     workers: int = 1,
     max_batch: int = 16384,
+    cache: dict[tuple[Cell, int], pd.DataFrame] | None = None,
 ) -> pd.DataFrame:
     """Simulate ``samples`` scenarios of every cell; returns the per-scenario table (with a ``cell`` column).
 
     Cells run together in batches of at most ``max_batch`` scenarios (memory stays bounded). Scenario ids
     restart at 0 in every cell, so per-step random draws are shared across cells as well (common random
-    numbers); a cell's rows never depend on the other cells of the run.
+    numbers); a cell's rows never depend on the other cells of the run. So a cell is simulated once however
+    often it is listed, and ``cache`` (keyed by ``(cell, samples)``) carries its rows across calls that share
+    ``seed``, ``params``, ``config``, ``scenario`` and ``nominal`` — the caller's promise.
     """
     if not cells:
         raise ValueError("cells must not be empty")
     if samples < 1:
         raise ValueError(f"samples must be >= 1; got {samples}")
+    cache = {} if cache is None else cache
+    todo = [c for c in dict.fromkeys(cells) if (c, samples) not in cache]
     per_batch = max(1, max_batch // samples)
-    tables = []
-    for start in range(0, len(cells), per_batch):
-        group = cells[start : start + per_batch]
+    for start in range(0, len(todo), per_batch):
+        group = todo[start : start + per_batch]
         batch = concat([cell_batch(c, samples, seed, scenario) for c in group])
         result = simulate_batch(
             batch, seed=seed, params=params, config=config, nominal=nominal, progress=progress, workers=workers
         )
-        table = result.table
-        table["cell"] = np.repeat(np.arange(start, start + len(group)), samples)
-        tables.append(table)
-    table = pd.concat(tables, ignore_index=True)
+        for k, cell in enumerate(group):
+            cache[cell, samples] = result.table.iloc[k * samples : (k + 1) * samples]
+    table = pd.concat([cache[c, samples] for c in cells], ignore_index=True)
+    table["cell"] = np.repeat(np.arange(len(cells)), samples)
     if any(c.penetration is not None for c in cells):
         table["penetration"] = np.repeat([np.nan if c.penetration is None else c.penetration for c in cells], samples)
     return table

@@ -132,23 +132,22 @@ def _new_run_dir(base: Path, rid: str) -> Path:
 
 
 def _run_all(names, configs, preset, seed, quick, workers, progress) -> dict[str, ExperimentResult]:
-    """Run the experiments in order, with a Rich progress bar and the time of each printed."""
-    if not progress:
-        return {
-            n: run_experiment(n, configs.get(n), preset=preset, seed=seed, quick=quick, workers=workers) for n in names
-        }
+    """Run the experiments in order (sharing simulated cells), with a Rich progress bar and the time of each."""
     from rich.progress import BarColumn, MofNCompleteColumn, Progress, SpinnerColumn, TextColumn, TimeElapsedColumn
 
-    results = {}
+    results, cache = {}, {}
     columns = (SpinnerColumn(), TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn())
-    with Progress(*columns, TimeElapsedColumn(), console=_console()) as bar:
+    with Progress(*columns, TimeElapsedColumn(), console=_console(), disable=not progress) as bar:
         task = bar.add_task("experiments", total=len(names))
         for name in names:
             bar.update(task, description=f"running {name}")
-            res = run_experiment(name, configs.get(name), preset=preset, seed=seed, quick=quick, workers=workers)
+            res = run_experiment(
+                name, configs.get(name), preset=preset, seed=seed, quick=quick, workers=workers, cache=cache
+            )
             results[name] = res
-            size = f"{len(res.summary)} cells, {len(res.table)} scenarios" if res.summary is not None else "trace"
-            bar.console.print(f"{name:<16} {res.elapsed_s:7.2f} s  ({size})")
+            if progress:
+                size = f"{len(res.summary)} cells, {len(res.table)} scenarios" if res.summary is not None else "trace"
+                bar.console.print(f"{name:<16} {res.elapsed_s:7.2f} s  ({size})")
             bar.advance(task)
         bar.update(task, description="done")
     return results

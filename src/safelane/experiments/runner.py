@@ -41,8 +41,12 @@ def run_experiment(
     quick: bool = False,
     workers: int = 1,
     nominal: NominalPlanner | None = None,
+    cache: dict | None = None,
 ) -> ExperimentResult:
-    """Run the registered experiment ``name`` (its default or ``quick`` config unless ``config`` is given)."""
+    """Run the registered experiment ``name`` (its default or ``quick`` config unless ``config`` is given).
+
+    ``cache``: cells already simulated under the same preset, seed and nominal planner (see :func:`run_cells`);
+    ``reproduce`` shares one across its experiments, so a cell two experiments list runs once."""
     exp = get_experiment(name)
     cfg = config or exp.default_config(quick)
     preset = preset or load_preset("paper")
@@ -53,7 +57,7 @@ def run_experiment(
         return ExperimentResult(name, cfg, None, None, trace, time.perf_counter() - start)
     cells = exp.cells(cfg)
     table = run_cells(
-        cells, cfg.samples, seed, params=preset.params, config=preset.sim, nominal=nominal, workers=workers
+        cells, cfg.samples, seed, params=preset.params, config=preset.sim, nominal=nominal, workers=workers, cache=cache
     )
     keys = SUMMARY_KEYS
     if any(c.penetration is not None for c in cells):
