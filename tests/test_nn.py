@@ -123,6 +123,31 @@ def test_numpy_matches_onnxruntime(tmp_path):
     assert onnx_planner.metadata["feature_names"] == list(FEATURE_NAMES)
 
 
+@pytest.mark.parametrize(
+    ("edit", "match"),
+    [
+        (lambda m: m.update(features_version=0), "features v0"),
+        (lambda m: m.update(format_version=99), "format version 99"),
+        (lambda m: m.update(format="other"), "format is 'other'"),
+    ],
+)
+def test_onnx_load_refuses_what_the_npz_load_refuses(tmp_path, edit, match):
+    """The ONNX loader checks format, version and feature map as :meth:`MLPPlanner.load` does (same names under
+    another feature meaning would otherwise load silently)."""
+    onnx = pytest.importorskip("onnx")
+    pytest.importorskip("onnxruntime")
+    from safelane.planners.onnx_io import METADATA_KEY
+
+    model = onnx.load(str(random_planner().to_onnx(tmp_path / "m.onnx")))
+    (prop,) = [p for p in model.metadata_props if p.key == METADATA_KEY]
+    meta = json.loads(prop.value)
+    edit(meta)
+    prop.value = json.dumps(meta)
+    onnx.save(model, str(tmp_path / "edited.onnx"))
+    with pytest.raises(ValueError, match=match):
+        MLPPlanner.from_onnx(tmp_path / "edited.onnx")
+
+
 # ---------------------------------------------------------------- persistence
 def test_save_load_round_trip(tmp_path):
     planner = random_planner(activation="relu")

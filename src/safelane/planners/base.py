@@ -59,6 +59,14 @@ class NominalPlanner(Protocol):
     def __call__(self, obs: Observation, params: Params) -> tuple[np.ndarray, np.ndarray]: ...
 
 
+def clip_actions(a_x, a_y, params: Params) -> tuple[np.ndarray, np.ndarray]:
+    """``(a_x, a_y)`` clipped to the mechanical limits ``[−a_x_d, a_x_a]`` and ``[−a_y_m, a_y_m]``."""
+    return (
+        np.clip(np.asarray(a_x, float), -params.a_x_d, params.a_x_a),
+        np.clip(np.asarray(a_y, float), -params.a_y_m, params.a_y_m),
+    )
+
+
 @dataclass(frozen=True)
 class ExpertPlanner:
     """Rule-based teacher/baseline planner.
@@ -78,7 +86,4 @@ class ExpertPlanner:
         mid = obs.p_x_f + self.gap_fraction * (obs.p_x_l - obs.p_x_f)
         a_x = self.k_p * (mid - obs.p_x) + self.k_v * (obs.v_x_l - obs.v_x)
         a_y = self.omega**2 * (params.lane_width - obs.p_y) - 2.0 * self.omega * obs.v_y
-        return (
-            np.clip(a_x, -params.a_x_d, params.a_x_a),
-            np.clip(a_y, -params.a_y_m, params.a_y_m),
-        )
+        return clip_actions(a_x, a_y, params)

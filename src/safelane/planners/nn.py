@@ -26,7 +26,7 @@ import numpy as np
 
 from .. import __version__
 from ..params import Params
-from .base import Observation
+from .base import Observation, clip_actions
 from .features import FEATURE_NAMES, FEATURES_VERSION, features
 
 FORMAT = "safelane-mlp-planner"
@@ -105,10 +105,7 @@ class MLPPlanner:
     def __call__(self, obs: Observation, params: Params) -> tuple[np.ndarray, np.ndarray]:
         """``(a_x, a_y)`` [m/s²], each ``(B,)``, clipped to the mechanical limits of ``params``."""
         out = self.predict(features(obs, params))
-        return (
-            np.clip(out[:, 0], -params.a_x_d, params.a_x_a),
-            np.clip(out[:, 1], -params.a_y_m, params.a_y_m),
-        )
+        return clip_actions(out[:, 0], out[:, 1], params)
 
     # ------------------------------------------------------------------ persistence
     def _core_metadata(self) -> dict:
@@ -198,8 +195,9 @@ class MLPPlanner:
         return OnnxPlanner(path)
 
 
-def _check_metadata(meta: dict, arrays: dict[str, np.ndarray]) -> None:
-    """Raise ``ValueError`` unless ``meta``/``arrays`` describe a model this safelane can run."""
+def _check_compat(meta: dict) -> None:
+    """Raise ``ValueError`` unless ``meta`` is a safelane model of a format, version and feature map this safelane
+    reads (the part of :func:`_check_metadata` that every exported form shares, ONNX included)."""
     if meta.get("format") != FORMAT:
         raise ValueError(f"format is {meta.get('format')!r}, expected {FORMAT!r}")
     if meta.get("format_version") != FORMAT_VERSION:
@@ -212,6 +210,11 @@ def _check_metadata(meta: dict, arrays: dict[str, np.ndarray]) -> None:
             f"trained on features v{meta.get('features_version')} {meta.get('feature_names')}, but this safelane "
             f"computes v{FEATURES_VERSION} {list(FEATURE_NAMES)}; retrain the model"
         )
+
+
+def _check_metadata(meta: dict, arrays: dict[str, np.ndarray]) -> None:
+    """Raise ``ValueError`` unless ``meta``/``arrays`` describe a model this safelane can run."""
+    _check_compat(meta)
     if meta.get("activation") not in ACTIVATIONS:
         raise ValueError(f"unknown activation {meta.get('activation')!r}; known: {sorted(ACTIVATIONS)}")
     n_feat = len(FEATURE_NAMES)

@@ -17,7 +17,7 @@ from pathlib import Path
 import numpy as np
 
 from ..params import Params
-from .base import Observation
+from .base import Observation, clip_actions
 from .features import FEATURE_NAMES, features
 
 OPSET = 17
@@ -104,11 +104,12 @@ class OnnxPlanner:
         if METADATA_KEY not in props:
             raise ValueError(f"{path}: no {METADATA_KEY!r} metadata; not exported by safelane")
         self.metadata = json.loads(props[METADATA_KEY])
-        if list(self.metadata.get("feature_names", [])) != list(FEATURE_NAMES):
-            raise ValueError(
-                f"{path}: trained on features {self.metadata.get('feature_names')}, but this safelane computes "
-                f"{list(FEATURE_NAMES)}; re-export the model"
-            )
+        from .nn import _check_compat
+
+        try:
+            _check_compat(self.metadata)
+        except ValueError as err:
+            raise ValueError(f"{path}: {err}") from None
 
     def predict(self, x: np.ndarray) -> np.ndarray:
         """Bounded actions ``(B, 2)`` [m/s²] for raw features ``x`` ``(B, F)`` (computed in float32)."""
@@ -118,7 +119,4 @@ class OnnxPlanner:
     def __call__(self, obs: Observation, params: Params) -> tuple[np.ndarray, np.ndarray]:
         """``(a_x, a_y)`` [m/s²], each ``(B,)``, clipped to the mechanical limits of ``params``."""
         out = self.predict(features(obs, params))
-        return (
-            np.clip(out[:, 0], -params.a_x_d, params.a_x_a),
-            np.clip(out[:, 1], -params.a_y_m, params.a_y_m),
-        )
+        return clip_actions(out[:, 0], out[:, 1], params)

@@ -13,7 +13,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..params import Params
-from ..planners.base import NominalPlanner, Observation
+from ..planners.base import NominalPlanner, Observation, clip_actions
 from ..planners.variants import VARIANT_NAMES, VARIANTS
 from ..safety._backend import ARRAY
 from ..safety.chain import propagate_chain
@@ -169,9 +169,7 @@ class ClosedLoop:
             observed_f_v = observed_f_v + cfg.sensor_noise_std * counter_normal(self.seed, b.scenario_id, s.step, 0)
         belief = assess.update(s.belief, observed_f_v, s.t, dt, cfg.assess_threshold)
         l1_decel, f_aggr = self.worst_case(s, belief)
-        a_x, a_y = self.nominal(obs, prm)
-        a_x = np.clip(np.asarray(a_x, float), -prm.a_x_d, prm.a_x_a)
-        a_y = np.clip(np.asarray(a_y, float), -prm.a_y_m, prm.a_y_m)
+        a_x, a_y = clip_actions(*self.nominal(obs, prm), prm)  # a planner's own clipping is not trusted
         l1x, l1v, fx, fv = s.x[:, 1], s.v[:, 1], s.x[:, 0], s.v[:, 0]
 
         active = ~s.completed
