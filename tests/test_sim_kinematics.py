@@ -17,12 +17,12 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from safelane import Params
+from safelane._motion import advance
 from safelane.safety import plan_evasion
 from safelane.sim.checks import ego_checks, lane_checks, stop_pair_extrema
 from safelane.sim.kinematics import (
     Fleet,
     Motion,
-    advance,
     crossing_knots,
     extrema,
     gap_extrema,

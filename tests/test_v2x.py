@@ -301,6 +301,14 @@ def test_extrapolate_matches_time_stepped_integration(v, a, age):
     assert v_now == pytest.approx(v_sim, abs=1e-6)
 
 
+def test_extrapolate_stops_exactly_at_rest():
+    """Stopping inside the interval ends at speed exactly 0 and at the braking distance (no rounding residue)."""
+    v, a = np.array([0.1095400068059238, 27.537869222837603]), np.array([-0.42831204867370987, -4.197615787694026])
+    p_now, v_now = extrapolate(0.0, v, a, 20.0)  # v + a·(v/−a) rounds to 1e-17 and 4e-15 for these
+    assert np.all(v_now == 0.0)
+    np.testing.assert_allclose(p_now, v * v / (-2 * a), rtol=1e-14)
+
+
 def test_extrapolate_broadcasts():
     p, v = extrapolate(np.zeros((2, 3)), 10.0, np.array([-1.0, 0.0, 1.0]), 0.1)
     assert p.shape == v.shape == (2, 3)

@@ -21,6 +21,7 @@ from typing import Literal
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field, ValidationInfo, field_validator, model_validator
 
+from ._motion import advance
 from .params import Params
 
 MAX_AGE_S = 0.3
@@ -155,11 +156,7 @@ def extrapolate(p, v, a, dt_s):
 
     Broadcasting arrays or scalars; returns ``(p, v)`` as float64.
     """
-    p, v, a, dt_s = np.broadcast_arrays(*(np.asarray(x, dtype=np.float64) for x in (p, v, a, dt_s)))
-    with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
-        t_stop = np.where(a < 0.0, v / -a, np.inf)
-    t = np.minimum(dt_s, t_stop)
-    return p + v * t + 0.5 * a * t * t, np.maximum(v + a * t, 0.0)
+    return advance(*np.broadcast_arrays(*(np.asarray(x, dtype=np.float64) for x in (p, v, a, dt_s))))
 
 
 @dataclass(frozen=True)

@@ -21,10 +21,10 @@ from __future__ import annotations
 
 import numpy as np
 
+from .._motion import advance, stop_time
 from ..params import Params
 from ..safety._backend import ARRAY
 from ..safety.chain import min_follow_decel
-from .kinematics import advance, stop_time
 
 
 def pair_min_gap(slack, v_f, a_f, v_l, a_l, dt):

@@ -24,6 +24,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .._motion import advance
 from ..params import Params
 from ..safety._backend import ARRAY
 from ..safety.chain import min_follow_decel
@@ -32,7 +33,7 @@ from ..safety.lateral import LATERAL_TOL_M, lateral_core
 from ..safety.longitudinal import FEASIBILITY_TOL_M
 from ..safety.plan import EvasionPlan, plan_from_core
 from .behaviours import pair_min_gap
-from .kinematics import Motion, advance, free_max
+from .kinematics import Motion, free_max
 
 PROCEED, HESITATE, ABORT, COMPLETED = 0, 1, 2, 3
 BEHAVIOURS = ("proceed", "hesitate", "abort", "completed")
