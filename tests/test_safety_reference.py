@@ -81,6 +81,24 @@ def skip_campaign_unless_selected(request, n_examples):
         pytest.skip("long campaign: run with -m slow")
 
 
+def run_campaign(request, n_examples: int, body, **strategies) -> Counter:
+    """Run ``body(rng, params, stats, **drawn)`` on ``n_examples`` Hypothesis-drawn seeds and parameter kinds (and
+    the extra ``strategies``), ``BATCH`` cases each; return the tallies, after checking at least ``MIN_CASES``
+    cases ran. The campaign size runs only with ``-m slow``."""
+    skip_campaign_unless_selected(request, n_examples)
+    stats = Counter()
+
+    @settings(SETTINGS, max_examples=n_examples)
+    @given(seed=SEEDS, kind=PARAM_KINDS, drawn=st.fixed_dictionaries(strategies))
+    def check(seed, kind, drawn):
+        rng = np.random.default_rng(seed)
+        body(rng, params_for(kind, rng), stats, **drawn)
+
+    check()
+    assert stats["cases"] >= MIN_CASES, stats
+    return stats
+
+
 # --------------------------------------------------------------------------------------------------------------
 # Scenario builders
 # --------------------------------------------------------------------------------------------------------------
@@ -229,14 +247,7 @@ def assert_same(what, engine, ref, where, inputs=None):
 
 @SIZES
 def test_leader_position_matches_time_stepping(n_examples, request):
-    skip_campaign_unless_selected(request, n_examples)
-    stats = Counter()
-
-    @settings(SETTINGS, max_examples=n_examples)
-    @given(seed=SEEDS, kind=PARAM_KINDS)
-    def check(seed, kind):
-        rng = np.random.default_rng(seed)
-        params = params_for(kind, rng)
+    def check(rng, params, stats):
         p = rng.uniform(-500.0, 500.0, BATCH)
         v = speeds(rng, BATCH)
         decel = decels(rng, BATCH, params.a_x_d)
@@ -248,21 +259,13 @@ def test_leader_position_matches_time_stepping(n_examples, request):
         stats["moving"] += int(np.sum(stops))
         stats["stopped"] += int(np.sum(~stops & (v > 0)))
 
-    check()
-    assert stats["cases"] >= MIN_CASES, stats
+    stats = run_campaign(request, n_examples, check)
     assert stats["moving"] > 100 and stats["stopped"] > 100, stats
 
 
 @SIZES
 def test_follower_position_matches_time_stepping(n_examples, request):
-    skip_campaign_unless_selected(request, n_examples)
-    stats = Counter()
-
-    @settings(SETTINGS, max_examples=n_examples)
-    @given(seed=SEEDS, kind=PARAM_KINDS)
-    def check(seed, kind):
-        rng = np.random.default_rng(seed)
-        params = params_for(kind, rng)
+    def check(rng, params, stats):
         p = rng.uniform(-500.0, 500.0, BATCH)
         v = speeds(rng, BATCH)
         aggressive = rng.random(BATCH) < 0.5
@@ -275,8 +278,7 @@ def test_follower_position_matches_time_stepping(n_examples, request):
         stats["braked to rest"] += int(np.sum(~aggressive & (v < params.a_x_d * t)))
         stats["still braking"] += int(np.sum(~aggressive & (v > params.a_x_d * t)))
 
-    check()
-    assert stats["cases"] >= MIN_CASES, stats
+    stats = run_campaign(request, n_examples, check)
     assert min(stats["aggressive"], stats["braked to rest"], stats["still braking"]) > 100, stats
 
 
@@ -287,14 +289,7 @@ def test_follower_position_matches_time_stepping(n_examples, request):
 
 @SIZES
 def test_lateral_evasion_time_matches_reference(n_examples, request):
-    skip_campaign_unless_selected(request, n_examples)
-    stats = Counter()
-
-    @settings(SETTINGS, max_examples=n_examples)
-    @given(seed=SEEDS, kind=PARAM_KINDS)
-    def check(seed, kind):
-        rng = np.random.default_rng(seed)
-        params = params_for(kind, rng)
+    def check(rng, params, stats):
         p_y, v_y = lateral_states(rng, params, BATCH)
         t_y_f, t_switch = lateral_evasion_time(p_y, v_y, params)
         ref = ref_lateral_time(p_y, v_y, params)
@@ -307,8 +302,7 @@ def test_lateral_evasion_time_matches_reference(n_examples, request):
         for case, name in enumerate(("nothing to evade", "bang-bang", "returning fast")):
             stats[name] += int(np.sum(ref.case == case))
 
-    check()
-    assert stats["cases"] >= MIN_CASES, stats
+    stats = run_campaign(request, n_examples, check)
     assert min(stats["nothing to evade"], stats["bang-bang"], stats["returning fast"]) > 500, stats
 
 
@@ -319,14 +313,7 @@ def test_lateral_evasion_time_matches_reference(n_examples, request):
 
 @SIZES
 def test_leader_chain_matches_reference(n_examples, request):
-    skip_campaign_unless_selected(request, n_examples)
-    stats = Counter()
-
-    @settings(SETTINGS, max_examples=n_examples)
-    @given(seed=SEEDS, kind=PARAM_KINDS, n_links=st.sampled_from([0, 1, 1, 2, 2, 3, 3]))
-    def check(seed, kind, n_links):
-        rng = np.random.default_rng(seed)
-        params = params_for(kind, rng)
+    def check(rng, params, stats, n_links):
         p, v, promise, human = chain_states(rng, params, BATCH, n_links)
         got = leader_chain(p, v, promise, params, human_driven=human)
         ref = ref_leader_chain(p, v, promise, params, human)
@@ -359,8 +346,7 @@ def test_leader_chain_matches_reference(n_examples, request):
         stats["violation (z binds)"] += int(np.sum(safe_link & (promise < ref.required)))
         stats["human-driven link"] += int(np.sum(human))
 
-    check()
-    assert stats["cases"] >= MIN_CASES, stats
+    stats = run_campaign(request, n_examples, check, n_links=st.sampled_from([0, 1, 1, 2, 2, 3, 3]))
     assert stats["verdicts compared"] >= 0.95 * stats["cases"], stats
     for key in ("N=0", "N=1", "N=2", "N=3"):
         assert stats[key] > 0, stats
@@ -384,14 +370,7 @@ def test_leader_chain_matches_reference(n_examples, request):
 
 @SIZES
 def test_longitudinal_evasion_matches_reference(n_examples, request):
-    skip_campaign_unless_selected(request, n_examples)
-    stats = Counter()
-
-    @settings(SETTINGS, max_examples=n_examples)
-    @given(seed=SEEDS, kind=PARAM_KINDS)
-    def check(seed, kind):
-        rng = np.random.default_rng(seed)
-        params = params_for(kind, rng)
+    def check(rng, params, stats):
         args = longitudinal_states(rng, params, BATCH)
         got = longitudinal_evasion(*args, params)
         ref = ref_longitudinal(*args, params)
@@ -408,8 +387,7 @@ def test_longitudinal_evasion_matches_reference(n_examples, request):
         for code in range(-1, 5):
             stats[f"case {code}"] += int(np.sum(got.case == code))
 
-    check()
-    assert stats["cases"] >= MIN_CASES, stats
+    stats = run_campaign(request, n_examples, check)
     assert stats["verdicts compared"] >= 0.95 * stats["cases"], stats
     for code in range(-1, 5):
         assert stats[f"case {code}"] > 200, stats
@@ -422,14 +400,7 @@ def test_longitudinal_evasion_matches_reference(n_examples, request):
 
 @SIZES
 def test_evasion_matches_reference(n_examples, request):
-    skip_campaign_unless_selected(request, n_examples)
-    stats = Counter()
-
-    @settings(SETTINGS, max_examples=n_examples)
-    @given(seed=SEEDS, kind=PARAM_KINDS)
-    def check(seed, kind):
-        rng = np.random.default_rng(seed)
-        params = params_for(kind, rng)
+    def check(rng, params, stats):
         kw = evasion_states(rng, params, BATCH)
         chain_unsafe = rng.random(BATCH) < 0.1
         plan = plan_evasion(**kw, params=params, chain_unsafe=chain_unsafe)
@@ -476,8 +447,7 @@ def test_evasion_matches_reference(n_examples, request):
         for code in range(0, 5):
             stats[f"longitudinal case {code}"] += int(np.sum(evading & (lon.case == code)))
 
-    check()
-    assert stats["cases"] >= MIN_CASES, stats
+    stats = run_campaign(request, n_examples, check)
     assert stats["verdicts compared"] >= 0.95 * stats["cases"], stats
     for key, count in stats.items():
         # The longitudinal cases are covered in depth above; here each must merely occur within an evasion.
