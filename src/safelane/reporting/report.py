@@ -17,6 +17,7 @@ import pandas as pd
 
 from ..experiments.paper_data import PLANNERS, PUBLISHED_N
 from ..experiments.registry import EXPERIMENTS
+from ..sim.supervisor import ABORT
 from .document import Document
 
 if TYPE_CHECKING:
@@ -199,7 +200,7 @@ def _trace_table(doc: Document, trace: pd.DataFrame) -> None:
     rows = []
     for planner in [p for p in PLANNERS if p in set(trace["planner"])]:
         t = trace[trace["planner"] == planner].sort_values("t")
-        done, aborts, before = t[t["completed"]], t[t["behaviour"] == 2], t[~t["completed"]]
+        done, aborts, before = t[t["completed"]], t[t["behaviour"] == ABORT], t[~t["completed"]]
         peak = before.loc[before["ego_y"].idxmax()] if len(before) else None
         rows.append(
             [

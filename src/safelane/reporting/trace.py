@@ -11,10 +11,12 @@ from pathlib import Path
 
 import pandas as pd
 
+from ..sim.supervisor import ABORT, HESITATE
+
 #: Columns a trace must have (``SimResult.trace``).
 TRACE_COLUMNS = ("scenario_id", "planner", "t", "ego_y", "ego_vx", "behaviour")
 
-_BEHAVIOUR_MARKS = {1: ("hesitate", "o", "#ff7f0e"), 2: ("abort", "x", "#d62728")}
+_BEHAVIOUR_MARKS = {HESITATE: ("hesitate", "o", "#ff7f0e"), ABORT: ("abort", "x", "#d62728")}
 
 
 def plot_trace(

@@ -141,11 +141,6 @@ def stop_pair_extrema(x1, v1, a1, t1, x2, v2, a2, t2, dt: float):
     return lo, hi
 
 
-def _one_segment(m: Motion, dt: float) -> np.ndarray:
-    """True where the motion has no knot strictly inside the period (one constant acceleration throughout)."""
-    return (m.t[..., 1:-1] >= dt).all(-1)
-
-
 def _quadratic_extrema(d0, dv0, rel_acc, dt: float):
     """``(min, max)`` over ``[0, dt]`` of ``d0 + dv0 t + rel_acc t²/2``."""
     end = d0 + dv0 * dt + 0.5 * rel_acc * dt * dt

@@ -27,7 +27,7 @@ from .config import SimConfig
 from .kinematics import Fleet, Motion
 from .rng import counter_normal, counter_uniform
 from .scenario import ScenarioBatch
-from .supervisor import ABORT, HESITATE, PROCEED, check_candidate, hesitate_lateral, plan_motion
+from .supervisor import ABORT, COMPLETED, HESITATE, PROCEED, check_candidate, hesitate_lateral, plan_motion
 
 
 @dataclass(frozen=True)
@@ -173,7 +173,7 @@ class ClosedLoop:
         l1x, l1v, fx, fv = s.x[:, 1], s.v[:, 1], s.x[:, 0], s.v[:, 0]
 
         active = ~s.completed
-        behaviour = np.where(active, PROCEED, -1)
+        behaviour = np.where(active, PROCEED, COMPLETED)
         completing = np.zeros(len(b), bool)
         accepted = []  # (rows, their verified plans) of this period
         a_yh = hesitate_lateral(evy, prm)

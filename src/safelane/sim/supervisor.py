@@ -35,8 +35,8 @@ from ..safety.plan import EvasionPlan, plan_from_core
 from .behaviours import pair_min_gap
 from .kinematics import Motion, free_max
 
-PROCEED, HESITATE, ABORT, COMPLETED = 0, 1, 2, 3
-BEHAVIOURS = ("proceed", "hesitate", "abort", "completed")
+#: The supervisor's choice per step (the trace's ``behaviour``); ``COMPLETED``: the lane change is done.
+PROCEED, HESITATE, ABORT, COMPLETED = 0, 1, 2, -1
 
 
 @dataclass(frozen=True)
