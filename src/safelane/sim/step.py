@@ -17,9 +17,9 @@ from ..planners.base import NominalPlanner, Observation, clip_actions
 from ..planners.variants import VARIANT_NAMES, VARIANTS
 from ..safety._backend import ARRAY
 from ..safety.chain import propagate_chain
-from ..safety.evasion import evasion_core
+from ..safety.evasion import plan_evasion
 from ..safety.lateral import LATERAL_TOL_M
-from ..safety.plan import EvasionPlan, plan_from_core
+from ..safety.plan import EvasionPlan
 from . import assessment as assess
 from .behaviours import follower_accel, leader_accels, leader_roles, responsible_accel
 from .checks import ego_checks, lane_checks, lane_pairs
@@ -85,23 +85,8 @@ class ClosedLoop:
         b, prm = self.b, self.prm
         n = len(b)
         # The plan held at t = 0: from the initial state under the most conservative assumptions.
-        args = (
-            b.ego_x,
-            b.ego_y,
-            b.ego_vx,
-            b.ego_vy,
-            b.x[:, 1],
-            b.v[:, 1],
-            np.full(n, prm.a_x_d),
-            b.x[:, 0],
-            b.v[:, 0],
-            np.ones(n, bool),
-            prm.p_m,
-            prm.p_m,
-        )
-        with np.errstate(all="ignore"):
-            exists, parts = evasion_core(ARRAY, *args, prm)
-        plan = plan_from_core(ARRAY, (n,), args, exists, parts, prm.p_m, prm.p_m, prm)
+        ego = (b.ego_x, b.ego_y, b.ego_vx, b.ego_vy)
+        plan = plan_evasion(*ego, b.x[:, 1], b.v[:, 1], prm.a_x_d, b.x[:, 0], b.v[:, 0], True, prm)
         return SimState(
             t=0.0,
             step=0,
