@@ -28,7 +28,7 @@ draw is seeded, so the procedure is repeatable. The N = 3 rows are never used.
 from __future__ import annotations
 
 from collections.abc import Callable
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, fields
 from pathlib import Path
 
 import numpy as np
@@ -56,7 +56,7 @@ SEARCH_SPACE: dict[str, tuple[float, float]] = {
     "assess_threshold": (0.1, 0.5),
 }
 _SIM_KEYS = ("horizon_s", "assess_window", "assess_threshold")
-_PLANNER_KEYS = ("k_p", "k_v", "omega", "gap_fraction")
+_PLANNER_KEYS = tuple(f.name for f in fields(ExpertPlanner))
 _INT_KEYS = ("assess_window",)
 
 PRESET_DIR = Path(__file__).resolve().parent.parent / "presets"

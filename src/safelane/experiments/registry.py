@@ -85,7 +85,8 @@ def _fig4(c: Fig4Config) -> list[Cell]:
     return [Cell(p, c.n_leaders, d) for d in c.decels for p in c.planners]
 
 
-def _table1(c: Table1Config) -> list[Cell]:
+def _n_grid(c: Table1Config | LeadersConfig) -> list[Cell]:
+    """Every N × a_x_N+1_d × planner (Table 1, and ours along N)."""
     return [Cell(p, n, d) for n in c.n_leaders for d in c.decels for p in c.planners]
 
 
@@ -95,10 +96,6 @@ def _fig6(c: Fig6Config) -> list[Cell]:
 
 def _penetration(c: PenetrationConfig) -> list[Cell]:
     return [Cell(p, 10, d, penetration=q) for q in c.penetration for d in c.decels for p in c.planners]
-
-
-def _leaders(c: LeadersConfig) -> list[Cell]:
-    return [Cell(p, n, d) for n in c.n_leaders for d in c.decels for p in c.planners]
 
 
 _QUICK = {"samples": 40}
@@ -112,7 +109,7 @@ EXPERIMENTS: dict[str, Experiment] = {
             "table1",
             "Success rates for N in {1, 3, 10} x a_x_N+1_d x planners (paper Table 1).",
             Table1Config,
-            _table1,
+            _n_grid,
             _QUICK,
         ),
         Experiment(
@@ -142,7 +139,7 @@ EXPERIMENTS: dict[str, Experiment] = {
             "leaders",
             "Success vs number of connected leaders N = 0..10 (beyond the paper).",
             LeadersConfig,
-            _leaders,
+            _n_grid,
             {"samples": 40, "n_leaders": (0, 1, 5, 10)},
             True,
         ),

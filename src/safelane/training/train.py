@@ -29,9 +29,10 @@ from pydantic import BaseModel, ConfigDict, Field
 from .. import __version__
 from ..config import load_model
 from ..params import Params
+from ..planners.base import ExpertPlanner
 from ..planners.nn import HEADS, MLPPlanner, head_bounds
 from ..planners.teacher import OptimalControlTeacher, TeacherConfig
-from .closed_loop import DaggerConfig, EvalConfig
+from .closed_loop import DaggerConfig, EvalConfig, collect_states, evaluate_closed_loop
 from .data import DataConfig, label, sample_observations
 
 _FROZEN = ConfigDict(frozen=True, extra="forbid", allow_inf_nan=False)
@@ -180,8 +181,6 @@ def train(cfg: TrainConfig, out_dir: Path | str, progress: bool = True) -> Train
         _fit(module, torch, as_tensors(parts), cfg, cfg.optim.max_epochs, rng, bar, 0, log)
         timings["fit_s"] = time.perf_counter() - t0
         for r in range(1, cfg.dagger.rounds + 1):
-            from .closed_loop import collect_states
-
             t0 = time.perf_counter()
             visited = collect_states(to_planner(module), cfg.dagger, prm, rng, seed=cfg.seed * 1000 + r * 100)
             timings["dagger_sim_s"] = timings.get("dagger_sim_s", 0.0) + time.perf_counter() - t0
@@ -219,9 +218,6 @@ def train(cfg: TrainConfig, out_dir: Path | str, progress: bool = True) -> Train
     (out_dir / "config.yaml").write_text(yaml.safe_dump(cfg.model_dump(mode="json"), sort_keys=False))
     ev = cfg.evaluation
     if ev.cells:
-        from ..planners.base import ExpertPlanner
-        from .closed_loop import evaluate_closed_loop
-
         baselines = {"expert": ExpertPlanner(), "teacher": teacher}
         candidates = {"mlp": planner, **{b: baselines[b] for b in ev.baselines}}
         t0 = time.perf_counter()
