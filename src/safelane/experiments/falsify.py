@@ -1,0 +1,333 @@
+"""Adversarial falsifier: search behaviours *inside* the paper's assumptions for a collision or a ``p_m`` violation.
+
+What is searched (the spec of :mod:`safelane.experiments.falsify_space`): initial states at the edges (tiny and
+zero slacks, speed ties, partly changed lanes, lateral speed, N = 0..10, human-driven leaders, every variant),
+L(N+1) piecewise-constant acceleration profiles, the connected leaders' own tasks anywhere inside their promises
+and F's wish anywhere inside its type's range (through the public :class:`~safelane.sim.traffic.TrafficHooks`),
+and adversarial nominal planners (:mod:`safelane.planners.adversarial`). The assessment is the truth (the
+guarantee assumes an accurate one) and ``p_v = 0``.
+
+How (each method a stream of batches; ``method="all"`` takes them in turn):
+
+* ``random`` — uniform points of the unit cube, decoded with edge mixtures;
+* ``cem`` — a cross-entropy optimiser in the unit cube minimising the smallest gap over its margin (independent
+  Gaussians, elite share 10 %, smoothed updates, restarts when it has converged);
+* ``knife`` — targeted knife-edge families (:func:`~safelane.experiments.falsify_space.knife_specs`).
+
+Everything is seeded: batch ``i`` of method ``m`` draws from ``default_rng([seed, m, i])``; with ``minutes=0`` the
+run is a function of ``(seed, scenarios, method, batch)`` alone. Batches run in one process (``workers=1``): the
+adversarial planners index per-scenario parameters by batch row.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import time
+import warnings
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+from ..params import Params
+from ..sim.config import SimConfig
+from ..sim.engine import simulate_batch
+from . import falsify_space as space
+
+METHODS = ("random", "cem", "knife")
+OUTCOMES = ("collision", "safety_violation", "leader_collision", "leader_violation")
+
+
+def hooks_live() -> bool:
+    """Whether :func:`simulate_batch` accepts ``traffic=`` yet (the extension point is being wired)."""
+    import inspect
+
+    return "traffic" in inspect.signature(simulate_batch).parameters
+
+
+class LaneGapRecorder:
+    """Running minimum of each scenario's target-lane gaps over their margins (F–L1, L_i–L(i+1)), sampled at the
+    start of every period through the leader-task hook. The exact in-period check is the simulator's
+    ``leader_violation``; this sample only ranks scenarios for the optimiser."""
+
+    def __init__(self, batch, prm: Params):
+        self.margin = np.where(batch.human, prm.p_m_human, prm.p_m)[:, :-1]
+        self.pairs = batch.valid[:, 1:] & batch.valid[:, :-1]
+        self.min_ratio = np.full(len(batch), np.inf)
+
+    def observe(self, view, params) -> None:
+        ids = view.scenario_id
+        ratio = np.where(self.pairs[ids], (view.x[:, 1:] - view.x[:, :-1]) / self.margin[ids], np.inf)
+        self.min_ratio[ids] = np.minimum(self.min_ratio[ids], ratio.min(1))
+
+
+@dataclass(frozen=True)
+class Setting:
+    """What every evaluation shares: limits, simulation settings, and what lies outside the assumptions."""
+
+    params: Params = field(default_factory=Params)
+    sim: SimConfig = field(default_factory=lambda: SimConfig(assessment="truth"))
+    seed: int = 0
+    decel_last_max: float | None = None  # > a_x_d: L(N+1) may brake beyond the assumptions (studies, tests)
+    use_hooks: bool = True  # traffic hooks and L(N+1) profiles, where the simulator has them
+
+
+def evaluate(spec: dict, setting: Setting) -> tuple[pd.DataFrame, dict]:
+    """Simulate every row of ``spec`` that satisfies the assumptions at ``t = 0``; returns one outcome row per
+    simulated scenario (``row``: its index in ``spec``) and the kept spec rows."""
+    prm = setting.params
+    spec = dict(spec)
+    if setting.decel_last_max is not None:
+        spec["decel_last"] = spec["decel_last"] / prm.a_x_d * setting.decel_last_max
+    hooks = setting.use_hooks and hooks_live()
+    profiles = setting.use_hooks and space.with_profile_fields() and setting.decel_last_max is None
+    batch, ok = space.build(spec, prm, profiles=profiles)
+    keep = np.flatnonzero(ok)
+    frames = []
+    for start in np.unique(spec["brake_start_s"][keep]):
+        rows = keep[spec["brake_start_s"][keep] == start]
+        sub = dataclasses.replace(batch.take(rows), scenario_id=np.arange(rows.size, dtype=np.int64))
+        sub_spec = space.take(spec, rows)
+        cfg = setting.sim.model_copy(update={"brake_start_s": float(start)})
+        kwargs = {}
+        recorder = None
+        if hooks:
+            recorder = LaneGapRecorder(sub, prm)
+            kwargs["traffic"] = space.hooks_for(sub_spec, prm, recorder)
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")  # decel_last beyond a_x_d is intended where it is asked for
+            table = simulate_batch(
+                sub, setting.seed, params=prm, config=cfg, nominal=space.planner_for(sub_spec, prm), workers=1, **kwargs
+            ).table
+        out = pd.DataFrame({"row": rows})
+        for name in OUTCOMES:
+            out[name] = table[name].to_numpy(bool)
+        out["ratio_l1"] = table["min_gap_leader_m"].to_numpy() / prm.p_m
+        out["ratio_f"] = table["min_gap_follower_m"].to_numpy() / prm.p_m
+        out["lane_ratio"] = recorder.min_ratio if recorder is not None else np.nan
+        frames.append(out)
+    outcome = pd.concat(frames, ignore_index=True) if frames else pd.DataFrame(columns=["row", *OUTCOMES])
+    outcome["ratio"] = np.fmin(outcome["ratio_l1"], outcome["ratio_f"]) if len(outcome) else []
+    return outcome.sort_values("row", ignore_index=True), space.take(spec, keep)
+
+
+def score(outcome: pd.DataFrame) -> np.ndarray:
+    """What the optimiser minimises: the smallest gap over its margin (ego and sampled lane gaps); a collision or
+    violation scores below any gap, a scenario that never entered the conflict zone scores 3."""
+    s = np.fmin(outcome["ratio"].to_numpy(float), outcome["lane_ratio"].to_numpy(float))
+    s = np.where(np.isnan(s), 3.0, np.minimum(s, 3.0))
+    bad = outcome[list(OUTCOMES)].to_numpy(bool).any(1)
+    return np.where(bad, s - 10.0, s)
+
+
+class CrossEntropy:
+    """Cross-entropy search in the unit cube (independent Gaussians, clipped): each generation samples
+    ``population`` points, keeps the best ``elite`` share by :func:`score` and moves mean and spread toward them
+    (smoothing ``alpha``); it restarts from the prior when the spread has collapsed or after ``max_generations``."""
+
+    def __init__(self, dim: int, elite: float = 0.1, alpha: float = 0.7, max_generations: int = 25):
+        self.dim, self.elite, self.alpha, self.max_generations = dim, elite, alpha, max_generations
+        self.restart()
+
+    def restart(self) -> None:
+        self.mean, self.std, self.generation = np.full(self.dim, 0.5), np.full(self.dim, 0.35), 0
+
+    def ask(self, rng: np.random.Generator, population: int) -> np.ndarray:
+        if self.generation >= self.max_generations or self.std.mean() < 0.02:
+            self.restart()
+        self.generation += 1
+        return np.clip(self.mean + self.std * rng.standard_normal((population, self.dim)), 0.0, 1.0)
+
+    def tell(self, u: np.ndarray, scores: np.ndarray) -> None:
+        finite = np.isfinite(scores)
+        if finite.sum() < 4:
+            return
+        order = np.argsort(np.where(finite, scores, np.inf), kind="stable")[: max(2, int(self.elite * finite.sum()))]
+        best = u[order]
+        self.mean = self.alpha * best.mean(0) + (1 - self.alpha) * self.mean
+        self.std = self.alpha * best.std(0) + (1 - self.alpha) * self.std
+
+
+@dataclass
+class Report:
+    """What a falsification run found (``worst``: the scenario with the smallest gap over its margin)."""
+
+    seed: int
+    methods: tuple[str, ...]
+    hooks: bool
+    profiles: bool
+    generated: int = 0
+    simulated: int = 0
+    wall_s: float = 0.0
+    counts: dict = field(default_factory=lambda: {name: 0 for name in OUTCOMES})
+    by_method: dict = field(default_factory=dict)
+    min_ratio: float = np.inf
+    min_ratio_l1: float = np.inf
+    min_ratio_f: float = np.inf
+    min_lane_ratio_sampled: float = np.inf
+    worst: dict | None = None
+    failures: list = field(default_factory=list)
+
+    def add(self, method: str, generated: int, outcome: pd.DataFrame, spec: dict, setting: Setting) -> None:
+        self.generated += generated
+        self.simulated += len(outcome)
+        m = self.by_method.setdefault(method, {"generated": 0, "simulated": 0, "min_ratio": np.inf, "failures": 0})
+        m["generated"] += generated
+        m["simulated"] += len(outcome)
+        if not len(outcome):
+            return
+        bad = outcome[list(OUTCOMES)].to_numpy(bool)
+        for name, col in zip(OUTCOMES, bad.T, strict=True):
+            self.counts[name] += int(col.sum())
+        m["failures"] += int(bad.any(1).sum())
+        for i in np.flatnonzero(bad.any(1))[: max(0, 20 - len(self.failures))]:
+            self.failures.append(scenario_record(spec, i, outcome.iloc[i], setting, method))
+        ratios = outcome["ratio"].to_numpy(float)
+        self.min_ratio_l1 = float(np.fmin(self.min_ratio_l1, np.nanmin(outcome["ratio_l1"], initial=np.inf)))
+        self.min_ratio_f = float(np.fmin(self.min_ratio_f, np.nanmin(outcome["ratio_f"], initial=np.inf)))
+        lane = outcome["lane_ratio"].to_numpy(float)
+        self.min_lane_ratio_sampled = float(np.fmin(self.min_lane_ratio_sampled, np.nanmin(lane, initial=np.inf)))
+        if np.isfinite(ratios).any():
+            i = int(np.nanargmin(ratios))
+            m["min_ratio"] = float(min(m["min_ratio"], ratios[i]))
+            if ratios[i] < self.min_ratio:
+                self.min_ratio = float(ratios[i])
+                self.worst = scenario_record(spec, i, outcome.iloc[i], setting, method)
+
+    def summary(self) -> dict:
+        """Everything but the scenario dumps (JSON-ready)."""
+        return {
+            "seed": self.seed,
+            "methods": list(self.methods),
+            "traffic_hooks": self.hooks,
+            "last_profiles": self.profiles,
+            "scenarios_generated": self.generated,
+            "scenarios_simulated": self.simulated,
+            "dropped_initial_state": self.generated - self.simulated,
+            "wall_s": round(self.wall_s, 1),
+            "collisions": self.counts["collision"],
+            "p_m_violations_ego": self.counts["safety_violation"],
+            "leader_collisions": self.counts["leader_collision"],
+            "p_m_violations_leaders": self.counts["leader_violation"],
+            "min_gap_over_p_m": self.min_ratio,
+            "min_gap_over_p_m_l1": self.min_ratio_l1,
+            "min_gap_over_p_m_f": self.min_ratio_f,
+            "min_lane_gap_over_margin_sampled": self.min_lane_ratio_sampled,
+            "by_method": self.by_method,
+        }
+
+    def text(self) -> str:
+        s = self.summary()
+        lines = [f"{k}: {v}" for k, v in s.items() if k != "by_method"]
+        for name, m in s["by_method"].items():
+            lines.append(
+                f"  {name}: {m['simulated']} simulated / {m['generated']} generated, min gap/p_m "
+                f"{m['min_ratio']!r}, failures {m['failures']}"
+            )
+        return "\n".join(lines)
+
+    def write(self, out: Path) -> list[Path]:
+        """``report.json`` (summary), ``worst.json`` (replayable), ``failure_<i>.json`` for each failure."""
+        out.mkdir(parents=True, exist_ok=True)
+        written = [out / "report.json"]
+        written[0].write_text(json.dumps(self.summary(), indent=2, default=float) + "\n")
+        dumps = ([("worst.json", self.worst)] if self.worst else []) + [
+            (f"failure_{i}.json", rec) for i, rec in enumerate(self.failures)
+        ]
+        for name, rec in dumps:
+            (out / name).write_text(json.dumps(rec, indent=1) + "\n")
+            written.append(out / name)
+        return written
+
+
+def scenario_record(spec: dict, i: int, outcome_row, setting: Setting, method: str) -> dict:
+    """One scenario, replayable with :func:`replay`: its spec row, the setting, and what happened."""
+    return {
+        "method": method,
+        "seed": setting.seed,
+        "params": setting.params.model_dump(),
+        "sim": setting.sim.model_dump(),
+        "decel_last_max": setting.decel_last_max,
+        "use_hooks": setting.use_hooks,
+        "spec": {k: np.asarray(v[i]).tolist() for k, v in spec.items()},
+        "outcome": {k: (v.item() if hasattr(v, "item") else v) for k, v in outcome_row.items() if k != "row"},
+    }
+
+
+def replay(record: dict | str | Path) -> pd.DataFrame:
+    """Re-simulate a dumped scenario (a :func:`scenario_record` or the path of its JSON); returns its outcome row."""
+    if not isinstance(record, dict):
+        record = json.loads(Path(record).read_text())
+    spec = {k: np.asarray([v]) for k, v in record["spec"].items()}
+    setting = Setting(
+        params=Params(**record["params"]),
+        sim=SimConfig(**record["sim"]),
+        seed=record["seed"],
+        decel_last_max=record["decel_last_max"],
+        use_hooks=record["use_hooks"],
+    )
+    return evaluate(spec, setting)[0]
+
+
+def falsify(
+    scenarios: int,
+    minutes: float = 0.0,
+    seed: int = 0,
+    method: str = "all",
+    *,
+    batch_size: int = 2048,
+    setting: Setting | None = None,
+    on_batch: Callable[[Report], None] | None = None,
+) -> Report:
+    """Run the falsifier until at least ``scenarios`` scenarios have been simulated *and* ``minutes`` have passed.
+
+    ``method``: one of :data:`METHODS` or ``"all"`` (one batch of each in turn). ``setting``: limits and
+    simulation settings (default: :class:`Setting` with ``seed``). ``on_batch`` is called after every batch.
+    """
+    methods = METHODS if method == "all" else (method,)
+    if any(m not in METHODS for m in methods):
+        raise ValueError(f"method must be one of {(*METHODS, 'all')}; got {method!r}")
+    if scenarios < 0 or minutes < 0 or batch_size < 1:
+        raise ValueError("scenarios and minutes must be >= 0 and batch_size >= 1")
+    setting = setting or Setting(seed=seed)
+    setting = dataclasses.replace(setting, seed=seed)
+    prm = setting.params
+    dim = space.dimension(prm)
+    hooks = setting.use_hooks and hooks_live()
+    report = Report(
+        seed=seed,
+        methods=methods,
+        hooks=hooks,
+        profiles=setting.use_hooks and space.with_profile_fields() and setting.decel_last_max is None,
+    )
+    cem = CrossEntropy(dim)
+    start = time.perf_counter()
+    index = 0
+    while report.simulated < scenarios or time.perf_counter() - start < 60.0 * minutes:
+        for m in methods:
+            rng = np.random.default_rng([seed, METHODS.index(m), index])
+            # Without profiles, L(N+1)'s sudden braking starts at one instant per batch (period-aligned or not).
+            brake_start = (
+                0.0
+                if report.profiles
+                else float(rng.choice([0.0, rng.integers(0, 30) * prm.dt, rng.uniform(0.0, 3.0)]))
+            )
+            if m == "knife":
+                spec, u = space.knife_specs(rng, batch_size, prm, brake_start), None
+            else:
+                u = cem.ask(rng, batch_size) if m == "cem" else rng.uniform(size=(batch_size, dim))
+                spec = space.decode(u, prm, brake_start)
+            outcome, kept = evaluate(spec, setting)
+            if m == "cem":
+                scores = np.full(batch_size, np.inf)
+                scores[outcome["row"].to_numpy()] = score(outcome)
+                cem.tell(u, scores)
+            report.add(m, batch_size, outcome.reset_index(drop=True), kept, setting)
+            report.wall_s = time.perf_counter() - start
+            if on_batch is not None:
+                on_batch(report)
+        index += 1
+    return report

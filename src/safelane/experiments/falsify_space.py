@@ -1,0 +1,344 @@
+"""The falsifier's search space: scenario specs inside the paper's assumptions, and how they become a batch.
+
+A **spec** is a dict of NumPy arrays with one row per scenario — the physical values that define it (speeds, gaps,
+the L(N+1) profile, the adversarial planner's and the traffic hooks' parameters). Specs come from three places:
+
+* :func:`decode` maps a point ``u ∈ [0, 1]^D`` of the unit cube (random search, cross-entropy) to a spec. Each
+  coordinate has an *edge mixture*: part of its range maps to exact edge values (a slack of exactly 0, a speed
+  equal to the vehicle ahead's, ``a_x_d`` exactly), part to tiny values (log-uniform down to 1e-12), the rest to
+  the plain range;
+* :func:`knife_specs` snaps random specs to knife edges: leaders exactly at their margin at equal speed, speed
+  matches that land on a period boundary, profile switches on or a hair off a boundary, lateral positions at the
+  conflict-zone edge and the lane boundary;
+* a JSON dump of one row (replay).
+
+:func:`build` turns a spec into a :class:`~safelane.sim.ScenarioBatch`, the adversarial nominal planner and the
+traffic hooks, and says which rows satisfy the assumptions at ``t = 0`` (the others are dropped and counted):
+the ego's evasion plan under the most conservative assumptions exists (:func:`safelane.safety.plan_evasion`),
+the leader chain is safe (:func:`safelane.safety.leader_chain`, ``unsafe`` False) and F can keep its margin
+behind L1 braking at ``a_x_d`` (the same analysis on the F–L1 pair).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+
+from ..params import Params
+from ..planners.adversarial import HugFollower, HugLeader, Mixture, Oscillating, RecklessMerge, square_wave
+from ..planners.variants import VARIANT_NAMES
+from ..safety import leader_chain, plan_evasion
+from ..sim.scenario import ScenarioBatch
+
+MAX_N = 10  #: most connected leaders searched
+L = MAX_N + 1  #: leader slots L1..L(N+1)
+P = 4  #: segments of L(N+1)'s acceleration profile
+PLANNER_PARAMS = 12
+
+
+class _Cube:
+    """Reads consecutive columns of ``u``; ``width`` counts them (``decode`` on a probe gives ``D``)."""
+
+    def __init__(self, u: np.ndarray):
+        self.u, self.width = u, 0
+
+    def take(self, w: int = 1) -> np.ndarray:
+        c = self.u[:, self.width : self.width + w]
+        self.width += w
+        return c[:, 0] if w == 1 else c
+
+
+def _lin(u, lo, hi):
+    return lo + (hi - lo) * u
+
+
+def _edge(u, lo, hi, *, exact=None, p_exact=0.1, p_tiny=0.2, tiny_lo=1e-12):
+    """Edge mixture on ``[lo, hi]``: ``u < p_exact`` → ``exact`` (default ``lo``); the next ``p_tiny`` → ``lo``
+    plus a log-uniform tiny amount in ``[tiny_lo, 1]``; the rest uniform on ``[lo, hi]``."""
+    exact = lo if exact is None else exact
+    tiny = lo + np.exp(_lin(np.clip((u - p_exact) / max(p_tiny, 1e-300), 0, 1), np.log(tiny_lo), 0.0))
+    plain = _lin(np.clip((u - p_exact - p_tiny) / (1 - p_exact - p_tiny), 0, 1), lo, hi)
+    return np.where(u < p_exact, exact, np.where(u < p_exact + p_tiny, tiny, plain))
+
+
+def decode(u: np.ndarray, prm: Params, brake_start_s: float = 0.0) -> dict[str, np.ndarray]:
+    """The spec of each row of ``u`` (``(n, D)`` in ``[0, 1]``); see the module docstring."""
+    u = np.clip(np.asarray(u, float), 0.0, 1.0)
+    c = _Cube(u)
+    n = np.minimum((c.take() * (MAX_N + 1)).astype(np.int64), MAX_N)
+    spec = {"n": n}
+    spec["variant"] = np.minimum((c.take() * len(VARIANT_NAMES)).astype(np.int64), len(VARIANT_NAMES) - 1)
+    spec["ego_y"] = np.where(c.take() < 0.4, 0.0, _lin(c.take(), 0.0, prm.lane_width))
+    spec["ego_vy"] = np.where(c.take() < 0.4, 0.0, _lin(c.take(), -2.0, 2.0))
+    spec["ego_dv"] = np.where(c.take() < 0.2, 0.0, _lin(c.take(), -10.0, 10.0))  # ego speed − L1's
+    spec["l1_slack"] = _edge(c.take(), 0.0, 40.0)  # L1 − ego − p_m
+    spec["f_slack"] = _edge(c.take(), 0.0, 40.0)  # ego − F − p_m
+    spec["f_dv"] = np.where(c.take() < 0.2, 0.0, _lin(c.take(), -10.0, 10.0))  # F's speed − the ego's
+    f_type = c.take()
+    spec["f_connected"] = f_type < 1 / 3
+    spec["f_aggressive"] = f_type >= 2 / 3
+    spec["base_v"] = _edge(c.take(), 0.0, 40.0, exact=30.0)  # L(N+1)'s speed
+    spec["lv_dv"] = np.where(c.take(L) < 0.3, 0.0, _lin(c.take(L), -8.0, 8.0))  # L_i − L(i+1) speed
+    spec["slack"] = _edge(c.take(L), 0.0, 40.0)  # L(i+1) − L_i − margin_i
+    spec["human"] = c.take(L) < 0.2
+    spec["promise_decel"] = _edge(c.take(L), 0.0, prm.a_x_d, exact=0.5, p_exact=0.3, p_tiny=0.1)
+    spec["promise_accel"] = _edge(c.take(L), 0.0, prm.a_x_a, exact=0.5, p_exact=0.3, p_tiny=0.1)
+    # L(N+1): piecewise-constant profile; segment j starts dt..3 s after j−1 (snapped to a period with prob 0.5).
+    gaps = _lin(c.take(P - 1), prm.dt, 3.0)
+    snap = c.take(P - 1) < 0.5
+    gaps = np.where(snap, np.maximum(np.round(gaps / prm.dt), 1.0) * prm.dt, gaps)
+    spec["profile_t"] = np.concatenate([np.zeros((len(u), 1)), np.cumsum(gaps, axis=1)], axis=1)
+    acc = _lin(c.take(P), -prm.a_x_d, prm.a_x_a)
+    spec["profile_a"] = np.where(c.take(P) < 0.25, -prm.a_x_d, acc)
+    spec["decel_last"] = _edge(c.take(), 1e-3, prm.a_x_d, exact=prm.a_x_d, p_exact=0.3, p_tiny=0.0)
+    spec["brake_start_s"] = np.full(len(u), float(brake_start_s))
+    spec["mode"] = np.minimum((c.take() * 4).astype(np.int64), 3)
+    spec["planner"] = c.take(PLANNER_PARAMS)
+    spec["task_hi"] = c.take(L)  # leaders' own tasks: a square wave between two levels inside the promise
+    spec["task_lo"] = c.take(L)
+    spec["task_period_s"] = _lin(c.take(), prm.dt, 4.0)
+    spec["task_phase"] = c.take()
+    spec["f_hi"] = c.take()  # F's wish: a square wave between two levels inside [−a_x_d, a_x_a]
+    spec["f_lo"] = c.take()
+    spec["f_period_s"] = _lin(c.take(), prm.dt, 4.0)
+    spec["f_phase"] = c.take()
+    spec["_width"] = np.full(len(u), c.width)
+    return spec
+
+
+def dimension(prm: Params) -> int:
+    """``D``, the number of coordinates :func:`decode` reads."""
+    return int(decode(np.zeros((1, 1000)), prm)["_width"][0])
+
+
+def take(spec: dict, rows) -> dict:
+    """Rows ``rows`` of a spec."""
+    return {k: v[rows] for k, v in spec.items()}
+
+
+def concat_specs(specs: list[dict]) -> dict:
+    return {k: np.concatenate([s[k] for s in specs]) for k in specs[0]}
+
+
+def knife_specs(rng: np.random.Generator, count: int, prm: Params, brake_start_s: float = 0.0) -> dict:
+    """Random specs snapped to knife edges (each edge applied to a random share of the rows):
+
+    * **margin ties**: leaders exactly at their margin behind the vehicle ahead at the same speed (the state the
+      chain's own worst-case trajectory ends in); the ego exactly at ``p_m`` behind L1 at L1's speed; F exactly at
+      ``p_m`` behind the ego. Positions are multiples of 1/1024 m, so the slacks are exactly 0 in floating point;
+    * **speed matches on a period boundary**: L(N+1) slower than L_N by ``a·k·dt``, accelerating at ``a`` for
+      exactly ``k`` periods (then constant), with the slack that makes the gap exactly the margin at the match;
+    * **period-aligned events**: profile switches at ``k·dt`` (computed as ``k·dt`` and as a running sum of
+      ``dt``, which differ in the last bit) or a hair off it (±1e-12, ±1e-9 s) or mid-period; brake, ease off,
+      brake harder; planner and traffic square waves with periods that are multiples of ``dt``, phase 0;
+    * **lateral edges**: the ego at ``y_s`` or the lane boundary (± one ulp, ± 1e-12), lateral speed 0 or tiny.
+    """
+    spec = decode(rng.uniform(size=(count, dimension(prm))), prm, brake_start_s)
+    n = spec["n"]
+    pick = lambda p: rng.uniform(size=count) < p  # noqa: E731
+    # Margin ties among the leaders (and speed ties), ego behind L1, F behind the ego.
+    tie_links = rng.uniform(size=(count, L)) < 0.5
+    spec["slack"] = np.where(tie_links, 0.0, np.round(spec["slack"] * 1024) / 1024)
+    spec["lv_dv"] = np.where(tie_links | pick(0.5)[:, None], 0.0, spec["lv_dv"])
+    spec["base_v"] = np.round(spec["base_v"] * 64) / 64
+    ego_tie = pick(0.5)
+    spec["l1_slack"] = np.where(ego_tie, 0.0, np.round(spec["l1_slack"] * 1024) / 1024)
+    spec["ego_dv"] = np.where(ego_tie | pick(0.3), 0.0, spec["ego_dv"])
+    f_tie = pick(0.3)
+    spec["f_slack"] = np.where(f_tie, 0.0, spec["f_slack"])
+    spec["f_dv"] = np.where(f_tie, 0.0, spec["f_dv"])
+    # Speed match on a period boundary between L_N and L(N+1): L(N+1) accelerates at a for k periods.
+    match = pick(0.3)
+    k = rng.integers(1, 30, size=count)
+    a = rng.choice([0.5, 1.0, prm.a_x_a], size=count)
+    closing = a * k * prm.dt
+    t_match = np.where(pick(0.5), k * prm.dt, np.array([sum([prm.dt] * int(j)) for j in k]))
+    spec["base_v"] = np.where(match, np.maximum(spec["base_v"], closing), spec["base_v"])
+    rows = np.flatnonzero(match)
+    spec["lv_dv"][rows, n[rows] - 1] = np.where(n[rows] >= 1, closing[rows], spec["lv_dv"][rows, n[rows] - 1])
+    spec["slack"][rows, n[rows] - 1] = np.where(
+        n[rows] >= 1, 0.5 * a[rows] * t_match[rows] ** 2, spec["slack"][rows, n[rows] - 1]
+    )
+    # Period-aligned L(N+1) profiles: brake, ease off, brake harder (or the match above, then constant).
+    starts = np.cumsum(rng.integers(1, 25, size=(count, P - 1)), axis=1)
+    running = np.array([[sum([prm.dt] * int(s)) for s in row] for row in starts])
+    aligned = np.where(pick(0.5)[:, None], starts * prm.dt, running)
+    jitter = rng.choice([0.0, 0.0, 1e-12, -1e-12, 1e-9, -1e-9, 0.5 * prm.dt], size=(count, P - 1))
+    times = np.concatenate([np.zeros((count, 1)), aligned + jitter], axis=1)
+    d1, d2 = rng.uniform(0.5, prm.a_x_d, size=count), rng.uniform(0.0, 0.5, size=count)
+    harder = np.stack([-d1, -d2 * d1, -prm.a_x_d * np.ones(count), np.zeros(count)], 1)
+    profile_a = np.where(pick(0.5)[:, None], harder, spec["profile_a"])
+    profile_a[rows] = np.stack([a[rows], np.zeros(rows.size), np.zeros(rows.size), -prm.a_x_d * np.ones(rows.size)], 1)
+    times[rows, 1] = t_match[rows]
+    times[rows, 2:] = np.maximum(times[rows, 2:], t_match[rows, None] + prm.dt * np.arange(1, P - 1))
+    for j in range(1, P):  # at most one switch per period: a jittered switch may not come within dt of the last
+        times[:, j] = np.where(times[:, j] - times[:, j - 1] < prm.dt, times[:, j - 1] + prm.dt, times[:, j])
+    spec["profile_t"], spec["profile_a"] = times, profile_a
+    # Period-aligned planner and traffic square waves.
+    aligned_rows = pick(0.5)
+    spec["task_period_s"] = np.where(aligned_rows, 2 * prm.dt * rng.integers(1, 20, size=count), spec["task_period_s"])
+    spec["task_phase"] = np.where(aligned_rows, 0.0, spec["task_phase"])
+    spec["f_period_s"] = np.where(aligned_rows, 2 * prm.dt * rng.integers(1, 20, size=count), spec["f_period_s"])
+    osc_period = (rng.integers(1, 30, size=count) - 1) * prm.dt / 2.9  # planner_for: period dt + 2.9·q
+    spec["planner"][:, 5] = np.where(aligned_rows, osc_period, spec["planner"][:, 5])
+    spec["planner"][:, 6] = np.where(aligned_rows, 0.0, spec["planner"][:, 6])
+    # Lateral edges.
+    y_edges = np.array(
+        [
+            prm.y_safe,
+            np.nextafter(prm.y_safe, np.inf),
+            prm.y_safe + 1e-12,
+            prm.y_safe - 1e-12,
+            prm.y_boundary,
+            np.nextafter(prm.y_boundary, -np.inf),
+            0.0,
+        ]
+    )
+    lateral = pick(0.4)
+    spec["ego_y"] = np.where(lateral, rng.choice(y_edges, size=count), spec["ego_y"])
+    spec["ego_vy"] = np.where(lateral, rng.choice([0.0, 1e-12, -1e-12, 0.5, -0.5], size=count), spec["ego_vy"])
+    return spec
+
+
+def planner_for(spec: dict, prm: Params) -> Mixture:
+    """The adversarial nominal planner of each row (:class:`Mixture` over the four adversaries)."""
+    q = spec["planner"]
+    gains = dict(
+        k_p=_lin(q[:, 0], 0.1, 10.0),
+        k_v=_lin(q[:, 1], 0.0, 10.0),
+        offset_m=_lin(q[:, 2], -1.0, 3.0) ** 3 / 9,
+        omega=_lin(q[:, 3], 0.3, 2.0),
+        zeta=_lin(q[:, 4], 0.05, 1.5),
+    )
+    osc = Oscillating(
+        period_s=_lin(q[:, 5], prm.dt, 3.0),
+        phase_x=q[:, 6],
+        phase_y=q[:, 7],
+        amp_x=_lin(q[:, 8], 0.0, prm.a_x_d),
+        mean_x=_lin(q[:, 9], -prm.a_x_d, prm.a_x_a),
+        amp_y=_lin(q[:, 10], 0.0, prm.a_y_m),
+        mean_y=_lin(q[:, 11], -0.5, prm.a_y_m),
+    )
+    reckless = RecklessMerge(a_x=_lin(q[:, 9], -prm.a_x_d, prm.a_x_a), lateral_gain=_lin(q[:, 10], 0.2, 1.0))
+    return Mixture((HugLeader(**gains), HugFollower(**gains), osc, reckless), spec["mode"])
+
+
+def build(spec: dict, prm: Params, *, profiles: bool) -> tuple[ScenarioBatch, np.ndarray]:
+    """The batch of ``spec`` and the mask of rows that satisfy the assumptions at ``t = 0`` (module docstring).
+
+    ``profiles``: give L(N+1) the spec's piecewise-constant profile (:func:`safelane.sim.traffic.with_last_profile`);
+    otherwise it brakes suddenly at ``decel_last`` from ``brake_start_s``.
+    """
+    n = spec["n"]
+    bsz = len(n)
+    k = int(n.max()) + 2
+    slots = np.arange(k)[None, :]
+    valid = slots <= n[:, None] + 1
+    connected = (slots >= 1) & (slots <= n[:, None])
+    connected = connected | ((slots == 0) & spec["f_connected"][:, None])
+    human = (slots >= 1) & (slots <= n[:, None]) & _leaders(spec["human"], k)
+    margin = np.where(human, prm.p_m_human, prm.p_m)
+    v = np.zeros((bsz, k))
+    for j in range(k - 1, 0, -1):  # back to front from L(N+1)
+        ahead = v[:, j + 1] if j + 1 < k else spec["base_v"]
+        v[:, j] = np.where(
+            j == n + 1, spec["base_v"], np.where(j <= n, np.maximum(ahead + spec["lv_dv"][:, j - 1], 0.0), ahead)
+        )
+    ego_vx = np.maximum(v[:, 1] + spec["ego_dv"], 0.0)
+    v[:, 0] = np.maximum(ego_vx + spec["f_dv"], 0.0)
+    x = np.zeros((bsz, k))
+    x[:, 1] = prm.p_m + spec["l1_slack"]
+    for j in range(1, k - 1):
+        step = np.where(j <= n, margin[:, j] + spec["slack"][:, j - 1], 1e6)
+        x[:, j + 1] = x[:, j] + step
+    x[:, 0] = -(prm.p_m + spec["f_slack"])
+    batch = ScenarioBatch(
+        ego_x=np.zeros(bsz),
+        ego_y=spec["ego_y"].astype(float),
+        ego_vx=ego_vx,
+        ego_vy=spec["ego_vy"].astype(float),
+        x=x,
+        v=v,
+        valid=valid,
+        connected=connected,
+        human=human,
+        promise_decel=np.where(connected & (slots >= 1), _leaders(spec["promise_decel"], k), 0.5),
+        promise_accel=np.where(connected & (slots >= 1), _leaders(spec["promise_accel"], k), 0.5),
+        n_connected=n.astype(np.int64),
+        follower_aggressive=spec["f_aggressive"] & ~spec["f_connected"],
+        decel_last=spec["decel_last"].astype(float),
+        p_v=np.zeros(bsz),
+        variant=spec["variant"].astype(np.int64),
+        scenario_id=np.arange(bsz, dtype=np.int64),
+    )
+    if profiles:
+        from ..sim.traffic import with_last_profile
+
+        batch = with_last_profile(batch, spec["profile_t"], spec["profile_a"], prm)
+    return batch, _assumptions_hold(batch, prm)
+
+
+def _leaders(a: np.ndarray, k: int) -> np.ndarray:
+    """Per-leader ``(B, L)`` columns placed on slots ``1..k−1`` of a ``(B, k)`` array (slot 0 copies slot 1)."""
+    out = a[:, : k - 1]
+    return np.concatenate([out[:, :1], out], axis=1)
+
+
+def _assumptions_hold(b: ScenarioBatch, prm: Params) -> np.ndarray:
+    """Rows whose ``t = 0`` state satisfies the assumptions (module docstring)."""
+    plan = plan_evasion(
+        b.ego_x, b.ego_y, b.ego_vx, b.ego_vy, b.x[:, 1], b.v[:, 1], prm.a_x_d, b.x[:, 0], b.v[:, 0], True, prm
+    )
+    ok = np.asarray(plan.feasible, bool).copy()
+    # F behind L1, L1 braking at a_x_d: the chain analysis on the F–L1 pair.
+    f_pair = leader_chain(
+        np.stack([b.x[:, 0], b.x[:, 1]], 1), np.stack([b.v[:, 0], b.v[:, 1]], 1), np.full((len(b), 1), prm.a_x_d), prm
+    )
+    ok &= ~np.asarray(f_pair.unsafe, bool)
+    for n in np.unique(b.n_connected):
+        rows = np.flatnonzero(b.n_connected == n)
+        if n == 0:
+            continue
+        chain = leader_chain(
+            b.x[rows, 1 : n + 2],
+            b.v[rows, 1 : n + 2],
+            b.promise_decel[rows, 1 : n + 1],
+            prm,
+            human_driven=b.human[rows, 1 : n + 1],
+        )
+        ok[rows] &= ~np.asarray(chain.unsafe, bool)
+    return ok
+
+
+def hooks_for(spec: dict, prm: Params, recorder=None):
+    """:class:`~safelane.sim.traffic.TrafficHooks` driving the leaders' own tasks and F's wish from the spec
+    (square waves between two levels: inside each leader's promise, inside F's ``[−a_x_d, a_x_a]``).
+    ``recorder``: an object with ``observe(view, params)``, called every period (the lane-gap sampler)."""
+    from ..sim.traffic import TrafficHooks
+
+    def leader_task(view, params):
+        if recorder is not None:
+            recorder.observe(view, params)
+        ids = view.scenario_id
+        k = view.x.shape[1]
+        pd_, pa = _leaders(spec["promise_decel"][ids], k), _leaders(spec["promise_accel"][ids], k)
+        hi, lo = _leaders(spec["task_hi"][ids], k), _leaders(spec["task_lo"][ids], k)
+        # Each leader's wave is shifted by a slot-dependent share of the period.
+        phase = spec["task_phase"][ids][:, None] + 0.37 * np.arange(k)[None, :]
+        up = square_wave(view.t, spec["task_period_s"][ids][:, None], phase) > 0
+        level = np.where(up, hi, lo)
+        return -pd_ + level * (pd_ + pa)
+
+    def follower_wish(view, params):
+        ids = view.scenario_id
+        up = square_wave(view.t, spec["f_period_s"][ids], spec["f_phase"][ids]) > 0
+        level = np.where(up, spec["f_hi"][ids], spec["f_lo"][ids])
+        return -prm.a_x_d + level * (prm.a_x_d + prm.a_x_a)
+
+    return TrafficHooks(leader_task=leader_task, follower_wish=follower_wish)
+
+
+def with_profile_fields() -> bool:
+    """Whether :class:`ScenarioBatch` carries L(N+1) profiles yet (the extension point is being wired)."""
+    return "last_profile_t" in {f.name for f in dataclasses.fields(ScenarioBatch)}
