@@ -22,6 +22,7 @@ def _register() -> None:
     # Each subcommand module adds itself to `app`; imports are local so `--help` stays fast.
     from . import calibrate as _calibrate  # noqa: F401
     from . import check  # noqa: F401
+    from . import falsify as _falsify  # noqa: F401
     from . import reproduce as _reproduce  # noqa: F401
     from . import simulate as _simulate  # noqa: F401
     from . import train as _train  # noqa: F401

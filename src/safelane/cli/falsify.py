@@ -1,0 +1,59 @@
+"""``safelane falsify``: search behaviours inside the paper's assumptions for a collision or a ``p_m`` violation."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import typer
+
+from . import app
+
+
+@app.command()
+def falsify(
+    minutes: float = typer.Option(1.0, "--minutes", "-m", min=0.0, help="Run at least this long [min]."),
+    scenarios: int = typer.Option(10_000, "--scenarios", "-n", min=0, help="Simulate at least this many scenarios."),
+    seed: int = typer.Option(0, "--seed", min=0, help="Seed of every draw; with --minutes 0 the report repeats."),
+    method: str = typer.Option("all", "--method", help="random, cem (cross-entropy), knife (knife edges) or all."),
+    batch_size: int = typer.Option(4096, "--batch-size", min=1, help="Scenarios generated per batch."),
+    out: Path = typer.Option(Path("results/falsify"), "--out", "-o", help="Folder for report.json and dumps."),
+    replay: Path = typer.Option(None, "--replay", help="Re-simulate one dumped scenario (a JSON from --out)."),
+    progress: bool = typer.Option(True, "--progress/--no-progress", help="Show a progress bar."),
+) -> None:
+    """Adversarial falsification of the safety guarantee (issue 9).
+
+    Searches initial states at the edges, L(N+1) acceleration profiles, leaders' tasks inside their promises,
+    F inside its type's range and adversarial nominal planners, with random search, a cross-entropy optimiser
+    and knife-edge families. Runs until both --minutes and --scenarios are reached, then prints the report and
+    writes OUT/report.json, OUT/worst.json (the scenario with the smallest gap over p_m) and OUT/failure_<i>.json
+    for each collision or violation found (replay with --replay).
+
+    Example: safelane falsify --minutes 10 --scenarios 1000000 --seed 0 --out results/falsify
+
+    Example: safelane falsify --replay results/falsify/worst.json
+    """
+    from ..experiments import falsify as fz
+
+    if replay is not None:
+        row = fz.replay(replay).drop(columns="row").iloc[0]
+        typer.echo("\n".join(f"{k}: {v!r}" for k, v in row.items()))
+        return
+    if method not in (*fz.METHODS, "all"):
+        raise typer.BadParameter(
+            f"must be one of {', '.join((*fz.METHODS, 'all'))}; got {method!r}", param_hint="--method"
+        )
+    from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
+
+    columns = (TextColumn("{task.description}"), BarColumn(), TextColumn("{task.fields[status]}"), TimeElapsedColumn())
+    with Progress(*columns, disable=not progress, transient=True) as bar:
+        task = bar.add_task("falsifying", total=max(scenarios, 1), status="")
+
+        def on_batch(report: fz.Report) -> None:
+            failures = sum(report.counts.values())
+            status = f"{report.simulated:,} simulated, min gap/p_m {report.min_ratio:.12f}, failures {failures}"
+            bar.update(task, completed=min(report.simulated, scenarios), status=status)
+
+        report = fz.falsify(scenarios, minutes, seed, method, batch_size=batch_size, on_batch=on_batch)
+    typer.echo(report.text())
+    written = report.write(out)
+    typer.echo(f"wrote {written[0]}" + (f" and {len(written) - 1} scenario dumps" if len(written) > 1 else ""))
