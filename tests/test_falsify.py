@@ -1,0 +1,98 @@
+"""The adversarial falsifier: deterministic, able to fail outside the assumptions, replayable; its planners."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from safelane import Params
+from safelane.experiments import falsify_space as space
+from safelane.experiments.falsify import Setting, falsify, replay
+from safelane.planners.adversarial import ADVERSARIES, HugLeader, Mixture, Oscillating
+from safelane.planners.base import Observation
+from safelane.sim import SimConfig
+
+PRM = Params()
+SHORT = SimConfig(assessment="truth", horizon_s=4.0)
+
+
+def _summary(report):
+    s = report.summary()
+    s.pop("wall_s")
+    return s
+
+
+def _observation(n: int, rng: np.random.Generator, t: float = 0.35) -> Observation:
+    u = lambda lo, hi: rng.uniform(lo, hi, size=n)  # noqa: E731
+    return Observation(
+        p_x=u(-5, 5), p_y=u(0, 3.5), v_x=u(0, 40), v_y=u(-1, 1), p_x_l=u(10, 40), v_x_l=u(0, 40), p_x_f=u(-40, -10),
+        v_x_f=u(0, 40), l1_plan=np.zeros((n, 10)), l1_connected=np.ones(n, bool), f_connected=np.ones(n, bool),
+        completed=np.zeros(n, bool), t=t,
+    )  # fmt: skip
+
+
+def test_same_seed_same_report():
+    setting = Setting(sim=SHORT)
+    a = falsify(200, seed=3, method="all", batch_size=256, setting=setting)
+    b = falsify(200, seed=3, method="all", batch_size=256, setting=setting)
+    assert _summary(a) == _summary(b)
+    assert a.worst == b.worst
+    assert a.simulated >= 200 and a.generated % (3 * 256) == 0  # whole rounds of one batch per method
+    c = falsify(200, seed=4, method="all", batch_size=256, setting=setting)
+    assert _summary(c) != _summary(a)
+
+
+def test_it_can_fail_without_the_supervisor():
+    setting = Setting(sim=SimConfig(assessment="truth", horizon_s=4.0, supervised=False))
+    report = falsify(100, seed=0, method="random", batch_size=256, setting=setting)
+    assert report.counts["collision"] + report.counts["safety_violation"] > 0
+    assert report.min_ratio < 1.0 and report.failures
+    # A dumped failure replays to the same outcome.
+    record = report.failures[0]
+    row = replay(record).iloc[0]
+    for name in ("collision", "safety_violation", "leader_violation"):
+        assert bool(row[name]) == record["outcome"][name]
+
+
+def test_it_can_fail_when_the_last_leader_brakes_beyond_a_x_d():
+    setting = Setting(sim=SHORT, decel_last_max=3 * PRM.a_x_d)
+    report = falsify(200, seed=0, method="random", batch_size=512, setting=setting)
+    assert sum(report.counts.values()) > 0
+
+
+def test_decoded_and_knife_specs_build_inside_the_assumptions():
+    rng = np.random.default_rng(0)
+    u = rng.uniform(size=(300, space.dimension(PRM)))
+    for spec in (space.decode(u, PRM), space.knife_specs(rng, 300, PRM)):
+        assert np.all(spec["n"] <= space.MAX_N) and np.all(spec["n"] >= 0)
+        assert np.all(np.diff(spec["profile_t"], axis=1) >= PRM.dt - 1e-12)  # at most one switch per period
+        assert np.all((spec["profile_a"] >= -PRM.a_x_d) & (spec["profile_a"] <= PRM.a_x_a))
+        batch, ok = space.build(spec, PRM, profiles=space.with_profile_fields())
+        assert 0 < ok.sum() < len(ok)  # some rows are dropped at t = 0, many kept
+        assert np.all(batch.v >= 0.0)
+    knife = space.knife_specs(np.random.default_rng(1), 400, PRM)
+    assert (knife["slack"] == 0.0).any() and (knife["l1_slack"] == 0.0).any()
+
+
+@pytest.mark.parametrize("name", sorted(ADVERSARIES))
+def test_adversarial_planners_give_finite_actions_of_the_batch_shape(name):
+    rng = np.random.default_rng(2)
+    obs = _observation(7, rng)
+    a_x, a_y = ADVERSARIES[name]()(obs, PRM)
+    for a, limit in ((a_x, max(PRM.a_x_a, PRM.a_x_d)), (a_y, PRM.a_y_m)):
+        assert a.shape == (7,) and np.isfinite(a).all() and np.abs(a).max() <= limit
+
+
+def test_per_scenario_parameters_are_row_aligned():
+    rng = np.random.default_rng(3)
+    obs = _observation(4, rng)
+    offsets = np.array([0.0, 1.0, 2.0, 3.0])
+    a_x, _ = HugLeader(offset_m=offsets, k_p=0.01, k_v=0.0)(obs, PRM)
+    expected = 0.01 * (obs.p_x_l - PRM.p_m - offsets - obs.p_x)
+    np.testing.assert_allclose(a_x, np.clip(expected, -PRM.a_x_d, PRM.a_x_a))
+    with pytest.raises(ValueError, match="workers=1"):
+        HugLeader(offset_m=np.zeros(3))(obs, PRM)
+    mix = Mixture((HugLeader(), Oscillating()), choice=np.array([0, 1, 1, 0]))
+    m_x, _ = mix(obs, PRM)
+    np.testing.assert_array_equal(m_x[[0, 3]], HugLeader()(obs, PRM)[0][[0, 3]])
+    np.testing.assert_array_equal(m_x[[1, 2]], Oscillating()(obs, PRM)[0][[1, 2]])
