@@ -1,6 +1,8 @@
-"""``safelane simulate``: summary on screen, CSVs and a trace plot on disk, clear errors."""
+"""``safelane simulate``: summary on screen, CSVs and a trace plot in a run folder, clear errors."""
 
 from __future__ import annotations
+
+import json
 
 import pandas as pd
 import pytest
@@ -17,45 +19,58 @@ def _invoke(*args):
     return runner.invoke(app, [*TINY, *args])
 
 
+def _run_dir(out):
+    """The one run folder under ``out``."""
+    (run,) = out.iterdir()
+    return run
+
+
 def test_tiny_run_prints_a_summary_and_writes_csvs(tmp_path):
     result = _invoke("--out", str(tmp_path), "--no-progress")
     assert result.exit_code == 0, result.output
     for text in ("CV_none, N = 1", "success", "collision", "95 % Wilson interval", "assessment correct"):
         assert text in result.output
-    scenarios = pd.read_csv(tmp_path / f"{STEM}_scenarios.csv")
-    summary = pd.read_csv(tmp_path / f"{STEM}_summary.csv")
+    run = _run_dir(tmp_path)
+    assert run.name.endswith(STEM)
+    scenarios = pd.read_csv(run / "scenarios.csv")
+    summary = pd.read_csv(run / "summary.csv")
+    info = json.loads((run / "run.json").read_text())
+    assert info["status"] == "complete" and info["samples"] == 6 and info["seed"] == 3 and info["planner"] == "CV_none"
+    assert info["assessment"] == "observed" and info["nominal"] == "expert" and info["preset"] is None
+    assert "numpy" in info["versions"] and info["command"].startswith("safelane")
     assert len(scenarios) == 6 and (scenarios["planner"] == "CV_none").all()
     assert {"success", "collision", "safety_violation", "completion_time_s", "n_abort"} <= set(scenarios.columns)
     assert len(summary) == 1 and summary.loc[0, "samples"] == 6
     assert {"success_rate", "success_lo", "success_hi", "collision_hi"} <= set(summary.columns)
-    assert not (tmp_path / f"{STEM}_trace.csv").exists()
+    assert not (run / "trace.csv").exists()
 
 
 def test_same_seed_same_csv(tmp_path):
     for sub in ("a", "b"):
         assert _invoke("--out", str(tmp_path / sub), "--no-progress").exit_code == 0
-    first, second = (pd.read_csv(tmp_path / sub / f"{STEM}_scenarios.csv") for sub in ("a", "b"))
+    first, second = (pd.read_csv(_run_dir(tmp_path / sub) / "scenarios.csv") for sub in ("a", "b"))
     pd.testing.assert_frame_equal(first, second)
 
 
 def test_trace_writes_one_scenario_and_a_png(tmp_path):
     result = _invoke("--out", str(tmp_path), "--trace", "--p-v", "0.1", "--assessment", "truth")
     assert result.exit_code == 0, result.output
-    stem = STEM.replace("pv0", "pv0.1")
-    trace = pd.read_csv(tmp_path / f"{stem}_trace.csv")
+    run = _run_dir(tmp_path)
+    trace = pd.read_csv(run / "trace.csv")
     assert trace["scenario_id"].nunique() == 1 and len(trace) == 100
     assert {"t", "ego_y", "ego_vx", "behaviour", "l1_v", "f_v"} <= set(trace.columns)
-    png = (tmp_path / f"{stem}_trace.png").read_bytes()
+    png = (run / "trace.png").read_bytes()
     assert png[:8] == b"\x89PNG\r\n\x1a\n" and len(png) > 10_000
-    assert f"wrote {tmp_path / f'{stem}_trace.png'}" in result.output.replace("\n", "")
+    assert f"wrote {run / 'trace.png'}" in result.output.replace("\n", "")
+    assert json.loads((run / "run.json").read_text())["assessment"] == "truth"
 
 
 def test_params_file_is_used(tmp_path):
     params = tmp_path / "params.yaml"
     params.write_text("p_m: 9.0\n")
-    result = _invoke("--out", str(tmp_path), "--no-progress", "--params", str(params))
+    result = _invoke("--out", str(tmp_path / "out"), "--no-progress", "--params", str(params))
     assert result.exit_code == 0, result.output
-    scenarios = pd.read_csv(tmp_path / f"{STEM}_scenarios.csv")
+    scenarios = pd.read_csv(_run_dir(tmp_path / "out") / "scenarios.csv")
     assert (scenarios["min_gap_leader_m"].dropna() >= 9.0 - 1e-9).all()
 
 
@@ -96,7 +111,9 @@ def test_preset_and_nominal_planner(tmp_path):
 
     result = _invoke("--preset", "paper", "--nominal", "expert", "--out", str(tmp_path), "--no-progress")
     assert result.exit_code == 0, result.output
-    got = pd.read_csv(tmp_path / f"{STEM}_scenarios.csv")
+    got = pd.read_csv(_run_dir(tmp_path) / "scenarios.csv")
+    info = json.loads((_run_dir(tmp_path) / "run.json").read_text())
+    assert info["preset"]["name"] == "paper" and info["nominal"] == "expert"
     preset = load_preset("paper")
     want = simulate("CV_none", 1, 4.0, 6, 3, params=preset.params, config=preset.sim).table
     assert got["success"].tolist() == want["success"].tolist()

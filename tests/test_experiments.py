@@ -200,7 +200,10 @@ def test_table1_side_by_side_mae_by_hand():
 
 # -- presets -----------------------------------------------------------------------------------------------------
 def test_unknown_preset_lists_available(tmp_path, monkeypatch):
-    monkeypatch.setattr(calibration, "PRESET_DIR", tmp_path)
+    import safelane.sim.preset as preset_module
+
+    monkeypatch.setattr(preset_module, "PRESET_DIR", tmp_path)
+    monkeypatch.setenv("SAFELANE_PRESET_DIR", str(tmp_path / "user"))
     (tmp_path / "alpha.yaml").write_text(PRESET.to_yaml())
     (tmp_path / "beta.yaml").write_text(PRESET.to_yaml())
     with pytest.raises(FileNotFoundError, match=r"available: alpha, beta"):

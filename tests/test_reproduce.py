@@ -194,17 +194,25 @@ def test_calibrate_command_writes_and_installs(monkeypatch, tmp_path):
         return Preset("paper", Params(), SimConfig(), META), frame
 
     monkeypatch.setattr(calibration, "calibrate", fake)
-    monkeypatch.setattr(calibration, "PRESET_DIR", tmp_path / "presets")
+    monkeypatch.setenv("SAFELANE_PRESET_DIR", str(tmp_path / "presets"))
+    shipped = calibration.PRESET_DIR / "paper.yaml"
+    before = shipped.read_bytes()
     out = tmp_path / "cal"
     result = CliRunner().invoke(
-        app, ["calibrate", "--candidates", "2", "--refine", "1", "--out", str(out), "--install"]
+        app, ["calibrate", "--candidates", "2", "--refine", "1", "--out", str(out), "--install", "--name", "mine"]
     )
     assert result.exit_code == 0, result.output
     assert "0.4900" in result.output  # the candidates table
-    for name in ("paper.yaml", "candidates.csv", "fit_per_cell.csv"):
-        assert (out / name).exists()
-    installed = calibration.load_preset(tmp_path / "presets" / "paper.yaml")
-    assert installed.meta["loss_mean_abs_diff"] == 0.1234
+    assert "/5" in result.output and "left]" in result.output  # the total and the time left
+    (run,) = out.iterdir()
+    for name in ("preset.yaml", "candidates.csv", "fit_per_cell.csv", "run.json"):
+        assert (run / name).exists()
+    installed = calibration.load_preset("mine")  # a user preset, by name
+    assert installed.meta["loss_mean_abs_diff"] == 0.1234 and installed.name == "mine"
+    assert installed.source == str(tmp_path / "presets" / "mine.yaml")
+    assert shipped.read_bytes() == before  # the package's own files are never written
+    refused = CliRunner().invoke(app, ["calibrate", "--out", str(out), "--install", "--name", "paper"])
+    assert refused.exit_code == 2 and "shipped preset" in refused.output
 
 
 def test_importing_the_package_and_commands_does_not_import_plotting():

@@ -132,7 +132,7 @@ def test_config_yaml_round_trip_and_unknown_keys(tmp_path):
     again = TrainConfig.load(path)
     assert again == cfg and again.config_hash() == cfg.config_hash()
     path.write_text(yaml.safe_dump({**tiny_config(), "optim": {"max_epochs": 2, "learning_rate": 1.0}}))
-    with pytest.raises(ValidationError, match="learning_rate"):
+    with pytest.raises(ValueError, match="learning_rate"):
         TrainConfig.load(path)
 
 
@@ -144,9 +144,10 @@ def test_cli_train_tiny_config(tmp_path):
 
     cfg = tmp_path / "tiny.yaml"
     cfg.write_text(yaml.safe_dump(tiny_config()))
-    out = tmp_path / "out"
-    result = CliRunner().invoke(app, ["train", "--config", str(cfg), "--out", str(out), "--no-progress"])
+    result = CliRunner().invoke(app, ["train", "--config", str(cfg), "--out", str(tmp_path / "out"), "--no-progress"])
     assert result.exit_code == 0, result.output
+    (out,) = (tmp_path / "out").iterdir()  # the run folder
+    assert json.loads((out / "run.json").read_text())["status"] == "complete"
     summary = json.loads((out / "summary.json").read_text())
     assert summary["epochs"] >= 1 and np.isfinite(summary["val_loss"])
     planner = MLPPlanner.load(out / "model.npz")
@@ -156,7 +157,7 @@ def test_cli_train_tiny_config(tmp_path):
     assert (out / "metrics.csv").read_text().startswith("round,epoch,train_loss,val_loss")
     bad = tmp_path / "bad.yaml"
     bad.write_text("seed: 0\nbogus: 1\n")
-    result = CliRunner().invoke(app, ["train", "--config", str(bad), "--out", str(out)])
+    result = CliRunner().invoke(app, ["train", "--config", str(bad), "--out", str(tmp_path / "out")])
     assert result.exit_code != 0 and "bogus" in result.output
 
 

@@ -15,6 +15,9 @@ _LAZY = {
     "simulate": ("safelane.sim", "simulate"),
     "simulate_batch": ("safelane.sim", "simulate_batch"),
     "SimConfig": ("safelane.sim", "SimConfig"),
+    "load_preset": ("safelane.sim.preset", "load_preset"),
+    "Preset": ("safelane.sim.preset", "Preset"),
+    "InputError": ("safelane.errors", "InputError"),
     "safety": ("safelane.safety", None),
     "sim": ("safelane.sim", None),
     "planners": ("safelane.planners", None),
@@ -30,5 +33,5 @@ def __getattr__(name: str):
     raise AttributeError(f"module 'safelane' has no attribute {name!r}")
 
 
-__all__ = ["Params", "SimConfig", "V2XMessage", "__version__", "chain_arrays", "leader_arrays", "simulate",
-           "simulate_batch"]
+__all__ = ["InputError", "Params", "Preset", "SimConfig", "V2XMessage", "__version__", "chain_arrays",
+           "leader_arrays", "load_preset", "simulate", "simulate_batch"]

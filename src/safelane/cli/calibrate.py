@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import time
 from pathlib import Path
 
 import typer
@@ -11,61 +12,84 @@ from . import app
 
 @app.command()
 def calibrate(
-    candidates: int = typer.Option(32, "--candidates", min=1, help="Latin-hypercube points of the first stage."),
+    candidates: int = typer.Option(64, "--candidates", min=1, help="Latin-hypercube points of the first stage."),
     samples: int = typer.Option(100, "--samples", min=1, help="Scenarios per Table 1 cell in the first stage."),
-    refine: int = typer.Option(16, "--refine", min=0, help="Local refinement steps around the best candidate."),
+    refine: int = typer.Option(32, "--refine", min=0, help="Local refinement steps around the best candidate."),
     finalists: int = typer.Option(4, "--finalists", min=1, help="Best candidates re-scored in the second stage."),
     final_samples: int = typer.Option(400, "--final-samples", min=1, help="Scenarios per cell when re-scoring."),
-    seed: int = typer.Option(0, "--seed", help="Seed of the search and of every simulation."),
-    out: Path = typer.Option(Path("results/calibration"), "--out", "-o", help="Folder for the preset and tables."),
+    seed: int = typer.Option(0, "--seed", min=0, help="Seed of the search and of every simulation."),
+    out: Path = typer.Option(
+        Path("results/calibration"), "--out", "-o", help="Parent folder; the run goes to OUT/<run-id>/."
+    ),
     workers: int = typer.Option(1, "--workers", min=1, help="Processes per simulation batch."),
-    install: bool = typer.Option(False, "--install", help="Also write the result as the package's 'paper' preset."),
+    install: bool = typer.Option(
+        False, "--install", help="Also install the result as a user preset (see --name), outside the package."
+    ),
+    name: str = typer.Option("calibrated", "--name", help="Name of the installed user preset (--preset NAME)."),
+    preset_dir: Path = typer.Option(
+        None, "--preset-dir", help="Folder of user presets; default $SAFELANE_PRESET_DIR or ~/.config/safelane/presets."
+    ),
 ) -> None:
-    """Calibrate the 'paper' preset to the published N = 1 and N = 10 rows of Table 1.
+    """Calibrate the quantities the paper leaves open to its published N = 1 and N = 10 rows of Table 1.
 
     Searches accelerations, p_m, the horizon and planner gains over plausible ranges (N = 3 is never used).
+    The defaults are the settings that built the shipped 'paper' preset. Rather different parameter sets fit
+    about equally well: read the result as one good choice, not a measurement.
 
-    Loss: mean absolute success-rate difference over the 40 published cells; every candidate is shown.
+    Loss: mean absolute success-rate difference over the 40 published cells; every candidate is shown, with
+    the total and an estimate of the time left.
 
-    Writes OUT/paper.yaml, OUT/candidates.csv and OUT/fit_per_cell.csv; --install also PRESET_DIR/paper.yaml.
+    Writes OUT/<run-id>/ with preset.yaml, candidates.csv, fit_per_cell.csv and run.json. --install also
+    writes the preset as a user preset NAME (never into the package): use it with --preset NAME.
 
-    Example: safelane calibrate --candidates 40 --refine 24 --finalists 4 --final-samples 400 --install
+    Example: safelane calibrate --install --name mine   (then: safelane simulate --preset mine)
     """
     import pandas as pd
     from rich.console import Console
 
-    from ..experiments.calibration import PRESET_DIR, SEARCH_SPACE
+    from ..experiments.calibration import SEARCH_SPACE
     from ..experiments.calibration import calibrate as run
+    from ..sim.preset import PRESET_DIR, install_preset, user_preset_dir
+    from ._runs import check_out_dir, run_folder
 
+    if install and (PRESET_DIR / f"{name}.yaml").exists():
+        raise typer.BadParameter(f"{name!r} is a shipped preset and cannot be replaced; choose another name",
+                                 param_hint="--name")
+    out = check_out_dir(out)
+    target = preset_dir or user_preset_dir()
+    if install:
+        check_out_dir(target, "--preset-dir")
     console = Console()
-    console.print("calibration candidates (loss: mean |ours - paper| over 40 cells; * = best so far)")
+    finalists = min(finalists, candidates)
+    total = candidates + refine + finalists
+    console.print(f"calibration: {total} candidates ({candidates} search, {refine} refine, {finalists} final); "
+                  "loss: mean |ours - paper| over 40 cells; * = best so far")
     best = [float("inf")]
+    start = time.perf_counter()
 
     def on_candidate(i: int, point: dict, loss: float) -> None:
         mark = " *" if loss < best[0] else "  "
         best[0] = min(best[0], loss)
         stage = "search" if i < candidates else "refine" if i < candidates + refine else "final"
         values = "  ".join(f"{k}={point[k]:.3g}" for k in SEARCH_SPACE)
-        console.print(f"{i:4d} {stage:6s} loss {loss:.4f}{mark}  {values}", soft_wrap=True)
+        elapsed = time.perf_counter() - start
+        eta = elapsed / (i + 1) * (total - i - 1)
+        console.print(f"{i + 1:4d}/{total} {stage:6s} loss {loss:.4f}{mark}  {values}  "
+                      f"[{elapsed:.0f} s, ~{eta:.0f} s left]", soft_wrap=True, markup=False)
 
-    preset, frame = run(
-        candidates=candidates,
-        samples=samples,
-        refine=refine,
-        finalists=min(finalists, candidates),
-        final_samples=final_samples,
-        seed=seed,
-        on_candidate=on_candidate,
-        workers=workers,
-    )
-    console.print()
-    out.mkdir(parents=True, exist_ok=True)
-    text = preset.to_yaml()
-    (out / "paper.yaml").write_text(text, encoding="utf-8")
-    frame.to_csv(out / "candidates.csv", index=False)
-    pd.DataFrame(preset.meta.get("per_cell", [])).to_csv(out / "fit_per_cell.csv", index=False)
-    console.print(f"chosen preset: loss {preset.meta.get('loss_mean_abs_diff')} (re-scored); wrote {out}/")
+    args = {"candidates": candidates, "samples": samples, "refine": refine, "finalists": finalists,
+            "final_samples": final_samples, "seed": seed, "workers": workers}
+    with run_folder(out, f"calibrate-seed{seed}", {"kind": "calibrate", **args}) as (run_dir, info):
+        preset, frame = run(**args, on_candidate=on_candidate)
+        console.print()
+        text = preset.to_yaml()
+        (run_dir / "preset.yaml").write_text(text, encoding="utf-8")
+        frame.to_csv(run_dir / "candidates.csv", index=False)
+        pd.DataFrame(preset.meta.get("per_cell", [])).to_csv(run_dir / "fit_per_cell.csv", index=False)
+        info["loss_mean_abs_diff"] = preset.meta.get("loss_mean_abs_diff")
+        if install:
+            path = install_preset(preset, name, target)
+            info["installed"] = str(path)
+    console.print(f"chosen preset: loss {preset.meta.get('loss_mean_abs_diff')} (re-scored); wrote {run_dir}/")
     if install:
-        PRESET_DIR.mkdir(parents=True, exist_ok=True)
-        (PRESET_DIR / "paper.yaml").write_text(text, encoding="utf-8")
-        console.print(f"installed {PRESET_DIR / 'paper.yaml'}")
+        console.print(f"installed user preset {name!r}: {path} (use --preset {name})")

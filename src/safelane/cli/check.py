@@ -18,22 +18,52 @@ def check(
     ego_vy: float = typer.Option(0.5, help="Ego lateral speed [m/s], positive toward the target lane."),
     l1_p: float = typer.Option(20.0, help="L1 position [m]."),
     l1_v: float = typer.Option(30.0, help="L1 speed [m/s]."),
-    l1_decel: float = typer.Option(None, help="L1 worst-case deceleration [m/s²]; default a_x_d."),
+    l1_decel: float = typer.Option(None, help="L1 worst-case deceleration [m/s²]; default a_x_d, or from --chain-p."),
+    chain_p: list[float] = typer.Option(
+        None, "--chain-p", help="Positions of L2..L(N+1) [m] (repeat): L1's worst case then follows the chain."
+    ),
+    chain_v: list[float] = typer.Option(None, "--chain-v", help="Speeds of L2..L(N+1) [m/s] (repeat, as --chain-p)."),
+    promise: float = typer.Option(0.5, "--promise", help="Promised max deceleration of L1..LN [m/s²] (--chain-p)."),
     f_p: float = typer.Option(-20.0, help="Follower position [m]."),
     f_v: float = typer.Option(30.0, help="Follower speed [m/s]."),
     aggressive: bool = typer.Option(True, "--aggressive/--collaborative", help="Follower's assumed worst case."),
     params_file: Path = typer.Option(None, "--params", help="YAML/JSON file with Params fields."),
+    preset: str = typer.Option(
+        None, "--preset", help="Take Params from a preset (name such as 'paper' or a YAML path); default Params()."
+    ),
 ) -> None:
     """Verify one state: does a safe evasion trajectory exist? Prints the plan as JSON.
 
+    Parameters: --preset paper (the calibrated ones), --params FILE, or the uncalibrated defaults. With
+    --chain-p/--chain-v (L2..L(N+1)), L1's worst-case deceleration comes from the connected chain (Eqs. 1–3).
+
     Example: safelane check --ego-py 1.5 --ego-vy 0.6 --f-p -12 --aggressive
+    Example: safelane check --preset paper --chain-p 40 --chain-p 60 --chain-v 30 --chain-v 30
     """
     from ..config import load_params
-    from ..safety import Reason, plan_evasion
+    from ..safety import Reason, plan_evasion, worst_case_leader_decel
+    from ..sim.preset import load_preset
 
-    params = load_params(params_file)
-    decel = params.a_x_d if l1_decel is None else l1_decel
+    if preset is not None and params_file is not None:
+        raise typer.BadParameter("give either --preset or --params, not both", param_hint="--preset")
     try:
+        params = load_preset(preset).params if preset is not None else load_params(params_file)
+    except ValueError as exc:
+        raise typer.BadParameter(str(exc), param_hint="--preset" if preset is not None else "--params") from exc
+    chain_p, chain_v = list(chain_p or []), list(chain_v or [])
+    if len(chain_p) != len(chain_v):
+        raise typer.BadParameter(
+            f"give one --chain-v per --chain-p; got {len(chain_p)} positions and {len(chain_v)} speeds",
+            param_hint="--chain-v",
+        )
+    if chain_p and l1_decel is not None:
+        raise typer.BadParameter("give either --l1-decel or a chain (--chain-p), not both", param_hint="--l1-decel")
+    try:
+        if chain_p:
+            n = len(chain_p)
+            decel = float(worst_case_leader_decel([l1_p, *chain_p], [l1_v, *chain_v], [promise] * n, params))
+        else:
+            decel = params.a_x_d if l1_decel is None else l1_decel
         plan = plan_evasion(ego_px, ego_py, ego_vx, ego_vy, l1_p, l1_v, decel, f_p, f_v, aggressive, params)
     except ValueError as exc:
         raise typer.BadParameter(str(exc)) from exc
@@ -41,12 +71,14 @@ def check(
     out = {
         "evasion_exists": bool(plan.feasible),
         "reasons": reasons,
+        "l1_decel": float(decel),
         "t_y_f": float(plan.t_y_f),
         "t_y_switch": float(plan.t_y_switch),
         "t_x1": float(plan.t_x1),
         "t_x2": float(plan.t_x2),
         "min_gap_leader_m": float(plan.min_gap_leader),
         "min_gap_follower_m": float(plan.min_gap_follower),
+        "preset": preset,
         "params": params.model_dump(),
     }
     typer.echo(json.dumps(out, indent=2))

@@ -14,7 +14,9 @@ from . import app
 @app.command()
 def reproduce(
     quick: bool = typer.Option(False, "--quick", help="Reduced grid: the same code on fewer samples, in seconds."),
-    seed: int = typer.Option(0, "--seed", help="Seed of every random draw; the same seed reproduces every number."),
+    seed: int = typer.Option(
+        0, "--seed", min=0, help="Seed of every random draw; the same seed reproduces every number."
+    ),
     out: Path = typer.Option(Path("results"), "--out", "-o", help="Parent folder; the run goes to OUT/<run-id>/."),
     workers: int = typer.Option(1, "--workers", min=1, help="Processes per simulation batch."),
     preset: str = typer.Option("paper", "--preset", help="Preset name (safelane/presets/NAME.yaml) or a YAML path."),
@@ -31,22 +33,30 @@ def reproduce(
 
     Example: safelane reproduce --quick --seed 0 --out results
     """
+    from ..experiments.registry import get_experiment
     from ..experiments.reproduce import reproduce as run
+    from ..sim.preset import load_preset
+    from ._runs import check_out_dir
 
     command = "safelane " + shlex.join(sys.argv[1:]) if sys.argv[1:] else None
     try:
-        run_dir = run(
-            out,
-            seed=seed,
-            quick=quick,
-            workers=workers,
-            preset=preset,
-            progress=progress,
-            experiments=only or None,
-            command=command,
-        )
-    except FileNotFoundError as exc:
-        raise typer.BadParameter(str(exc), param_hint="--preset") from exc
+        load_preset(preset)  # fail before any work
     except ValueError as exc:
-        raise typer.BadParameter(str(exc)) from exc
-    typer.echo(str(run_dir))
+        raise typer.BadParameter(str(exc), param_hint="--preset") from exc
+    for name in only or ():
+        try:
+            get_experiment(name)
+        except ValueError as exc:
+            raise typer.BadParameter(str(exc), param_hint="--only") from exc
+    out = check_out_dir(out)
+    run_dir = run(
+        out,
+        seed=seed,
+        quick=quick,
+        workers=workers,
+        preset=preset,
+        progress=progress,
+        experiments=only or None,
+        command=command,
+    )
+    typer.echo(str(run_dir / "report.html"))

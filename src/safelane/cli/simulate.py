@@ -1,4 +1,4 @@
-"""``safelane simulate``: one experiment cell → summary table on screen, CSVs (and a trace plot) on disk."""
+"""``safelane simulate``: one experiment cell → summary table on screen, CSVs (and a trace plot) in a run folder."""
 
 from __future__ import annotations
 
@@ -11,82 +11,120 @@ from . import app
 
 @app.command()
 def simulate(
-    planner: str = typer.Option("CV_all", "--planner", "-p", help="Planner variant: CV_all, CV_follow, CV_none, ..."),
+    planner: str = typer.Option(
+        "CV_all", "--planner", "-p", help="Planner variant: CV_all, CV_follow, CV_none or No_agg_assess."
+    ),
     leaders: int = typer.Option(5, "--leaders", "-n", help="Number N of connected leaders L1..LN."),
     decel: float = typer.Option(5.0, "--decel", "-d", help="Sudden deceleration a_x_N+1_d of L(N+1), in m/s²."),
     samples: int = typer.Option(1000, "--samples", "-s", help="Number of random scenarios."),
-    seed: int = typer.Option(0, "--seed", help="Seed of every random draw; the same seed gives the same table."),
+    seed: int = typer.Option(0, "--seed", help="Seed; the same cell and seed give the same numbers as the report."),
     p_v: float = typer.Option(0.0, "--p-v", help="Unexpected promise-violation probability per period, in [0, 1]."),
     params_file: Path = typer.Option(None, "--params", help="YAML/JSON file with Params fields."),
     preset: str = typer.Option(
-        None, "--preset", help="A calibrated preset (e.g. 'paper'): its params, horizon, assessment and planner."
+        None, "--preset", help="A preset name (e.g. 'paper') or YAML path: its params, horizon, assessment, planner."
     ),
     nominal: str = typer.Option(None, "--nominal", help="Nominal planner: expert (default), mlp or teacher."),
-    assessment: str = typer.Option("observed", "--assessment", help="'observed' (the real one) or 'truth'."),
-    out: Path = typer.Option(Path("results/simulate"), "--out", "-o", help="Output folder (created if missing)."),
+    assessment: str = typer.Option(
+        None, "--assessment", help="'observed' (the real one; default) or 'truth' (F's true type)."
+    ),
+    out: Path = typer.Option(
+        Path("results/simulate"), "--out", "-o", help="Parent folder; the run goes to OUT/<run-id>/ (created)."
+    ),
     trace: bool = typer.Option(False, "--trace", help="Also write one scenario's trajectories (CSV) and a plot."),
     progress: bool = typer.Option(True, "--progress/--no-progress", help="Show a progress bar."),
 ) -> None:
     """Simulate one cell of the paper's sampler and summarise it (rates with 95 % Wilson intervals).
 
-    Writes STEM_scenarios.csv (one row per scenario) and STEM_summary.csv into OUT, with
-    STEM = PLANNER_N<leaders>_decel<decel>_pv<p_v>_seed<seed>.
+    Writes OUT/<run-id>/ with scenarios.csv (one row per scenario), summary.csv and run.json (command, preset,
+    planner, nominal planner, samples, assessment, seed, versions); run-id = UTC start time and the cell.
 
-    With --trace also STEM_trace.csv and STEM_trace.png: the first scenario's lateral position and longitudinal
-    speed over time.
+    With --trace also trace.csv and trace.png: the first scenario's lateral position and longitudinal speed.
+
+    A cell (planner, N, decel, p_v) and seed give the same numbers here, in Python (safelane.simulate) and in
+    the report of 'safelane reproduce' under the same preset.
 
     Example: safelane simulate --planner CV_all --leaders 5 --decel 5 --samples 1000 --seed 0
     Example: safelane simulate --preset paper --nominal mlp --leaders 1 --decel 4
     """
-    from pydantic import ValidationError
-
     from ..config import load_params
-    from ..experiments.calibration import load_preset
-    from ..planners.registry import get_nominal
+    from ..errors import InputError
     from ..sim import SimConfig
     from ..sim import simulate as run
+    from ..sim.inputs import as_nominal, check_cell_args
+    from ..sim.preset import load_preset
+    from ._runs import check_out_dir, preset_record, run_folder
+
+    def bad(exc: Exception, option: str):
+        return typer.BadParameter(str(exc), param_hint=option)
 
     if preset is not None and params_file is not None:
         raise typer.BadParameter("give either --preset or --params, not both", param_hint="--preset")
     try:
         chosen = load_preset(preset) if preset is not None else None
-        params = chosen.params if chosen else load_params(params_file)
-    except (ValidationError, ValueError, FileNotFoundError) as exc:
-        raise typer.BadParameter(str(exc), param_hint="--preset" if preset else "--params") from exc
-    try:
-        config = (chosen.sim if chosen else SimConfig()).model_copy(update={"assessment": assessment})
-        SimConfig.model_validate(config.model_dump())
-    except ValidationError as exc:
-        raise typer.BadParameter(str(exc), param_hint="--assessment") from exc
-    try:
-        planner_obj = get_nominal(nominal) if nominal else (chosen.nominal() if chosen else None)
     except ValueError as exc:
-        raise typer.BadParameter(str(exc), param_hint="--nominal") from exc
+        raise bad(exc, "--preset") from exc
     try:
+        params = chosen.params if chosen else load_params(params_file)
+    except ValueError as exc:
+        raise bad(exc, "--params") from exc
+    base = chosen.sim if chosen else SimConfig()
+    if assessment is not None and assessment not in ("observed", "truth"):
+        raise typer.BadParameter(f"{assessment!r} is not one of 'observed', 'truth'", param_hint="--assessment")
+    config = base.model_copy(update={"assessment": assessment or base.assessment})
+    try:
+        planner_obj = as_nominal(nominal) if nominal else (chosen.nominal() if chosen else None)
+    except ValueError as exc:
+        raise bad(exc, "--nominal") from exc
+    options = {"planner": "--planner", "n_leaders": "--leaders", "decel": "--decel", "samples": "--samples",
+               "seed": "--seed", "p_v": "--p-v"}
+    try:
+        check_cell_args(planner, leaders, decel, samples, seed, p_v)
+    except InputError as exc:
+        raise bad(exc, options.get(exc.where or "", "--planner")) from exc
+    out = check_out_dir(out)
+
+    label = f"{planner}_N{leaders}_decel{decel:g}_pv{p_v:g}_seed{seed}"
+    info = {
+        "kind": "simulate",
+        "preset": preset_record(chosen),
+        "params_file": None if params_file is None else str(params_file),
+        "planner": planner,
+        "nominal": nominal or ("expert (preset gains)" if chosen else "expert"),
+        "n_leaders": leaders,
+        "decel": decel,
+        "p_v": p_v,
+        "samples": samples,
+        "seed": seed,
+        "assessment": config.assessment,
+        "params": params.model_dump(),
+        "sim": config.model_dump(),
+    }
+    with run_folder(out, label, info) as (run_dir, info):
         result = run(planner, leaders, decel, samples, seed, p_v=p_v, params=params, config=config, trace=trace,
                      progress=progress, nominal=planner_obj)  # fmt: skip
-    except ValueError as exc:
-        raise typer.BadParameter(str(exc)) from exc
+        table, summary = result.table, result.summary()
+        written = [run_dir / "scenarios.csv", run_dir / "summary.csv"]
+        table.to_csv(written[0], index=False)
+        summary.to_csv(written[1], index=False)
+        if trace and result.trace is not None:
+            from ..reporting.trace import plot_trace
 
-    stem = f"{planner}_N{leaders}_decel{decel:g}_pv{p_v:g}_seed{seed}"
-    out.mkdir(parents=True, exist_ok=True)
-    table, summary = result.table, result.summary()
-    written = [out / f"{stem}_scenarios.csv", out / f"{stem}_summary.csv"]
-    table.to_csv(written[0], index=False)
-    summary.to_csv(written[1], index=False)
-    if trace and result.trace is not None:
-        from ..reporting.trace import plot_trace
-
-        first = result.trace[result.trace["scenario_id"] == table["scenario_id"].iloc[0]]
-        written.append(out / f"{stem}_trace.csv")
-        first.to_csv(written[-1], index=False)
-        scenario = int(first["scenario_id"].iloc[0])
-        title = f"{planner}, N = {leaders}, $a_{{x,N+1,d}}$ = {decel:g} m/s², scenario {scenario}"
-        png = out / f"{stem}_trace.png"
-        written.append(plot_trace(first, png, y_boundary=params.y_boundary, lane_width=params.lane_width, title=title))
-    _print_summary(table, planner, leaders, decel, samples, seed, p_v, assessment)
+            first = result.trace[result.trace["scenario_id"] == table["scenario_id"].iloc[0]]
+            written.append(run_dir / "trace.csv")
+            first.to_csv(written[-1], index=False)
+            scenario = int(first["scenario_id"].iloc[0])
+            title = f"{planner}, N = {leaders}, $a_{{x,N+1,d}}$ = {decel:g} m/s², scenario {scenario}"
+            png = run_dir / "trace.png"
+            written.append(
+                plot_trace(first, png, y_boundary=params.y_boundary, lane_width=params.lane_width, title=title)
+            )
+        info["files"] = [p.name for p in written] + ["run.json"]
+        info["success_rate"] = float(table["success"].mean())
+        info["collision_rate"] = float(table["collision"].mean())
+    _print_summary(table, planner, leaders, decel, samples, seed, p_v, config.assessment)
     for path in written:
         typer.echo(f"wrote {path}")
+    typer.echo(f"run folder: {run_dir}")
 
 
 def _print_summary(table, planner, leaders, decel, samples, seed, p_v, assessment) -> None:

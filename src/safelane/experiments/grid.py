@@ -11,6 +11,7 @@ import pandas as pd
 from ..params import Params
 from ..planners.base import NominalPlanner
 from ..sim.engine import SimConfig, simulate_batch
+from ..sim.inputs import cell_rng as _cell_rng
 from ..sim.scenario import ScenarioConfig, concat, paper_scenarios, penetration_scenarios
 
 
@@ -29,8 +30,7 @@ def cell_rng(seed: int, cell: Cell) -> np.random.Generator:
     """The generator of a cell's initial states: keyed by the run seed and the cell's scenario settings only,
     so a cell gives the same numbers whichever grid it runs in, and every planner sees the same scenarios
     (common random numbers: planner differences are not sampling noise)."""
-    pen = -1 if cell.penetration is None else round(cell.penetration * 1e6)
-    return np.random.default_rng([seed, cell.n_leaders, round(cell.decel * 1e6), round(cell.p_v * 1e6), pen + 1])
+    return _cell_rng(seed, cell.n_leaders, cell.decel, cell.p_v, cell.penetration)  # the one scheme: sim/inputs
 
 
 def run_cells(

@@ -22,6 +22,7 @@ import datetime as dt
 import importlib.util
 import json
 import platform
+import shutil
 import time
 from collections.abc import Mapping, Sequence
 from dataclasses import asdict
@@ -71,7 +72,12 @@ def reproduce(
         raise ValueError(f"configs for experiments that do not run: {sorted(set(configs) - set(names))}")
     started = dt.datetime.now(dt.timezone.utc)
     run_dir = _new_run_dir(Path(out_dir or "results"), run_id(seed, quick, started))
-    results = _run_all(names, configs, preset, seed, quick, workers, progress)
+    try:
+        results = _run_all(names, configs, preset, seed, quick, workers, progress)
+    except BaseException:
+        # Interrupted (Ctrl-C) or failed before anything was written: leave no empty run folder behind.
+        shutil.rmtree(run_dir, ignore_errors=True)
+        raise
 
     t0 = time.perf_counter()
     data_files = _write_tables(results, run_dir)
@@ -108,7 +114,7 @@ def reproduce(
     _write_run_json(record)
     write_report(record)
     if progress:
-        _console().print(f"report: {run_dir / 'report.md'} (total {sum(timings.values()):.1f} s)")
+        _console().print(f"report: {run_dir / 'report.html'} (total {sum(timings.values()):.1f} s)")
     return run_dir
 
 
@@ -220,6 +226,7 @@ def _write_run_json(r) -> None:
         "command": r.command,
         "preset": {
             "name": r.preset.name,
+            "source": getattr(r.preset, "source", None),
             "params": r.preset.params.model_dump(),
             "sim": r.preset.sim.model_dump(),
             "planner": dict(r.preset.planner),

@@ -15,6 +15,7 @@ from ..params import Params
 from ..planners.base import ExpertPlanner, NominalPlanner
 from ._alloc import tune_allocator
 from .config import SimConfig
+from .inputs import cell_rng, check_cell_args, check_settings, resolve
 from .results import SimResult, results_table, trace_rows
 from .scenario import ScenarioBatch, ScenarioConfig, check_batch, paper_scenarios
 from .step import ClosedLoop
@@ -31,16 +32,25 @@ def simulate(
     params: Params | None = None,
     config: SimConfig | None = None,
     scenario: ScenarioConfig | None = None,
-    nominal: NominalPlanner | None = None,
+    nominal: NominalPlanner | str | None = None,
     trace: bool = False,
     record_observations: bool = False,
     progress: bool = False,
+    preset: str | None = None,
+    trace_limit: int = 16,
 ) -> SimResult:
     """Simulate one experiment cell of the paper's sampler.
 
+    ``preset`` (a name such as ``"paper"``, a YAML path or a ``Preset``) supplies ``params``, ``config`` and the
+    nominal planner where those are not given; ``nominal`` takes a registered name (``"mlp"``). The cell's
+    scenarios come from :func:`~safelane.sim.inputs.cell_rng`, as in ``safelane reproduce``: the same cell and
+    seed give the same numbers as the report. Bad arguments raise ``InputError`` naming the argument.
+
     Example: ``simulate("CV_all", n_leaders=5, decel=5.0, samples=1000, seed=0).summary()``.
     """
-    rng = np.random.default_rng(seed)
+    check_cell_args(planner, n_leaders, decel, samples, seed, p_v)
+    params, config, scenario, nominal = resolve(preset, params, config, scenario, nominal)
+    rng = cell_rng(seed, n_leaders, decel, p_v)
     batch = paper_scenarios(planner, n_leaders, decel, samples, rng, scenario, p_v=p_v)
     return simulate_batch(
         batch,
@@ -51,6 +61,7 @@ def simulate(
         trace=trace,
         record_observations=record_observations,
         progress=progress,
+        trace_limit=trace_limit,
     )
 
 
@@ -77,6 +88,7 @@ def simulate_batch(
     cfg = config or SimConfig()
     nominal = nominal or ExpertPlanner()
     check_batch(batch, prm)
+    check_settings(prm, cfg)
     tune_allocator()
     if workers > 1 and len(batch) >= 2 * workers and not (trace or record_observations):
         return _simulate_parallel(batch, seed, prm, cfg, nominal, workers)

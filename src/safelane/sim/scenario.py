@@ -11,10 +11,11 @@ import warnings
 from dataclasses import dataclass, fields
 
 import numpy as np
-from pydantic import BaseModel, ConfigDict, Field
+from pydantic import BaseModel, ConfigDict, Field, model_validator
 
 from ..params import Params
 from ..planners.variants import VARIANT_NAMES, get_variant
+from .inputs import check_scenario_ranges
 
 
 class ScenarioConfig(BaseModel):
@@ -34,6 +35,9 @@ class ScenarioConfig(BaseModel):
         0.5, ge=0.0, le=1.0, description="Share of aggressive followers among non-connected ones (our assumption)."
     )
     human_share: float = Field(0.0, ge=0.0, le=1.0, description="Share of human-driven connected leaders.")
+
+    # Reversed or impossible ranges fail here, naming the field (not as a NumPy error later): see sim/inputs.py.
+    _check_ranges = model_validator(mode="after")(check_scenario_ranges)
 
 
 @dataclass(frozen=True)

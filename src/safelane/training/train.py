@@ -102,6 +102,17 @@ def _progress(enabled: bool):
     return Progress(*cols, disable=not enabled, transient=False)
 
 
+def _stage_printer(progress: bool, t_start: float):
+    """Without progress bars, one line per stage on stderr (with the elapsed time), so a long run is not silent."""
+    import sys
+
+    def say(message: str) -> None:
+        if not progress:
+            print(f"[train {time.perf_counter() - t_start:6.1f} s] {message}", file=sys.stderr, flush=True)
+
+    return say
+
+
 def _fit(module, torch, data, cfg: TrainConfig, max_epochs: int, rng, progress, round_no: int, log: list) -> None:
     """Adam with early stopping on ``data = (x_tr, y_tr, x_va, y_va)`` tensors; restores the best weights."""
     x_tr, y_tr, x_va, y_va = data
@@ -145,10 +156,28 @@ def _fit(module, torch, data, cfg: TrainConfig, max_epochs: int, rng, progress, 
 
 
 def train(cfg: TrainConfig, out_dir: Path | str, progress: bool = True) -> TrainResult:
-    """Run the whole pipeline of the module docstring; returns the planner and writes the files to ``out_dir``."""
-    from .torch_model import TorchPlanner, init_weights, require_torch, to_planner
+    """Run the whole pipeline of the module docstring; returns the planner and writes the files to ``out_dir``.
+
+    Deterministic: PyTorch runs with ``torch.use_deterministic_algorithms(True)`` on ``cfg.threads`` threads and
+    NumPy's BLAS on as many (restored afterwards), so the same config on the same software gives the same
+    weights bit for bit."""
+    from threadpoolctl import threadpool_limits
+
+    from .torch_model import require_torch
 
     torch = require_torch()
+    previous = torch.are_deterministic_algorithms_enabled()
+    torch.use_deterministic_algorithms(True)
+    try:
+        with threadpool_limits(limits=cfg.threads, user_api="blas"):
+            return _train(torch, cfg, out_dir, progress)
+    finally:
+        torch.use_deterministic_algorithms(previous)
+
+
+def _train(torch, cfg: TrainConfig, out_dir: Path | str, progress: bool) -> TrainResult:
+    from .torch_model import TorchPlanner, init_weights, to_planner
+
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
     torch.set_num_threads(cfg.threads)
@@ -168,10 +197,13 @@ def train(cfg: TrainConfig, out_dir: Path | str, progress: bool = True) -> Train
     def as_tensors(parts):
         return tuple(torch.from_numpy(np.asarray(a, np.float32)) for a in parts)
 
+    say = _stage_printer(progress, t_start)
     with _progress(progress) as bar:
         task = bar.add_task("labelling states", total=1, info=f"{cfg.data.n_states} states")
+        say(f"labelling {cfg.data.n_states} teacher states")
         parts = labelled(sample_observations(cfg.data.n_states, rng, prm, cfg.data))
         bar.update(task, completed=1, info=f"{timings['labelling_s']:.1f} s")
+        say(f"fitting round 0 (up to {cfg.optim.max_epochs} epochs)")
         mean = parts[0].mean(axis=0)
         std = parts[0].std(axis=0)
         std = np.where(std > 1e-8, std, 1.0)  # a constant feature (e.g. no connected followers) passes through
@@ -181,6 +213,7 @@ def train(cfg: TrainConfig, out_dir: Path | str, progress: bool = True) -> Train
         _fit(module, torch, as_tensors(parts), cfg, cfg.optim.max_epochs, rng, bar, 0, log)
         timings["fit_s"] = time.perf_counter() - t0
         for r in range(1, cfg.dagger.rounds + 1):
+            say(f"DAgger round {r}/{cfg.dagger.rounds}: simulating, labelling and fitting")
             t0 = time.perf_counter()
             visited = collect_states(to_planner(module), cfg.dagger, prm, rng, seed=cfg.seed * 1000 + r * 100)
             timings["dagger_sim_s"] = timings.get("dagger_sim_s", 0.0) + time.perf_counter() - t0
@@ -218,6 +251,7 @@ def train(cfg: TrainConfig, out_dir: Path | str, progress: bool = True) -> Train
     (out_dir / "config.yaml").write_text(yaml.safe_dump(cfg.model_dump(mode="json"), sort_keys=False))
     ev = cfg.evaluation
     if ev.cells:
+        say(f"closed-loop evaluation: {len(ev.cells)} cells x {ev.samples} scenarios")
         baselines = {"expert": ExpertPlanner(), "teacher": teacher}
         candidates = {"mlp": planner, **{b: baselines[b] for b in ev.baselines}}
         t0 = time.perf_counter()
@@ -227,4 +261,5 @@ def train(cfg: TrainConfig, out_dir: Path | str, progress: bool = True) -> Train
     (out_dir / "summary.json").write_text(json.dumps(summary, indent=2))
     card = {**planner.full_metadata(), "closed_loop": json.loads(table.to_json(orient="records")) if ev.cells else []}
     (out_dir / "model.json").write_text(json.dumps(card, indent=2))
+    say("done")
     return TrainResult(planner=planner, summary=summary, metrics=metrics, out_dir=out_dir)

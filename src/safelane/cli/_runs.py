@@ -1,0 +1,105 @@
+"""Where command outputs go: ``--out`` checked before any work, one run folder per run, ``run.json`` in each.
+
+A run folder is ``OUT/<UTC start>-<label>`` (``-2``, ``-3``… when a run in the same second took the name).
+Its ``run.json`` records the command, the preset, the planners, the samples, the assessment, the seed, the
+software versions and ``status``: ``running`` while it runs, then ``complete`` — or ``interrupted``
+(Ctrl-C) / ``failed`` when it stops early; a folder left empty by an early stop is removed.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import datetime as dt
+import json
+import os
+import shlex
+import sys
+import tempfile
+from collections.abc import Iterator
+from pathlib import Path
+
+from ..errors import InputError
+
+
+def check_out_dir(out: Path, option: str = "--out") -> Path:
+    """Create ``out`` (and parents) and prove it is writable, before any work; :class:`InputError` naming
+    ``option``, the value and why otherwise."""
+    out = Path(out).expanduser()
+    if out.exists() and not out.is_dir():
+        raise InputError(f"{option} {str(out)!r} is a file; expected a folder (it is created if missing)", option)
+    try:
+        out.mkdir(parents=True, exist_ok=True)
+        with tempfile.NamedTemporaryFile(dir=out, prefix=".safelane-write-test-"):
+            pass
+    except OSError as exc:
+        reason = exc.strerror or type(exc).__name__
+        raise InputError(f"{option} {str(out)!r} is not a writable folder: {reason}", option) from exc
+    return out
+
+
+def new_run_dir(base: Path, label: str, now: dt.datetime | None = None) -> Path:
+    """A fresh folder ``base/<UTC timestamp>-<label>``."""
+    now = now or dt.datetime.now(dt.timezone.utc)
+    stem = f"{now:%Y%m%dT%H%M%SZ}-{label}"
+    for k in range(1, 1000):
+        path = base / (stem if k == 1 else f"{stem}-{k}")
+        try:
+            path.mkdir(parents=True)
+        except FileExistsError:
+            continue
+        return path
+    raise InputError(f"could not create a run folder under {base}", "--out")
+
+
+def command_line() -> str:
+    """The command as typed (``safelane ...``)."""
+    return "safelane " + shlex.join(sys.argv[1:]) if sys.argv[1:] else "safelane"
+
+
+def write_run_json(run_dir: Path, info: dict) -> Path:
+    path = Path(run_dir) / "run.json"
+    path.write_text(json.dumps(info, indent=2, default=str) + "\n", encoding="utf-8")
+    return path
+
+
+def preset_record(preset) -> dict | None:
+    """What ``run.json`` stores of a preset: name, source file and every value."""
+    if preset is None:
+        return None
+    return {
+        "name": preset.name,
+        "source": getattr(preset, "source", None),
+        "params": preset.params.model_dump(),
+        "sim": preset.sim.model_dump(),
+        "planner": dict(preset.planner),
+    }
+
+
+@contextlib.contextmanager
+def run_folder(out: Path, label: str, info: dict) -> Iterator[tuple[Path, dict]]:
+    """Create the run folder, write ``run.json`` (status ``running``) and yield ``(folder, info)``; the caller
+    may add to ``info``. On exit ``run.json`` is rewritten with the final status; a folder that holds nothing
+    but ``run.json`` after an early stop is removed."""
+    from ..experiments.reproduce import software_versions
+
+    run_dir = new_run_dir(out, label)
+    started = dt.datetime.now(dt.timezone.utc)
+    info = {"run_id": run_dir.name, "command": command_line(), **info, "started_utc": f"{started:%Y-%m-%d %H:%M:%S}",
+            "status": "running", "versions": software_versions()}
+    write_run_json(run_dir, info)
+    status = "failed"
+    try:
+        yield run_dir, info
+        status = "complete"
+    except KeyboardInterrupt:
+        status = "interrupted"
+        raise
+    finally:
+        info["status"] = status
+        info["finished_utc"] = f"{dt.datetime.now(dt.timezone.utc):%Y-%m-%d %H:%M:%S}"
+        if status != "complete" and {p.name for p in run_dir.iterdir()} <= {"run.json"}:
+            with contextlib.suppress(OSError):
+                (run_dir / "run.json").unlink()
+                os.rmdir(run_dir)
+        else:
+            write_run_json(run_dir, info)
