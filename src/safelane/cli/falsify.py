@@ -15,7 +15,8 @@ def falsify(
     scenarios: int = typer.Option(10_000, "--scenarios", "-n", min=0, help="Simulate at least this many scenarios."),
     seed: int = typer.Option(0, "--seed", min=0, help="Seed of every draw; with --minutes 0 the report repeats."),
     method: str = typer.Option("all", "--method", help="random, cem (cross-entropy), knife (knife edges) or all."),
-    batch_size: int = typer.Option(4096, "--batch-size", min=1, help="Scenarios generated per batch."),
+    batch_size: int = typer.Option(16384, "--batch-size", min=1, help="Scenarios generated per batch."),
+    workers: int = typer.Option(1, "--workers", min=1, help="Parallel search streams (processes)."),
     out: Path = typer.Option(Path("results/falsify"), "--out", "-o", help="Folder for report.json and dumps."),
     replay: Path = typer.Option(None, "--replay", help="Re-simulate one dumped scenario (a JSON from --out)."),
     progress: bool = typer.Option(True, "--progress/--no-progress", help="Show a progress bar."),
@@ -53,7 +54,7 @@ def falsify(
             status = f"{report.simulated:,} simulated, min gap/p_m {report.min_ratio:.12f}, failures {failures}"
             bar.update(task, completed=min(report.simulated, scenarios), status=status)
 
-        report = fz.falsify(scenarios, minutes, seed, method, batch_size=batch_size, on_batch=on_batch)
+        report = fz.falsify(scenarios, minutes, seed, method, batch_size=batch_size, on_batch=on_batch, workers=workers)
     typer.echo(report.text())
     written = report.write(out)
     typer.echo(f"wrote {written[0]}" + (f" and {len(written) - 1} scenario dumps" if len(written) > 1 else ""))

@@ -14,9 +14,10 @@ How (each method a stream of batches; ``method="all"`` takes them in turn):
   Gaussians, elite share 10 %, smoothed updates, restarts when it has converged);
 * ``knife`` — targeted knife-edge families (:func:`~safelane.experiments.falsify_space.knife_specs`).
 
-Everything is seeded: batch ``i`` of method ``m`` draws from ``default_rng([seed, m, i])``; with ``minutes=0`` the
-run is a function of ``(seed, scenarios, method, batch)`` alone. Batches run in one process (``workers=1``): the
-adversarial planners index per-scenario parameters by batch row.
+Everything is seeded: batch ``i`` of method ``m`` in stream ``w`` draws from ``default_rng([seed, w, m, i])``; with
+``minutes=0`` the run is a function of ``(seed, scenarios, method, batch_size, workers)`` alone. Each simulation runs
+in one process (``simulate_batch(workers=1)``: the adversarial planners index per-scenario parameters by batch row);
+``workers > 1`` runs that many independent streams in parallel processes and merges their reports.
 """
 
 from __future__ import annotations
@@ -281,19 +282,25 @@ def falsify(
     batch_size: int = 2048,
     setting: Setting | None = None,
     on_batch: Callable[[Report], None] | None = None,
+    workers: int = 1,
+    stream: int = 0,
 ) -> Report:
     """Run the falsifier until at least ``scenarios`` scenarios have been simulated *and* ``minutes`` have passed.
 
     ``method``: one of :data:`METHODS` or ``"all"`` (one batch of each in turn). ``setting``: limits and
-    simulation settings (default: :class:`Setting` with ``seed``). ``on_batch`` is called after every batch.
+    simulation settings (default: :class:`Setting` with ``seed``). ``on_batch`` is called after every batch (with
+    ``workers > 1``: with the merged report so far). ``workers``: parallel streams, each with its share of
+    ``scenarios``; ``stream``: this run's stream number.
     """
     methods = METHODS if method == "all" else (method,)
     if any(m not in METHODS for m in methods):
         raise ValueError(f"method must be one of {(*METHODS, 'all')}; got {method!r}")
-    if scenarios < 0 or minutes < 0 or batch_size < 1:
-        raise ValueError("scenarios and minutes must be >= 0 and batch_size >= 1")
+    if scenarios < 0 or minutes < 0 or batch_size < 1 or workers < 1:
+        raise ValueError("scenarios and minutes must be >= 0, batch_size and workers >= 1")
     setting = setting or Setting(seed=seed)
     setting = dataclasses.replace(setting, seed=seed)
+    if workers > 1:
+        return _parallel(scenarios, minutes, seed, method, batch_size, setting, on_batch, workers)
     prm = setting.params
     dim = space.dimension(prm)
     hooks = setting.use_hooks and hooks_live()
@@ -308,7 +315,7 @@ def falsify(
     index = 0
     while report.simulated < scenarios or time.perf_counter() - start < 60.0 * minutes:
         for m in methods:
-            rng = np.random.default_rng([seed, METHODS.index(m), index])
+            rng = np.random.default_rng([seed, stream, METHODS.index(m), index])
             # Without profiles, L(N+1)'s sudden braking starts at one instant per batch (period-aligned or not).
             brake_start = (
                 0.0
@@ -331,3 +338,73 @@ def falsify(
                 on_batch(report)
         index += 1
     return report
+
+
+def merge(reports: list[Report]) -> Report:
+    """One report of several streams: counts add up, minima are taken, the worst scenario is the overall worst."""
+    out = Report(seed=reports[0].seed, methods=reports[0].methods, hooks=reports[0].hooks, profiles=reports[0].profiles)
+    for r in reports:
+        out.generated += r.generated
+        out.simulated += r.simulated
+        out.wall_s = max(out.wall_s, r.wall_s)
+        for name in OUTCOMES:
+            out.counts[name] += r.counts[name]
+        for name, m in r.by_method.items():
+            acc = out.by_method.setdefault(name, {"generated": 0, "simulated": 0, "min_ratio": np.inf, "failures": 0})
+            for key in ("generated", "simulated", "failures"):
+                acc[key] += m[key]
+            acc["min_ratio"] = min(acc["min_ratio"], m["min_ratio"])
+        out.min_ratio_l1 = min(out.min_ratio_l1, r.min_ratio_l1)
+        out.min_ratio_f = min(out.min_ratio_f, r.min_ratio_f)
+        out.min_lane_ratio_sampled = min(out.min_lane_ratio_sampled, r.min_lane_ratio_sampled)
+        if r.min_ratio < out.min_ratio:
+            out.min_ratio, out.worst = r.min_ratio, r.worst
+        out.failures.extend(r.failures[: max(0, 20 - len(out.failures))])
+    return out
+
+
+def _stream(args) -> Report:
+    scenarios, minutes, seed, method, batch_size, setting, stream, queue = args
+
+    def report_progress(report: Report) -> None:
+        queue.put((stream, report.summary(), report.min_ratio))
+
+    return falsify(scenarios, minutes, seed, method, batch_size=batch_size, setting=setting, stream=stream,
+                   on_batch=report_progress)  # fmt: skip
+
+
+def _parallel(scenarios, minutes, seed, method, batch_size, setting, on_batch, workers: int) -> Report:
+    """``workers`` streams in parallel processes; progress comes back through a queue."""
+    import multiprocessing
+    import queue as queue_mod
+    from concurrent.futures import ProcessPoolExecutor, wait
+
+    share = -(-scenarios // workers)
+    with multiprocessing.Manager() as manager, ProcessPoolExecutor(max_workers=workers) as pool:
+        progress = manager.Queue()
+        jobs = [(share, minutes, seed, method, batch_size, setting, w, progress) for w in range(workers)]
+        futures = [pool.submit(_stream, job) for job in jobs]
+        latest: dict[int, tuple] = {}
+        while True:
+            done, _ = wait(futures, timeout=0.5)
+            fresh = False
+            try:
+                while True:
+                    stream, summary, min_ratio = progress.get_nowait()
+                    latest[stream], fresh = (summary, min_ratio), True
+            except queue_mod.Empty:
+                pass
+            if on_batch is not None and fresh:
+                partial = Report(seed=seed, methods=(), hooks=False, profiles=False)
+                partial.simulated = sum(v[0]["scenarios_simulated"] for v in latest.values())
+                partial.min_ratio = min(v[1] for v in latest.values())
+                partial.counts = {
+                    "collision": sum(v[0]["collisions"] for v in latest.values()),
+                    "safety_violation": sum(v[0]["p_m_violations_ego"] for v in latest.values()),
+                    "leader_collision": sum(v[0]["leader_collisions"] for v in latest.values()),
+                    "leader_violation": sum(v[0]["p_m_violations_leaders"] for v in latest.values()),
+                }
+                on_batch(partial)
+            if len(done) == len(futures):
+                break
+        return merge([f.result() for f in futures])
