@@ -23,6 +23,11 @@ class SafelaneGroup(TyperGroup):
     def invoke(self, ctx: typer.Context):
         try:
             return super().invoke(ctx)
+        except typer.BadParameter as exc:
+            # Commands turn input errors into BadParameter (naming the option); --debug shows where they arose.
+            if _debug(ctx) and exc.__cause__ is not None:
+                raise exc.__cause__ from exc
+            raise
         except (typer.TyperException, typer.Exit, typer.Abort, KeyboardInterrupt):
             raise
         except Exception as exc:

@@ -47,7 +47,6 @@ def simulate(
     Example: safelane simulate --preset paper --nominal mlp --leaders 1 --decel 4
     """
     from ..config import load_params
-    from ..errors import InputError
     from ..sim import SimConfig
     from ..sim import simulate as run
     from ..sim.inputs import as_nominal, check_cell_args
@@ -79,8 +78,8 @@ def simulate(
                "seed": "--seed", "p_v": "--p-v"}
     try:
         check_cell_args(planner, leaders, decel, samples, seed, p_v)
-    except InputError as exc:
-        raise bad(exc, options.get(exc.where or "", "--planner")) from exc
+    except ValueError as exc:  # InputError names the argument; an unknown variant comes from the registry
+        raise bad(exc, options.get(getattr(exc, "where", None) or "", "--planner")) from exc
     out = check_out_dir(out)
 
     label = f"{planner}_N{leaders}_decel{decel:g}_pv{p_v:g}_seed{seed}"

@@ -20,7 +20,10 @@ def wilson_interval(successes, n, z: float = Z95):
     denom = 1.0 + z * z / n
     centre = (p + z * z / (2.0 * n)) / denom
     half = z * np.sqrt(p * (1.0 - p) / n + z * z / (4.0 * n * n)) / denom
-    return np.clip(centre - half, 0.0, 1.0), np.clip(centre + half, 0.0, 1.0)
+    # At k = 0 (k = n) the bound is exactly 0 (1); the formula leaves rounding residue such as 2.17e-19.
+    lo = np.where(successes == 0, 0.0, np.clip(centre - half, 0.0, 1.0))
+    hi = np.where(successes == n, 1.0, np.clip(centre + half, 0.0, 1.0))
+    return lo, hi
 
 
 RATE_COLUMNS = ("success", "collision", "safety_violation", "leader_collision")
