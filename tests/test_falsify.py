@@ -96,3 +96,17 @@ def test_per_scenario_parameters_are_row_aligned():
     m_x, _ = mix(obs, PRM)
     np.testing.assert_array_equal(m_x[[0, 3]], HugLeader()(obs, PRM)[0][[0, 3]])
     np.testing.assert_array_equal(m_x[[1, 2]], Oscillating()(obs, PRM)[0][[1, 2]])
+
+
+def test_merged_streams_add_up_and_keep_the_worst():
+    from safelane.experiments.falsify import Report, merge
+
+    a = Report(seed=0, methods=("random",), hooks=True, profiles=True, generated=10, simulated=4, min_ratio=1.2)
+    b = Report(seed=0, methods=("random",), hooks=True, profiles=True, generated=6, simulated=3, min_ratio=1.1)
+    a.counts["collision"], b.counts["collision"] = 1, 2
+    a.by_method = {"random": {"generated": 10, "simulated": 4, "min_ratio": 1.2, "failures": 1}}
+    b.by_method = {"random": {"generated": 6, "simulated": 3, "min_ratio": 1.1, "failures": 2}}
+    b.worst = {"spec": {}}
+    m = merge([a, b])
+    assert (m.generated, m.simulated, m.counts["collision"], m.min_ratio) == (16, 7, 3, 1.1)
+    assert m.worst is b.worst and m.by_method["random"]["failures"] == 3
