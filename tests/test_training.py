@@ -146,6 +146,7 @@ def test_cli_train_tiny_config(tmp_path):
     cfg.write_text(yaml.safe_dump(tiny_config()))
     result = CliRunner().invoke(app, ["train", "--config", str(cfg), "--out", str(tmp_path / "out"), "--no-progress"])
     assert result.exit_code == 0, result.output
+    assert "labelling" in result.output and "done" in result.output  # --no-progress: one line per stage
     (out,) = (tmp_path / "out").iterdir()  # the run folder
     assert json.loads((out / "run.json").read_text())["status"] == "complete"
     summary = json.loads((out / "summary.json").read_text())
