@@ -37,7 +37,7 @@ def falsify(
 
     if replay is not None:
         row = fz.replay(replay).drop(columns="row").iloc[0]
-        typer.echo("\n".join(f"{k}: {v!r}" for k, v in row.items()))
+        typer.echo("\n".join(f"{k}: {fz.json_scalar(v)!r}" for k, v in row.items()))
         return
     if method not in (*fz.METHODS, "all"):
         raise typer.BadParameter(

@@ -254,11 +254,11 @@ def scenario_record(spec: dict, i: int, outcome_row, setting: Setting, method: s
         "decel_last_max": setting.decel_last_max,
         "use_hooks": setting.use_hooks,
         "spec": {k: np.asarray(v[i]).tolist() for k, v in spec.items()},
-        "outcome": {k: _plain(v) for k, v in outcome_row.items() if k != "row"},
+        "outcome": {k: json_scalar(v) for k, v in outcome_row.items() if k != "row"},
     }
 
 
-def _plain(value):
+def json_scalar(value):
     """A JSON-ready scalar: NumPy scalars as Python ones, NaN (no such gap) as None."""
     value = value.item() if hasattr(value, "item") else value
     return None if isinstance(value, float) and np.isnan(value) else value
