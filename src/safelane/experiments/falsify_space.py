@@ -132,7 +132,9 @@ def knife_specs(rng: np.random.Generator, count: int, prm: Params, brake_start_s
     * **period-aligned events**: profile switches at ``k·dt`` (computed as ``k·dt`` and as a running sum of
       ``dt``, which differ in the last bit) or a hair off it (±1e-12, ±1e-9 s) or mid-period; brake, ease off,
       brake harder; planner and traffic square waves with periods that are multiples of ``dt``, phase 0;
-    * **lateral edges**: the ego at ``y_s`` or the lane boundary (± one ulp, ± 1e-12), lateral speed 0 or tiny.
+    * **lateral edges**: the ego at ``y_s`` or the lane boundary (± one ulp, ± 1e-12), lateral speed 0 or tiny;
+    * **the paper's setting with a hugging planner** (where issue 9's violation was found): traffic at 30 m/s, one
+      spacing ``δp ~ U[17, 22]`` m, promises 0.5, L(N+1) braking at one constant deceleration, CV_all, hug L1.
     """
     spec = decode(rng.uniform(size=(count, dimension(prm))), prm, brake_start_s)
     n = spec["n"]
@@ -183,7 +185,28 @@ def knife_specs(rng: np.random.Generator, count: int, prm: Params, brake_start_s
     osc_period = (rng.integers(1, 30, size=count) - 1) * prm.dt / 2.9  # planner_for: period dt + 2.9·q
     spec["planner"][:, 5] = np.where(aligned_rows, osc_period, spec["planner"][:, 5])
     spec["planner"][:, 6] = np.where(aligned_rows, 0.0, spec["planner"][:, 6])
-    # Lateral edges.
+    # The paper's own setting with a hugging planner (where issue 9's violation was found): traffic at 30 m/s,
+    # one spacing δp ~ U[17, 22] m, promises 0.5, L(N+1) braking at one constant deceleration, CV_all, hug L1.
+    paper = pick(0.2)
+    rows = np.flatnonzero(paper)
+    spacing = rng.uniform(17.0, 22.0, size=rows.size)[:, None] - prm.p_m
+    spec["n"][rows] = rng.integers(1, MAX_N + 1, size=rows.size)
+    spec["variant"][rows] = VARIANT_NAMES.index("CV_all")
+    spec["mode"][rows] = 0
+    spec["base_v"][rows], spec["lv_dv"][rows], spec["human"][rows] = 30.0, 0.0, False
+    spec["slack"][rows] = spacing
+    spec["l1_slack"][rows], spec["f_slack"][rows] = spacing[:, 0], spacing[:, 0]
+    spec["ego_dv"][rows] = rng.uniform(-1.0, 1.0, size=rows.size)
+    spec["f_dv"][rows] = -spec["ego_dv"][rows]
+    spec["f_connected"][rows], spec["f_aggressive"][rows] = True, False
+    spec["promise_decel"][rows], spec["promise_accel"][rows] = 0.5, 0.5
+    spec["task_hi"][rows], spec["task_lo"][rows] = 0.5, 0.5  # wanted 0: hold the speed
+    decel = rng.uniform(0.5, prm.a_x_d, size=rows.size)
+    spec["decel_last"][rows] = decel
+    spec["profile_a"][rows] = -decel[:, None]
+    spec["planner"][rows, 2] = rng.uniform(0.2, 0.6, size=rows.size)  # offsets -0.001 … +0.33 m (planner_for)
+    spec["ego_y"][rows], spec["ego_vy"][rows] = 0.0, 0.0
+    # Lateral edges (not on the paper rows).
     y_edges = np.array(
         [
             prm.y_safe,
@@ -195,7 +218,7 @@ def knife_specs(rng: np.random.Generator, count: int, prm: Params, brake_start_s
             0.0,
         ]
     )
-    lateral = pick(0.4)
+    lateral = pick(0.4) & ~paper
     spec["ego_y"] = np.where(lateral, rng.choice(y_edges, size=count), spec["ego_y"])
     spec["ego_vy"] = np.where(lateral, rng.choice([0.0, 1e-12, -1e-12, 0.5, -0.5], size=count), spec["ego_vy"])
     return spec
