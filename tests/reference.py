@@ -167,8 +167,15 @@ def ref_min_follow_decel(p_f, v_f, p_l, v_l, a_l, margin, a_x_d):
     p_f, v_f, p_l, v_l, a_l, margin = (
         np.asarray(x, dtype=np.float64) for x in np.broadcast_arrays(p_f, v_f, p_l, v_l, a_l, margin)
     )
+    # Convention shared with the library: gaps within 1 nm of the margin count as kept; at a slack of at most
+    # 0.5 nm the follower keeps the gap above margin - 0.5 nm (half a nanometre more slack, clamped at 0 down to
+    # -1 nm).
+    slack = p_l - p_f - margin
+    shifted = np.where((slack >= -1e-9) & (slack <= 5e-10), np.maximum(slack + 5e-10, 0.0), slack)
+    p_l = p_l + (shifted - slack)
     args = (p_f, v_f, p_l, v_l, a_l, margin)
-    already_close = p_l - p_f - margin <= 0.0
+    # At the margin a pair can keep it only if it is not closing (the bisection below decides); inside, never.
+    already_close = (p_l - p_f - margin < 0.0) | ((p_l - p_f - margin <= 0.0) & (v_f > v_l))
     full, *_ = follow_gap_margin(np.full(p_f.shape, a_x_d), *args)
     lo = np.full(p_f.shape, np.log(Z_MIN))
     hi = np.full(p_f.shape, np.log(Z_MAX))

@@ -50,30 +50,35 @@ def _pair_min_gap(slack, v_f, a_f, v_l, a_l, dt):
 
 
 def _min_follow_decel(slack, v_f, v_l, a_l):
-    if slack <= 0.0:
+    if slack < -1e-9:  # inside the margin beyond the 1 nm tolerance
         return math.inf
+    slack = slack if slack > 5e-10 else max(slack + 5e-10, 0.0)  # keep the gap above margin - 0.5 nm
     lead = v_l * v_l / a_l if a_l > 0.0 else (math.inf if v_l > 0.0 else 0.0)
     dv = v_f - v_l
-    if dv > 0.0 and 2.0 * slack * a_l <= v_l * dv:
-        return a_l + dv * dv / (2.0 * slack)
-    return v_f * v_f / (2.0 * slack + lead)
+    if dv > 0.0:
+        if slack == 0.0:
+            return math.inf
+        if 2.0 * slack * a_l <= v_l * dv:
+            return a_l + dv * dv / (2.0 * slack)
+    return v_f * v_f / (2.0 * slack + lead) if v_f > 0.0 else 0.0
 
 
-def _final_stop_accel(slack, v_f, v_l, lead_decel, prm, dt):
-    brake = prm.a_x_d
+def _final_stop_accel(slack, v_f, v_l, lead_decel, prm, dt, brake=None):
+    brake = prm.a_x_d if brake is None else brake
     if lead_decel <= 0.0 and v_l > 0.0:
         return math.inf
     y = slack + (v_l * v_l / (2.0 * lead_decel) if lead_decel > 0.0 else 0.0)
     if y <= 0.0:
-        return -math.inf
+        return 0.0 if y == 0.0 and v_f == 0.0 else -math.inf
     w = -0.5 * brake * dt + math.sqrt(max(0.25 * brake * brake * dt * dt + brake * (2.0 * y - v_f * dt), 0.0))
     return (w - v_f) / dt if w >= 0.0 else -v_f * v_f / (2.0 * y)
 
 
-def _responsible_bound(slack, v_f, v_l, d, prm, dt):
+def _responsible_bound(slack, v_f, v_l, d, prm, dt, brake=None):
+    brake = prm.a_x_d if brake is None else brake
     if slack < 0.0:
         return -math.inf
-    bound = _final_stop_accel(slack, v_f, v_l, d, prm, dt)
+    bound = _final_stop_accel(slack, v_f, v_l, d, prm, dt, brake)
     xl_end, u1 = _advance(slack, v_l, -d, dt)
     g = xl_end - v_f * dt
     if xl_end > 0.0:
@@ -86,7 +91,7 @@ def _responsible_bound(slack, v_f, v_l, d, prm, dt):
         tau = 2.0 * slack / dv
         if tau < dt and v_l - d * tau > 0.0:
             bound = min(bound, -d - dv * dv / (2.0 * slack) if slack > 0.0 else -math.inf)
-    c = prm.a_x_d - d
+    c = brake - d
     r0 = v_f - u1
     disc = c * c * dt * dt + 4.0 * c * (2.0 * g + dt * r0)
     if c > 0.0 and disc >= 0.0 and u1 > 0.0:
@@ -120,6 +125,7 @@ def loop_scenario(b, i: int, prm: Params, steps: int, open_decel=0.5, open_gap=3
     history, aggressive, latched = [], True, False
     collided = violated = leader_collided = False
     counts = [0, 0, 0]
+    cap = [math.inf] * k
     times = [(j - (window - 1) / 2.0) * dt for j in range(window)]
     norm = sum(s * s for s in times)
     for _ in range(steps):
@@ -168,16 +174,30 @@ def loop_scenario(b, i: int, prm: Params, steps: int, open_decel=0.5, open_gap=3
                     behaviour, completing, plan, plan_t0, a_y = code, ny >= prm.y_boundary, candidate, t + dt, lat
                     break
             counts[behaviour] += 1
-        # Others act: leaders front to back, then F.
+        # Others act: each connected leader keeps its task while it could still keep its margin braking at its own
+        # bound (never above the smallest it has had) against the vehicle ahead at that one's bound.
+        bounds = [prm.a_x_d]
+        for j in range(n, 0, -1):  # the chain scan, written out: L(N+1) at a_x_d, then Eq. 3 link by link
+            margin = prm.p_m_human if human[j] else prm.p_m
+            z = _min_follow_decel(x[j + 1] - x[j] - margin, v[j], v[j + 1], bounds[0])
+            bounds.insert(0, min(max(promise_d[j], z), prm.a_x_d))
+        bounds.insert(0, prm.a_x_d)  # F's slot: unused
         acc = [0.0] * k
-        for j in range(k - 1, 0, -1):
+        for j in range(1, k):
             if j == n + 1:
                 acc[j] = -decel_last if t + 1e-9 >= 0.0 else 0.0
                 continue
+            cap[j] = min(cap[j], bounds[j])
+            own, d = cap[j], bounds[j + 1]
             margin = prm.p_m_human if human[j] else prm.p_m
-            z = min(_min_follow_decel(x[j + 1] - x[j] - margin, v[j], v[j + 1], max(-acc[j + 1], 0.0)), prm.a_x_d)
+            slack = x[j + 1] - x[j] - margin
             task = min(max(0.5 * (v_desired[j] - v[j]), -promise_d[j]), promise_a[j])
-            acc[j] = min(task, -z)
+            want = min(task, _responsible_bound(slack, v[j], v[j + 1], d, prm, dt, own) - 1e-9)
+            xf, vf = _advance(0.0, v[j], want, dt)
+            xl, vl = _advance(slack, v[j + 1], -d, dt)
+            ok = _pair_min_gap(slack, v[j], want, v[j + 1], -d, dt) >= -1e-9
+            ok = ok and _min_follow_decel(xl - xf, vf, vl, d) <= own
+            acc[j] = max(want if ok else -own, -own)
         if f_aggr_true:
             wanted = min(max(0.5 * (x[1] - x[0] - prm.p_m - 1.0) + 1.5 * (v[1] - v[0]), -prm.a_x_d), prm.a_x_a)
         elif ex - x[0] < gap0 + open_gap:

@@ -107,7 +107,8 @@ def test_no_connected_leader_means_mechanical_limit():
 @pytest.mark.parametrize(
     ("p", "v", "why"),
     [
-        ([0.0, 5.0], [20.0, 20.0], "gap 5 − 0 − p_m = 0: already at the margin"),
+        ([0.0, 5.0], [21.0, 20.0], "gap 5 − 0 − p_m = 0: at the margin and closing at 1 m/s"),
+        ([0.0, 4.9], [20.0, 20.0], "gap 4.9 − 0 − p_m = −0.1: inside the margin"),
         ([0.0, 10.0], [20.0, 10.0], "D = 5, 2·5·8 = 80 <= 10·10: z = 8 + 100/10 = 18 > a_x_d"),
     ],
 )
@@ -119,6 +120,16 @@ def test_unsafe_chain_gives_mechanical_limit_and_reason_bit(p, v, why):
     plan = plan_evasion(0.0, 2.0, 20.0, 2.0, 50.0, 20.0, result.l1_decel, -40.0, 20.0, False, GOLDEN,
                         chain_unsafe=result.unsafe)  # fmt: skip
     assert plan.reason & Reason.CHAIN_UNSAFE
+
+
+def test_at_the_margin_and_not_closing_the_link_is_safe():
+    # gap 5 − 0 − p_m = 0 at equal speeds 20 m/s, L2 at a_x_d = 8: braking like L2 keeps the gap exactly, so
+    # z = 8 (the slack -> 0+ limit of z_B = 400 / (2·0 + 400/8)), not "unsafe" (the jump the adversarial search hit).
+    result = leader_chain([0.0, 5.0], [20.0, 20.0], [1.0], GOLDEN)
+    assert not result.unsafe
+    assert result.l1_decel == pytest.approx(8.0, rel=1e-9)
+    # L2 slower by 2 m/s: the gap opens first; z = 8·(18/20)² = 6.48.
+    assert leader_chain([0.0, 5.0], [18.0, 20.0], [1.0], GOLDEN).l1_decel == pytest.approx(6.48, rel=1e-9)
 
 
 def test_z_above_mechanical_limit_is_reported():

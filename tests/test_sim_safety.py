@@ -33,8 +33,10 @@ def test_no_collision_or_violation_on_random_mixed_scenarios(planner):
     assert (~table["follower_connected"] & ~table["follower_aggressive"]).any()
     assert table["decel"].min() < 3.0 and table["decel"].max() > 7.0
     assert table[OUTCOMES].sum().to_dict() == dict.fromkeys(OUTCOMES, 0)
-    # The campaign exercises the supervisor, not only easy cases: some succeed, some abort.
-    assert table["success"].any() and (table["n_abort"] > 0).any()
+    # The campaign exercises the supervisor, not only easy cases: some succeed (No_agg_assess, which takes every F
+    # for aggressive, completes none here since leaders keep their distance against the worst case), some abort.
+    assert (table["success"].any() or planner == "No_agg_assess") and (table["n_abort"] > 0).any()
+    assert (table["n_proceed"] > 0).all()
     # Outcome bookkeeping is consistent.
     assert (table["success"] == (table["completed"] & ~table["collision"])).all()
     assert table.loc[table["completed"], "completion_time_s"].between(0.0, 10.0).all()
@@ -61,13 +63,15 @@ def test_leaders_alone_never_collide_without_unexpected_violations(n_leaders):
     assert batch.human.any() and (table["decel"] == 8.0).all()
 
 
-def test_unexpected_violations_void_the_egos_guarantee():
+def test_unexpected_violations_void_the_egos_guarantee_and_the_monitor_sees_them():
     # Outside the paper's assumptions: L1 may brake harder than its worst case, and the ego following it at p_m
-    # under that worst case ends up closer than p_m. (Leaders themselves react to the vehicle ahead within the
-    # same period — perfect V2X coordination — so their own margins survive unexpected violations.)
-    table = simulate("CV_all", 10, 4.0, 100, seed=4, p_v=0.3, config=TRUTH).table
-    assert table["safety_violation"].mean() > 0.5
-    assert table["leader_collision"].sum() == 0
+    # under that worst case ends up closer than p_m — unless the monitor, seeing the breach, switches to the most
+    # conservative assumptions from the next period on.
+    off = simulate("CV_all", 10, 4.0, 100, seed=4, p_v=0.3, config=TRUTH.model_copy(update={"monitor": False})).table
+    on = simulate("CV_all", 10, 4.0, 100, seed=4, p_v=0.3, config=TRUTH).table
+    assert off["safety_violation"].mean() > 0.5
+    assert on["safety_violation"].mean() < 0.5 * off["safety_violation"].mean()
+    assert on["breach_leader_bound"].mean() > 0.9 and off["breach_leader_bound"].mean() > 0.9
 
 
 def test_leader_columns_report_a_chain_that_starts_too_close():

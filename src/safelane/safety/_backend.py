@@ -15,6 +15,10 @@ import numpy as np
 
 INF = math.inf
 
+#: Gaps within this many metres of the margin count as satisfied (float round-off of the closed forms); the same
+#: tolerance decides when a link's slack counts as exactly zero (``chain.min_follow_decel``).
+FEASIBILITY_TOL_M = 1e-9
+
 
 class _Scalar:
     """Python-float implementation (inputs are ``float``/``bool``)."""

@@ -19,7 +19,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..params import Params
-from ._backend import ARRAY, INF, SCALAR
+from ._backend import ARRAY, FEASIBILITY_TOL_M, INF, SCALAR
 from ._checks import bool_array, check_params, finish, float_array, prepare
 
 
@@ -35,30 +35,49 @@ def min_follow_decel(xp, slack, v_f, v_l, a_l):
       ``2 slack a_l <= v_l (v_f − v_l)``;
     * both stopped: ``z_B = v_f² / (2 slack + v_l² / a_l)``.
 
-    Returns ``z`` (``inf`` when ``slack <= 0``).
+    **The boundary** ``slack = 0`` (the pair exactly at its margin — where a chain's own worst-case trajectory
+    ends, and what a speed match on a period boundary produces, with speeds equal up to round-off): gaps within
+    ``FEASIBILITY_TOL_M`` (1 nm) of the margin count as kept, as everywhere in the analysis. A slack of at most
+    half of it is taken as ``slack + FEASIBILITY_TOL_M / 2`` (clamped at 0 down to ``−FEASIBILITY_TOL_M``): ``z``
+    then keeps the gap above ``margin − 0.5 nm``, leaving the other half of the tolerance to round-off, so a pair
+    that settles at the margin never drifts out of the tolerance. A pair at the margin that is not closing needs
+    ``z_B ≈ a_l·(v_f/v_l)²`` (``a_l`` at equal speeds; 0 when both are at rest), the limit of the formula as
+    ``slack → 0+``; one closing at round-off speed (``1e-15`` m/s) needs ``a_l`` plus a negligible term; one really
+    closing needs far beyond ``a_x_d`` (unsafe). So ``z`` is continuous as ``slack → 0`` (up to the tolerance)
+    wherever the true bound is; it is ``inf`` only for pairs inside the margin beyond the tolerance.
+
+    Returns ``z`` (``inf`` when ``slack < −FEASIBILITY_TOL_M``).
     """
     if xp is ARRAY:
         return _min_follow_decel_array(slack, v_f, v_l, a_l)
+    half = 0.5 * FEASIBILITY_TOL_M
+    slack = slack if slack > half else (max(slack + half, 0.0) if slack >= -FEASIBILITY_TOL_M else slack)
     lead_stop2 = 2.0 * xp.stop_dist(v_l, a_l)  # v_l² / a_l
-    z_b = xp.div(v_f * v_f, 2.0 * slack + lead_stop2, 0.0)
+    z_b = xp.div(v_f * v_f, 2.0 * slack + lead_stop2, 0.0) if v_f > 0.0 else 0.0
     dv = v_f - v_l
     z_a = a_l + xp.div(dv * dv, 2.0 * slack, INF)
     interior = (dv > 0.0) & (2.0 * slack * a_l <= v_l * dv)
-    return xp.where(slack > 0.0, xp.where(interior, z_a, z_b), INF)
+    return xp.where(slack >= 0.0, xp.where(interior, z_a, z_b), INF)
 
 
 def _min_follow_decel_array(slack, v_f, v_l, a_l):
     """:func:`min_follow_decel` for NumPy arrays: the same arithmetic, with the guarded divisions written as raw
     ones under ``errstate`` and masked after (the hot path of the simulator's scans)."""
     with np.errstate(all="ignore"):
+        half = 0.5 * FEASIBILITY_TOL_M  # the tolerance at the margin (see min_follow_decel)
+        edge = np.where(slack >= -FEASIBILITY_TOL_M, np.maximum(slack + half, 0.0), slack)
+        slack = np.where(slack > half, slack, edge)
         # 2·(v²/(2a)) = v²/a and 2·slack are exact rescalings: the same bits as the scalar formula, fewer passes.
         lead_stop2 = np.where(a_l > 0.0, v_l * v_l / a_l, np.where(v_l > 0.0, INF, 0.0))
         two_slack = 2.0 * slack
-        z_b = v_f * v_f / (two_slack + lead_stop2)  # the denominator is > 0 wherever slack > 0, the only rows kept
+        # The denominator is > 0 wherever slack > 0; at slack = 0 it is 0 only with the leader at rest (or v_l²
+        # underflowing), where a pair that is not closing needs 0 (a closing one takes z_A), as the scalar div.
+        den = two_slack + lead_stop2
+        z_b = np.where(den > 0.0, v_f * v_f / den, 0.0)
         dv = v_f - v_l
         z_a = a_l + dv * dv / two_slack
         interior = (dv > 0.0) & (two_slack * a_l <= v_l * dv)
-        return np.where(slack > 0.0, np.where(interior, z_a, z_b), INF)
+        return np.where(slack >= 0.0, np.where(interior, z_a, z_b), INF)
 
 
 @dataclass(frozen=True)

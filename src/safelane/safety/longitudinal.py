@@ -32,12 +32,11 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..params import Params
-from ._backend import ARRAY, INF
+from ._backend import ARRAY, FEASIBILITY_TOL_M, INF
 from ._checks import check_params, finish, prepare
 from .chain import braked_position
 
-#: Gaps within this many metres of the margin count as satisfied (float round-off of the closed forms).
-FEASIBILITY_TOL_M = 1e-9
+__all__ = ["FEASIBILITY_TOL_M"]  # defined in _backend (chain.py needs it too); re-exported here as before
 
 
 def profile(xp, u, p, v, p1, v1, a1, prm: Params, l1_stop=None):

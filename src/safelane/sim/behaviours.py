@@ -1,13 +1,14 @@
 """Behaviour models of the target-lane vehicles (each small, documented and parameterised).
 
 * **L(N+1)** (not connected): constant speed, then sudden braking at ``a_x_N+1_d`` from ``brake_start_s``
-  until it stops.
-* **Connected L_i**: its own driving task is to hold its initial speed (a P law clipped to the promise
-  ``[−a_m_d, a_m_a]``); when the actual state of ``L(i+1)`` needs more to keep its margin, it takes the minimal
-  safe deceleration of Eqs. 2–3 on actual states, assuming ``L(i+1)`` keeps its current deceleration (an
-  *expected* violation). Decisions are resolved front to back within a period (perfect V2X coordination).
-  *Unexpected* violation: with probability ``p_v`` per period, independently per connected vehicle, it brakes
-  at ``U[z_i, a_x_N+1_d]`` for that period (paper §4.2).
+  until it stops — or any piecewise-constant profile inside ``[−a_x_d, a_x_a]``
+  (:func:`safelane.sim.traffic.with_last_profile`), switching at any instant.
+* **Connected L_i** (:func:`leader_accels`): its own driving task (hold the initial speed, or a traffic hook's
+  wish) clipped to the promise ``[−a_m_d, a_m_a]``, kept while it leaves a safe distance against the vehicle
+  ahead's *worst case* (its chain bound; ``a_x_d`` for ``L(N+1)``); otherwise the minimal braking that does —
+  beyond the promise only as far as the chain analysis allows (an *expected* violation). So no leader ever
+  brakes harder than the bound the ego's analysis gave it. *Unexpected* violation: with probability ``p_v`` per
+  period, independently per connected vehicle, it brakes at ``U[z_i, a_x_N+1_d]`` for that period (paper §4.2).
 * **Follower F** (see :func:`follower_accel`): collaborative or aggressive, always a *responsible* follower of
   L1 and — collaborative from the ego's signal at ``t = 0``, aggressive once the lane change completes — of
   the ego.
@@ -23,7 +24,7 @@ import numpy as np
 
 from .._motion import advance, stop_time
 from ..params import Params
-from ..safety._backend import ARRAY
+from ..safety._backend import ARRAY, FEASIBILITY_TOL_M
 from ..safety.chain import min_follow_decel
 
 
@@ -42,23 +43,24 @@ def pair_min_gap(slack, v_f, a_f, v_l, a_l, dt):
     return np.minimum(slack, (xl - xf).min(0))
 
 
-def responsible_ok(a, slack, v_f, v_l, lead_decel, prm: Params):
+def responsible_ok(a, slack, v_f, v_l, lead_decel, prm: Params, brake=None, tol: float = 0.0):
     """True where accelerating at ``a`` for one period still lets the follower keep its margin by braking at
-    ``a_x_d`` afterwards, with the vehicle ahead braking at ``lead_decel`` from now on: the definition that
-    :func:`responsible_accel` solves in closed form (exact gap minimum over the period, then Eqs. 2–3)."""
+    ``brake`` (default ``a_x_d``) afterwards, with the vehicle ahead braking at ``lead_decel`` from now on: the
+    definition that :func:`responsible_accel` solves in closed form (exact gap minimum over the period, then
+    Eqs. 2–3). ``tol``: gaps this far inside the margin still count as kept (round-off)."""
     a, slack, v_f, v_l, lead_decel = np.broadcast_arrays(
         *(np.asarray(x, dtype=float) for x in (a, slack, v_f, v_l, lead_decel))
     )
     dt = prm.dt
-    in_period = pair_min_gap(slack, v_f, a, v_l, -lead_decel, dt) >= 0.0
+    in_period = pair_min_gap(slack, v_f, a, v_l, -lead_decel, dt) >= -tol
     xf, vf = advance(0.0, v_f, a, dt)
     xl, vl = advance(slack, v_l, -lead_decel, dt)
     with np.errstate(all="ignore"):
         z = min_follow_decel(ARRAY, xl - xf, vf, vl, lead_decel)
-    return in_period & (z <= prm.a_x_d)
+    return in_period & (z <= (prm.a_x_d if brake is None else brake))
 
 
-def final_stop_accel(slack, v_f, v_l, lead_decel, prm: Params):
+def final_stop_accel(slack, v_f, v_l, lead_decel, prm: Params, brake=None):
     """Largest ``a`` for which the follower's final stopping point (``a`` for one period, then ``a_x_d``) stays
     behind the leader's (braking at ``lead_decel``): a necessary condition of :func:`responsible_ok`, in
     closed form. ``+inf`` where the leader never stops; ``-inf`` where even stopping at once is too late.
@@ -67,7 +69,8 @@ def final_stop_accel(slack, v_f, v_l, lead_decel, prm: Params):
     leader's stop ``Y = slack + v_l²/(2 lead_decel)`` gives ``w = −B dt/2 + sqrt(B² dt²/4 + B (2Y − v_f dt))``.
     When that ``w`` is negative the follower stops inside the period, at ``v_f²/(2|a|)``, so ``a = −v_f²/(2Y)``.
     """
-    dt, brake = prm.dt, prm.a_x_d
+    dt = prm.dt
+    brake = prm.a_x_d if brake is None else brake
     with np.errstate(all="ignore"):
         lead_stop = np.where(
             lead_decel > 0.0,
@@ -79,13 +82,15 @@ def final_stop_accel(slack, v_f, v_l, lead_decel, prm: Params):
         a_moving = (w - v_f) / dt
         a_stopping = np.where(y > 0.0, -v_f * v_f / (2.0 * np.where(y > 0.0, y, 1.0)), -np.inf)
         a = np.where(w >= 0.0, a_moving, a_stopping)
-    return np.where(np.isinf(y) & (y > 0), np.inf, np.where(y <= 0.0, -np.inf, a))
+    # Both stops at the same point with the follower already at rest: staying (a = 0) is the bound.
+    at_rest_there = (y == 0.0) & (v_f == 0.0)
+    return np.where(np.isinf(y) & (y > 0), np.inf, np.where(y <= 0.0, np.where(at_rest_there, 0.0, -np.inf), a))
 
 
 _ROOT_EPS = 1e-9  # m/s²: the closed-form bound is applied this far on the safe side (rounding at the boundary)
 
 
-def responsible_bounds(slack, v_f, v_l, lead_decel, prm: Params) -> dict[str, np.ndarray]:
+def responsible_bounds(slack, v_f, v_l, lead_decel, prm: Params, brake=None) -> dict[str, np.ndarray]:
     """The closed-form upper bounds whose minimum is :func:`responsible_accel`'s answer, by the way the margin
     binds (``+inf`` where a case does not hold at its root). The follower is at ``a`` for one period, then brakes
     at ``B = a_x_d``; the leader brakes at ``d = lead_decel`` throughout; ``x_l(dt)``, ``u1``: the leader's
@@ -105,7 +110,8 @@ def responsible_bounds(slack, v_f, v_l, lead_decel, prm: Params) -> dict[str, np
       ``q = (−c dt + sqrt(c² dt² + 4c (2G + dt (v_f − u1)))) / 2``, where ``q > 0`` and the instant ``q / c``
       after the period comes before the leader stops.
     """
-    dt, brake = prm.dt, prm.a_x_d
+    dt = prm.dt
+    brake = prm.a_x_d if brake is None else brake
     slack = slack + 0.0  # −0.0 → +0.0: the in-period vertex divides by it, and −0.0 would flip its infinity's sign
     with np.errstate(all="ignore"):
         xl_end, u1 = advance(slack, v_l, -lead_decel, dt)
@@ -124,16 +130,18 @@ def responsible_bounds(slack, v_f, v_l, lead_decel, prm: Params) -> dict[str, np
         after_period = (c > 0.0) & (disc >= 0.0) & (q > 0.0) & (u1 > 0.0) & (q * lead_decel <= c * u1)
         return {
             "inside": np.where(slack >= 0.0, np.inf, -np.inf),
-            "final": final_stop_accel(slack, v_f, v_l, lead_decel, prm),
+            "final": final_stop_accel(slack, v_f, v_l, lead_decel, prm, brake),
             "end": np.where(xl_end > 0.0, end, np.where(xl_end < 0.0, -np.inf, 0.0)),
             "in_period": np.where(in_period, vertex, np.inf),
             "after_period": np.where(after_period, after, np.inf),
         }
 
 
-def responsible_bound(slack, v_f, v_l, lead_decel, prm: Params):
-    """The smallest of :func:`responsible_bounds`: the largest safe acceleration, in closed form."""
-    bounds = iter(responsible_bounds(slack, v_f, v_l, lead_decel, prm).values())
+def responsible_bound(slack, v_f, v_l, lead_decel, prm: Params, brake=None):
+    """The smallest of :func:`responsible_bounds`: the largest safe acceleration, in closed form (exact for
+    ``brake >= lead_decel``, always the case with the default ``a_x_d``; a softer ``brake`` admits one more case,
+    the follower stopping first, that the caller must check — see :func:`leader_accels`)."""
+    bounds = iter(responsible_bounds(slack, v_f, v_l, lead_decel, prm, brake).values())
     out = next(bounds)
     for b in bounds:
         out = np.minimum(out, b)
@@ -164,52 +172,72 @@ def leader_roles(valid, connected, n_connected):
     return is_last, acts
 
 
-def leader_accels(
-    x,
-    v,
-    margin,
-    roles,
-    promise_decel,
-    promise_accel,
-    v_desired,
-    decel_last,
-    braking,
-    violating,
-    violate_pick,
-    prm: Params,
-):
+def leader_accels(x, v, margin, roles, bounds, task, a_last, decel_last, violating, violate_pick, prm: Params):
     """Accelerations of L1..L(N+1) for this period, ``(B, K)`` with index 0 (F) left at 0.
 
-    ``margin``: (B, K) each vehicle's margin to the one ahead (``p_m`` or ``p_m_human``); ``roles``: from
-    :func:`leader_roles`. ``braking``: (B,) L(N+1) is braking this period. ``violating``: (B, K) bool, an
-    unexpected violation this period, or ``None`` for none anywhere; ``violate_pick``: (B, K) uniforms placing its
-    deceleration in ``U[z_i, a_x_N+1_d]``.
+    A connected ``L_i`` keeps its own ``task`` (already inside its promise) while that keeps a safe distance
+    against the vehicle ahead's *worst case* — its chain bound ``bounds[:, i+1]`` (``a_x_d`` for ``L(N+1)``) —
+    with ``L_i`` itself able to brake at no more than its own bound ``bounds[:, i]`` afterwards; otherwise it
+    brakes minimally for that (:func:`responsible_bound` with ``brake = bounds[:, i]``, checked exactly by
+    :func:`responsible_ok`; where the closed form is not confirmed it brakes at its bound, always safe). So a
+    leader never brakes harder than its current bound, and its bound never grows: the worst case the ego's held
+    plan assumed for ``L1`` stays a worst case (the consistency invariant, docs/simulator.md).
+
+    Args:
+        x, v: ``(B, K)`` current positions and speeds. ``margin``: ``(B, K)`` each vehicle's margin to the one
+            ahead (``p_m`` or ``p_m_human``). ``roles``: from :func:`leader_roles`.
+        bounds: ``(B, K)`` each vehicle's worst-case deceleration from the chain analysis on the current states
+            (``a_x_d`` for ``L(N+1)`` and anything not connected).
+        task: ``(B, K)`` the connected leaders' own wanted accelerations, inside their promises.
+        a_last: ``(B,)`` ``L(N+1)``'s acceleration at the start of the period (its profile).
+        decel_last: ``(B,)`` ``a_x_N+1_d`` (the top of an unexpected violation's range).
+        violating: ``(B, K)`` an unexpected violation this period, or ``None`` for none anywhere; then the vehicle
+            brakes at ``U[z_i, a_x_N+1_d]`` (``violate_pick`` the uniforms), whatever its bound.
     """
     bsz, k = x.shape
     is_last, acts = roles
-    mixed = is_last.any(0) | ~acts.all(0)  # per slot: not every row an acting connected leader (then a mask)
-    acc = np.zeros((bsz, k), order="F")  # column-major: filled vehicle by vehicle
-    a_last = np.where(braking, -decel_last, 0.0)
-    # What does not depend on the scan, for every vehicle at once: gaps to the vehicle ahead, own driving task.
-    slack = x[:, 1:] - x[:, :-1] - margin[:, :-1]
-    task = np.minimum(np.maximum(0.5 * (v_desired - v), -promise_decel), promise_accel)
-    with np.errstate(all="ignore"):
-        for i in range(k - 1, 0, -1):  # front to back: each link reacts to the one ahead (a scan over vehicles)
-            if i + 1 < k:
-                ahead_decel = np.maximum(-acc[:, i + 1], 0.0)
-                z = np.minimum(min_follow_decel(ARRAY, slack[:, i], v[:, i], v[:, i + 1], ahead_decel), prm.a_x_d)
-            else:
-                z = np.zeros(bsz)
-            a_conn = np.minimum(task[:, i], -z)
+    acc = np.zeros((bsz, k))
+    if k > 2:
+        # Followers are slots 1..K-2 (connected leaders never sit in the last slot), each behind the next slot.
+        slack = x[:, 2:] - x[:, 1:-1] - margin[:, 1:-1]
+        v_f, v_l, d, own = v[:, 1:-1], v[:, 2:], bounds[:, 2:], bounds[:, 1:-1]
+        with np.errstate(all="ignore"):
+            bound = responsible_bound(slack, v_f, v_l, d, prm, brake=own) - _ROOT_EPS
+            want = np.minimum(task[:, 1:-1], bound)
+            ok = responsible_ok(want, slack, v_f, v_l, d, prm, brake=own, tol=FEASIBILITY_TOL_M)
+            a_conn = np.maximum(np.where(ok, want, -own), -own)
             if violating is not None:
-                lo, hi = np.minimum(z, decel_last), np.maximum(z, decel_last)
-                a_conn = np.where(violating[:, i], -(lo + violate_pick[:, i] * (hi - lo)), a_conn)
-            acc[:, i] = np.where(is_last[:, i], a_last, np.where(acts[:, i], a_conn, 0.0)) if mixed[i] else a_conn
-    return acc
+                z = np.minimum(min_follow_decel(ARRAY, slack, v_f, v_l, d), prm.a_x_d)
+                lo, hi = np.minimum(z, decel_last[:, None]), np.maximum(z, decel_last[:, None])
+                a_conn = np.where(violating[:, 1:-1], -(lo + violate_pick[:, 1:-1] * (hi - lo)), a_conn)
+        acc[:, 1:-1] = np.where(acts[:, 1:-1], a_conn, 0.0)
+    acc = np.where(is_last, a_last[:, None], acc)
+    return np.asfortranarray(acc)
+
+
+def leader_task(v, v_desired, promise_decel, promise_accel, wanted=None):
+    """Each connected leader's own driving task, inside its promise ``[−a_m_d, a_m_a]``: ``wanted`` (a traffic
+    hook's wish) or, by default, holding its initial speed (a P law)."""
+    if wanted is None:
+        wanted = 0.5 * (v_desired - v)
+    return np.minimum(np.maximum(wanted, -promise_decel), promise_accel)
 
 
 def follower_accel(
-    f_x, f_v, l1_x, l1_v, ego_x, ego_vx, aggressive, completed, gap0, prm: Params, open_decel: float, open_gap_m: float
+    f_x,
+    f_v,
+    l1_x,
+    l1_v,
+    ego_x,
+    ego_vx,
+    aggressive,
+    completed,
+    gap0,
+    prm: Params,
+    open_decel: float,
+    open_gap_m: float,
+    wanted=None,
+    ignores_ego: bool = False,
 ):
     """Follower acceleration for this period.
 
@@ -218,14 +246,17 @@ def follower_accel(
       ego responsibly (brakes as needed, up to ``a_x_d``) whenever the ego is ahead of it;
     * aggressive: until the lane change completes, closes the gap to L1 (PD law on the gap to ``p_m``,
       up to ``a_x_a``), ignoring the ego; afterwards it follows the ego responsibly.
-    Both always follow L1 responsibly (L1's worst case: ``a_x_d``).
+    Both always follow L1 responsibly (L1's worst case: ``a_x_d``). ``wanted``: a traffic hook's wish
+    (:class:`safelane.sim.traffic.TrafficHooks`) replacing both nominal laws, inside ``[−a_x_d, a_x_a]``; the
+    responsible filters still apply. ``ignores_ego`` (outside the assumptions): F never follows the ego.
     """
     gap_ego = ego_x - f_x
     collab_nominal = np.where(gap_ego < gap0 + open_gap_m, -open_decel, np.clip(ego_vx - f_v, -open_decel, open_decel))
     gap_l1 = l1_x - f_x
     aggr_nominal = np.clip(0.5 * (gap_l1 - prm.p_m - 1.0) + 1.5 * (l1_v - f_v), -prm.a_x_d, prm.a_x_a)
-    wanted = np.where(aggressive, aggr_nominal, collab_nominal)
+    if wanted is None:
+        wanted = np.where(aggressive, aggr_nominal, collab_nominal)
     a = responsible_accel(wanted, gap_l1 - prm.p_m, f_v, l1_v, prm.a_x_d, prm)
-    follows_ego = (gap_ego > 0.0) & (~aggressive | completed)
+    follows_ego = (gap_ego > 0.0) & (~aggressive | completed) & (not ignores_ego)
     a_ego = responsible_accel(a, gap_ego - prm.p_m, f_v, ego_vx, prm.a_x_d, prm)
     return np.where(follows_ego, a_ego, a)

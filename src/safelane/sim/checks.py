@@ -10,7 +10,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..params import Params
-from .kinematics import Fleet, Motion, crossing_knots, extrema, free_max, windowed_gap_extrema
+from .kinematics import Fleet, Motion, crossing_knots, extrema, free_max, gap_extrema, windowed_gap_extrema
 
 
 def _rows(m: Motion, rows) -> Motion:
@@ -54,7 +54,9 @@ def ego_checks(
         x_end, y_end = x_end.copy(), y_end.copy()
         x_end[rows], y_end[rows] = plan_lon.x[:, -1], plan_lat.x[:, -1]
     d0 = s.x - s.ego[0][:, None]
-    a_bound = max(prm.a_x_a, prm.a_x_d) + float(np.abs(others.acc).max(initial=0.0))
+    # Per scenario (not batch-wide), so that which pairs count as near — exact minimum gaps — does not depend on
+    # the other scenarios of the batch: a cell gives the same table alone and inside a grid.
+    a_bound = (max(prm.a_x_a, prm.a_x_d) + others.row_max_abs_acc())[:, None]
     reach = np.abs(s.v - s.ego[2][:, None]) * dt
     near = b.valid & (np.abs(d0) - reach < prm.p_m + 0.5 * a_bound * dt * dt + 1e-6) & (y_max > conflict_level)[:, None]
     c, r = np.nonzero(near.T)  # the (B, K) masks are column-major: scan them vehicle by vehicle
@@ -71,6 +73,8 @@ def ego_checks(
     # both levels all period (the windows are the whole period): closed form over the stop knots.
     settled = ~planned & (-free_max(-lat.x[:, 0], -lat.v[:, 0], -lat.acc[:, 0], dt) > max_level)
     stops = ~simple & settled[r]
+    if others.switch is not None:  # a switch inside the period: two segments, the general path
+        stops &= ~others.switch.mask[r, c]
     ps, pk = np.flatnonzero(simple), np.flatnonzero(stops)
     rest = ~simple & ~stops
     general = [(np.flatnonzero(rest & ~on_plan), lon, lat, None)]
@@ -207,7 +211,7 @@ def lane_checks(b, prm: Params, others: Fleet, pairs=None):
     valid, margin = pairs if pairs is not None else lane_pairs(b, prm)
     x0, v0 = others.x, others.v
     gap0 = x0[:, 1:] - x0[:, :-1]
-    slack = float(np.abs(others.acc).max(initial=0.0)) * dt * dt + 1e-6
+    slack = others.max_abs_acc * dt * dt + 1e-6
     near = valid & (gap0 - np.abs(v0[:, 1:] - v0[:, :-1]) * dt < margin + slack)
     # Vehicles at rest all period keep their gap: such a pair at or beyond its margin needs no exact check.
     resting = (others.v_end == 0.0) & (v0 == 0.0)
@@ -220,7 +224,13 @@ def lane_checks(b, prm: Params, others: Fleet, pairs=None):
     pair_min = np.empty(r.size)
     one = others.t_stop >= dt
     simple = one[r, c] & one[r, c + 1]
-    ps, pg = np.flatnonzero(simple), np.flatnonzero(~simple)
+    two = np.zeros(r.size, bool)
+    if others.switch is not None:  # a switch inside the period: exact over the merged knots of both motions
+        two = others.switch.mask[r, c] | others.switch.mask[r, c + 1]
+        pt = np.flatnonzero(two)
+        if pt.size:
+            pair_min[pt] = gap_extrema(others.motion(r[pt], c[pt]), others.motion(r[pt], c[pt] + 1))[0]
+    ps, pg = np.flatnonzero(simple & ~two), np.flatnonzero(~simple & ~two)
     rs, cs, rg, cg = r[ps], c[ps], r[pg], c[pg]
     d0 = x0[rs, cs + 1] - x0[rs, cs]
     dv0 = v0[rs, cs + 1] - v0[rs, cs]

@@ -24,3 +24,20 @@ class SimConfig(BaseModel):
     follower_open_gap_m: float = Field(3.0, ge=0.0, description="How much a collaborative F opens the gap [m].")
     l1_plan_steps: int = Field(10, ge=1, description="Periods of L1's planned acceleration shared over V2X.")
     supervised: bool = Field(True, description="False runs the nominal planner without the safety supervisor.")
+    v2x_loss: float = Field(
+        0.0, ge=0.0, lt=1.0, description="Probability that a V2X message is lost (per sender and period)."
+    )
+    v2x_latency_periods: int = Field(0, ge=0, le=50, description="V2X messages arrive this many periods late.")
+    v2x_max_age_s: float = Field(
+        0.3, ge=0.0, description="Older messages are stale: their sender counts as non-connected (safelane.v2x)."
+    )
+    follower_ignores_ego: bool = Field(
+        False,
+        description="Outside the assumptions: F never yields to the ego (it follows L1 only, even after the lane "
+        "change completes). For studies of what the guarantee does not cover.",
+    )
+    monitor: bool = Field(
+        True,
+        description="After a breach of the assumptions (safelane.sim.monitor) use the most conservative ones "
+        "(L1 at a_x_d, F aggressive). False only records breaches.",
+    )

@@ -19,6 +19,7 @@ from .inputs import cell_rng, check_cell_args, check_settings, resolve
 from .results import SimResult, results_table, trace_rows
 from .scenario import ScenarioBatch, ScenarioConfig, check_batch, paper_scenarios
 from .step import ClosedLoop
+from .traffic import TrafficHooks
 
 
 def simulate(
@@ -77,12 +78,14 @@ def simulate_batch(
     progress: bool = False,
     trace_limit: int = 16,
     workers: int = 1,
+    traffic: TrafficHooks | None = None,
 ) -> SimResult:
     """Run every scenario of ``batch`` in closed loop; see :class:`SimResult`.
 
     ``workers > 1`` splits the batch across processes; scenarios are independent and their random draws are
     counter-based, so the table is identical to a single-process run (traces and observations need
-    ``workers=1``).
+    ``workers=1``). ``traffic``: behaviour hooks (:class:`~safelane.sim.traffic.TrafficHooks`, the public
+    extension point; with workers they must be picklable and index per-scenario data by ``scenario_id``).
     """
     prm = params or Params()
     cfg = config or SimConfig()
@@ -91,8 +94,8 @@ def simulate_batch(
     check_settings(prm, cfg)
     tune_allocator()
     if workers > 1 and len(batch) >= 2 * workers and not (trace or record_observations):
-        return _simulate_parallel(batch, seed, prm, cfg, nominal, workers)
-    sim = ClosedLoop(batch, seed, prm, cfg, nominal)
+        return _simulate_parallel(batch, seed, prm, cfg, nominal, workers, traffic)
+    sim = ClosedLoop(batch, seed, prm, cfg, nominal, traffic)
     state = sim.initial_state()
     n_steps = round(cfg.horizon_s / prm.dt)
     rows, observations = [], []
@@ -116,15 +119,15 @@ def simulate_batch(
 
 
 def _simulate_chunk(args) -> pd.DataFrame:
-    batch, seed, prm, cfg, nominal = args
-    return simulate_batch(batch, seed, params=prm, config=cfg, nominal=nominal).table
+    batch, seed, prm, cfg, nominal, traffic = args
+    return simulate_batch(batch, seed, params=prm, config=cfg, nominal=nominal, traffic=traffic).table
 
 
-def _simulate_parallel(batch, seed, prm, cfg, nominal, workers: int) -> SimResult:
+def _simulate_parallel(batch, seed, prm, cfg, nominal, workers: int, traffic=None) -> SimResult:
     from concurrent.futures import ProcessPoolExecutor
 
     chunks = np.array_split(np.arange(len(batch)), workers)
-    jobs = [(batch.take(rows), seed, prm, cfg, nominal) for rows in chunks]
+    jobs = [(batch.take(rows), seed, prm, cfg, nominal, traffic) for rows in chunks]
     with ProcessPoolExecutor(max_workers=workers) as pool:
         tables = list(pool.map(_simulate_chunk, jobs))
     return SimResult(table=pd.concat(tables, ignore_index=True))

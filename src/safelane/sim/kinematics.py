@@ -79,6 +79,14 @@ class Fleet:
     x_end: np.ndarray
     v_end: np.ndarray
     dt: float
+    #: ``None``, or the second segment of vehicles whose acceleration switches inside the period (L(N+1)'s
+    #: profiles): :class:`Switch`. Those entries are two segments; ``acc``/``t_stop`` describe the first.
+    switch: Switch | None = None
+
+    @property
+    def switching(self) -> np.ndarray | None:
+        """Mask of the entries with a switch inside the period (``None`` when there are none)."""
+        return None if self.switch is None else self.switch.mask
 
     @classmethod
     def constant(cls, x, v, a, dt: float) -> Fleet:
@@ -89,20 +97,94 @@ class Fleet:
         vs = np.where(ts < dt, 0.0, np.maximum(v + a * ts, 0.0))
         return cls(x=x, v=v, acc=a, t_stop=ts, x_end=xs, v_end=vs, dt=dt)
 
+    @classmethod
+    def switched(cls, x, v, a1, t_switch, a2, dt: float) -> Fleet:
+        """Like :meth:`constant`, but entries with ``t_switch < dt`` change to ``a2`` at ``t_switch`` (exactly, with
+        stopping in either segment; a vehicle at rest stays at rest unless ``a2 > 0``)."""
+        mask = t_switch < dt
+        if not mask.any():
+            return cls.constant(x, v, a1, dt)
+        first = cls.constant(x, v, a1, dt)
+        # The first segment ends at the switch: the state there, then the second segment to the period's end.
+        ts1 = np.minimum(first.t_stop, t_switch)
+        x_sw = x + v * ts1 + 0.5 * first.acc * ts1 * ts1
+        v_sw = np.where(first.t_stop < t_switch, 0.0, np.maximum(v + first.acc * ts1, 0.0))
+        rest = np.maximum(dt - t_switch, 0.0)
+        ts2 = stop_time(v_sw, a2, rest)
+        at_rest = ts2 <= 0.0
+        acc2, ts2 = np.where(at_rest, 0.0, a2), np.where(at_rest, rest, ts2)
+        x2 = x_sw + v_sw * ts2 + 0.5 * acc2 * ts2 * ts2
+        v2 = np.where(ts2 < rest, 0.0, np.maximum(v_sw + acc2 * ts2, 0.0))
+        sw = Switch(mask=mask, t=np.where(mask, t_switch, dt), x=x_sw, v=v_sw, acc=acc2, t_stop=t_switch + ts2)
+        return cls(
+            x=x,
+            v=v,
+            acc=first.acc,
+            t_stop=np.where(mask, ts1, first.t_stop),
+            x_end=np.where(mask, x2, first.x_end),
+            v_end=np.where(mask, v2, first.v_end),
+            dt=dt,
+            switch=sw,
+        )
+
     @property
     def end(self):
         return self.x_end, self.v_end
 
+    @property
+    def max_abs_acc(self) -> float:
+        """The largest ``|acceleration|`` of any entry in any segment (for the near-pair filters)."""
+        top = float(np.abs(self.acc).max(initial=0.0))
+        if self.switch is not None:
+            top = max(top, float(np.abs(self.switch.acc[self.switch.mask]).max(initial=0.0)))
+        return top
+
+    def row_max_abs_acc(self) -> np.ndarray:
+        """:attr:`max_abs_acc` per row of a ``(B, K)`` fleet: ``(B,)``."""
+        top = np.abs(self.acc).max(1, initial=0.0)
+        if self.switch is not None:
+            top = np.maximum(top, np.abs(np.where(self.switch.mask, self.switch.acc, 0.0)).max(1, initial=0.0))
+        return top
+
     def motion(self, *idx) -> Motion:
         """The :class:`Motion` (knots ``0, t_stop, dt``) of the entries ``self.x[idx]`` (``...`` for all). After
-        the stop knot the vehicle is at rest (or, if it never stops, the stop knot is ``dt`` itself)."""
+        the stop knot the vehicle is at rest (or, if it never stops, the stop knot is ``dt`` itself). With switches
+        in the fleet, every motion has the knots ``0, t_stop1, t_switch, t_stop2, dt`` (repeated where unused)."""
         ts, xs, vs = self.t_stop[idx], self.x_end[idx], self.v_end[idx]
+        if self.switch is None:
+            return Motion(
+                t=np.stack([np.zeros_like(ts), ts, np.full_like(ts, self.dt)], -1),
+                x=np.stack([self.x[idx], xs, xs], -1),
+                v=np.stack([self.v[idx], vs, vs], -1),
+                acc=np.stack([self.acc[idx], np.zeros_like(ts)], -1),
+            )
+        sw = self.switch
+        on = sw.mask[idx]
+        t_sw = np.where(on, sw.t[idx], self.dt)
+        x_sw = np.where(on, sw.x[idx], xs)
+        v_sw = np.where(on, sw.v[idx], vs)
+        ts2 = np.where(on, sw.t_stop[idx], self.dt)
+        zero = np.zeros_like(ts)
         return Motion(
-            t=np.stack([np.zeros_like(ts), ts, np.full_like(ts, self.dt)], -1),
-            x=np.stack([self.x[idx], xs, xs], -1),
-            v=np.stack([self.v[idx], vs, vs], -1),
-            acc=np.stack([self.acc[idx], np.zeros_like(ts)], -1),
+            t=np.stack([zero, ts, t_sw, ts2, np.full_like(ts, self.dt)], -1),
+            # From the first segment's end (its stop or the switch) the vehicle rests until the switch: the state
+            # at both knots is the state at the switch.
+            x=np.stack([self.x[idx], x_sw, x_sw, xs, xs], -1),
+            v=np.stack([self.v[idx], v_sw, v_sw, vs, vs], -1),
+            acc=np.stack([self.acc[idx], zero, np.where(on, sw.acc[idx], 0.0), zero], -1),
         )
+
+
+@dataclass(frozen=True)
+class Switch:
+    """The second segment of :meth:`Fleet.switched` entries (arrays shaped like the fleet's)."""
+
+    mask: np.ndarray  # a switch inside the period
+    t: np.ndarray  # switch instant (dt where none)
+    x: np.ndarray  # state at the switch
+    v: np.ndarray
+    acc: np.ndarray  # acceleration after it (0 for a vehicle at rest)
+    t_stop: np.ndarray  # stop instant in the second segment (dt where it does not stop)
 
 
 def gap_extrema(behind: Motion, ahead: Motion):

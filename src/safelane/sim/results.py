@@ -9,6 +9,7 @@ import pandas as pd
 
 from ..planners.base import Observation
 from ..planners.variants import VARIANT_NAMES
+from .monitor import BREACH_KINDS
 from .scenario import ScenarioBatch
 
 
@@ -54,6 +55,10 @@ def results_table(b: ScenarioBatch, s) -> pd.DataFrame:
             "assessed_aggressive": belief,
             "assessment_correct": belief == truth,
             "assessment_time_s": s.belief.first_collaborative_s,
+            "n_invalid_proposals": s.n_invalid,
+            "assumption_breach": s.breach.any,
+            "breach_time_s": s.breach.first_s,
+            **{f"breach_{kind}": s.breach.flags[:, i] for i, kind in enumerate(BREACH_KINDS)},
         }
     )
 

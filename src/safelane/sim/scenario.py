@@ -61,13 +61,20 @@ class ScenarioBatch:
     p_v: np.ndarray  # (B,) unexpected promise-violation probability per connected vehicle and period
     variant: np.ndarray  # (B,) index into VARIANT_NAMES
     scenario_id: np.ndarray  # (B,) stable id: keys per-scenario random draws
+    #: ``(B, P)`` L(N+1)'s acceleration profile (segment start times, accelerations), or ``None`` for the sudden
+    #: braking at ``decel_last`` from ``SimConfig.brake_start_s``; set with
+    #: :func:`safelane.sim.traffic.with_last_profile`.
+    last_profile_t: np.ndarray | None = None
+    last_profile_a: np.ndarray | None = None
 
     def __len__(self) -> int:
         return len(self.ego_x)
 
     def take(self, idx) -> ScenarioBatch:
         """Rows ``idx`` (a slice, index array or mask) as a new batch."""
-        return ScenarioBatch(**{f.name: getattr(self, f.name)[idx] for f in fields(self)})
+        return ScenarioBatch(
+            **{f.name: None if getattr(self, f.name) is None else getattr(self, f.name)[idx] for f in fields(self)}
+        )
 
 
 def paper_scenarios(
@@ -164,11 +171,17 @@ def concat(batches: list[ScenarioBatch]) -> ScenarioBatch:
     """Stack batches row-wise, padding the vehicle axis (padding is invalid and never simulated)."""
     k = max(b.x.shape[1] for b in batches)
     out = {}
+    profiles = {b.last_profile_t is None for b in batches}
+    if len(profiles) > 1:
+        raise ValueError("cannot concatenate batches with and without an L(N+1) profile (last_profile_t)")
     for f in fields(ScenarioBatch):
+        if getattr(batches[0], f.name) is None:
+            out[f.name] = None
+            continue
         parts = []
         for b in batches:
             a = getattr(b, f.name)
-            if a.ndim == 2 and a.shape[1] < k:
+            if a.ndim == 2 and a.shape[1] < k and not f.name.startswith("last_profile"):
                 pad = np.repeat(a[:, -1:], k - a.shape[1], axis=1)
                 if f.name in ("valid", "connected", "human"):
                     pad = np.zeros_like(pad)

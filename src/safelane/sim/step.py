@@ -21,13 +21,17 @@ from ..safety.evasion import plan_evasion
 from ..safety.lateral import LATERAL_TOL_M
 from ..safety.plan import EvasionPlan
 from . import assessment as assess
-from .behaviours import follower_accel, leader_accels, leader_roles, responsible_accel
+from .behaviours import follower_accel, leader_accels, leader_roles, leader_task, responsible_accel
 from .checks import ego_checks, lane_checks, lane_pairs
 from .config import SimConfig
 from .kinematics import Fleet, Motion
+from .link import Link
+from .monitor import Breach, observe_breaches
+from .proposals import check_proposal
 from .rng import counter_normal, counter_uniform
 from .scenario import ScenarioBatch
 from .supervisor import ABORT, COMPLETED, HESITATE, PROCEED, check_candidate, hesitate_lateral, plan_motion
+from .traffic import TrafficHooks, TrafficView, hook_output, profile_segment
 
 
 @dataclass(frozen=True)
@@ -52,18 +56,32 @@ class SimState:
     min_gap_f: np.ndarray
     min_gap_l1: np.ndarray
     counts: np.ndarray  # (B, 3) proceed / hesitate / abort
+    plan_f_aggr: np.ndarray  # (B,) the F type the held plan assumed
+    breach: Breach  # the assumption monitor's record
+    n_invalid: np.ndarray  # (B,) periods whose nominal proposal was invalid (non-finite or out of range)
+    leader_cap: np.ndarray  # (B, K) the smallest chain bound each vehicle has had: it never brakes harder
+    link: Link | None = None  # the V2X emulation's received messages (None: perfect V2X)
 
 
 class ClosedLoop:
     """Holds the constant per-scenario arrays; ``step`` is a pure function of the state."""
 
-    def __init__(self, batch: ScenarioBatch, seed: int, prm: Params, cfg: SimConfig, nominal: NominalPlanner):
+    def __init__(
+        self,
+        batch: ScenarioBatch,
+        seed: int,
+        prm: Params,
+        cfg: SimConfig,
+        nominal: NominalPlanner,
+        traffic: TrafficHooks | None = None,
+    ):
         # (B, K) arrays are kept column-major: the engine works vehicle by vehicle (x[:, i]), and a strided
         # column costs NumPy several times a contiguous one.
         batch = dataclasses.replace(
             batch, **{f.name: _columns(getattr(batch, f.name)) for f in dataclasses.fields(batch)}
         )
         self.b, self.seed, self.prm, self.cfg, self.nominal = batch, seed, prm, cfg, nominal
+        self.traffic = traffic or TrafficHooks()
         variants = [VARIANTS[name] for name in VARIANT_NAMES]
         self.uses_chain = np.array([v.uses_chain for v in variants])[batch.variant]
         self.uses_f_v2x = np.array([v.uses_follower_v2x for v in variants])[batch.variant]
@@ -80,6 +98,10 @@ class ClosedLoop:
         self.margin = np.where(batch.human, prm.p_m_human, prm.p_m)
         self.roles = leader_roles(batch.valid, batch.connected, batch.n_connected)
         self.lane_pairs = lane_pairs(batch, prm)
+        self.last_slot = batch.n_connected + 1
+        self.emulate_v2x = cfg.v2x_loss > 0.0 or cfg.v2x_latency_periods > 0
+        self.chain_connected = np.column_stack([in_chain, np.zeros(len(batch), bool)])[:, : k - 1]
+        self.last_slot_mask = np.arange(k)[None, :] == self.last_slot[:, None]
 
     def initial_state(self) -> SimState:
         b, prm = self.b, self.prm
@@ -106,6 +128,11 @@ class ClosedLoop:
             min_gap_f=np.full(n, np.inf),
             min_gap_l1=np.full(n, np.inf),
             counts=np.zeros((n, 3), np.int64),
+            plan_f_aggr=np.ones(n, bool),
+            breach=Breach.none(n),
+            n_invalid=np.zeros(n, np.int64),
+            leader_cap=np.full(b.x.shape, np.inf),
+            link=Link.start(b.x, b.v) if self.emulate_v2x else None,
         )
 
     def observe(self, s: SimState) -> Observation:
@@ -130,18 +157,47 @@ class ClosedLoop:
             t=s.t,
         )
 
-    def worst_case(self, s: SimState, belief: assess.AssessmentState):
-        """L1's worst-case deceleration and F's assumed type, from the information each variant uses."""
-        b, prm = self.b, self.prm
+    def chain(self, s: SimState):
+        """The chain analysis on the current states: ``(bounds (B, K), unsafe (B,))``, ``bounds[:, i]`` the worst-case
+        deceleration of slot ``i`` (``a_x_d`` for F's slot, ``L(N+1)`` and anything not connected)."""
+        prm = self.prm
         n_links = s.x.shape[1] - 2
         with np.errstate(all="ignore"):  # inputs were checked with the batch: the scan alone, unchecked
             decel, _, unsafe = propagate_chain(
                 ARRAY, s.x.T[1:], s.v.T[1:], self.chain_promise, self.chain_margin, prm, n_links
             )
-        l1_decel = np.where(self.uses_chain & ~np.asarray(unsafe, bool), decel[0], prm.a_x_d)
+        bounds = np.column_stack([np.full(len(s.x), prm.a_x_d), *(np.broadcast_to(d, (len(s.x),)) for d in decel)])
+        return bounds, np.broadcast_to(np.asarray(unsafe, bool), (len(s.x),))
+
+    def ego_chain(self, s: SimState, link: Link | None, chain):
+        """What the ego's analysis gives for ``L1``: ``(bound, unsafe, stale (B,), f_fresh (B,))``. With perfect V2X
+        the chain on the true states (``chain``); with the emulation, on the ego's view through the staleness
+        fallback."""
+        n = len(s.x)
+        if link is None:
+            return chain[0][:, 1], chain[1], np.zeros(n, bool), np.ones(n, bool)
+        prm, cfg = self.prm, self.cfg
+        p, v, n_eff, stale = link.chain_view(s.t, s.x[:, 1], s.v[:, 1], self.chain_connected, prm, cfg.v2x_max_age_s)
+        links = np.arange(p.shape[1] - 1)[:, None]
+        promise = np.where(links < n_eff[None, :], self.chain_promise, prm.a_x_d)
+        with np.errstate(all="ignore"):
+            decel, _, unsafe = propagate_chain(ARRAY, p.T, v.T, promise, self.chain_margin, prm, p.shape[1] - 1)
+        f_fresh = link.fresh(0, s.t, cfg.v2x_max_age_s)
+        stale_any = stale.any(1) | (self.b.connected[:, 0] & ~f_fresh)
+        return np.broadcast_to(decel[0], (n,)), np.broadcast_to(np.asarray(unsafe, bool), (n,)), stale_any, f_fresh
+
+    def worst_case(self, s: SimState, belief: assess.AssessmentState, l1_bound, unsafe, f_fresh):
+        """L1's worst-case deceleration and F's assumed type, from the information each variant uses; after a
+        breach of the assumptions (the monitor, ``SimConfig.monitor``) the most conservative ones."""
+        b, prm = self.b, self.prm
+        l1_decel = np.where(self.uses_chain & ~unsafe, l1_bound, prm.a_x_d)
         assessed = b.follower_aggressive if self.cfg.assessment == "truth" else belief.aggressive
-        trusted = self.uses_f_v2x & b.connected[:, 0]
+        trusted = self.uses_f_v2x & b.connected[:, 0] & f_fresh
         f_aggr = np.where(trusted, False, np.where(self.uses_assessment, assessed, True))
+        if self.cfg.monitor:
+            broken = s.breach.any
+            l1_decel = np.where(broken, prm.a_x_d, l1_decel)
+            f_aggr = f_aggr | broken
         return l1_decel, f_aggr
 
     def step(self, s: SimState):
@@ -153,8 +209,18 @@ class ClosedLoop:
         if cfg.sensor_noise_std > 0.0:  # counter-based: skipping the draws when unused changes nothing else
             observed_f_v = observed_f_v + cfg.sensor_noise_std * counter_normal(self.seed, b.scenario_id, s.step, 0)
         belief = assess.update(s.belief, observed_f_v, s.t, dt, cfg.assess_threshold)
-        l1_decel, f_aggr = self.worst_case(s, belief)
-        a_x, a_y = clip_actions(*self.nominal(obs, prm), prm)  # a planner's own clipping is not trusted
+        chain = self.chain(s)
+        link = s.link
+        if link is not None:
+            link = link.update(
+                s.t, s.x, s.v, s.acc, s.step, self.seed, b.scenario_id, cfg.v2x_loss, cfg.v2x_latency_periods
+            )
+        l1_bound, unsafe, stale, f_fresh = self.ego_chain(s, link, chain)
+        l1_decel, f_aggr = self.worst_case(s, belief, l1_bound, unsafe, f_fresh)
+        # A planner's answer is checked, not trusted: a wrong shape or type is an error naming it; a non-finite or
+        # out-of-range action is a failed proposal (the row hesitates on a safe command or aborts).
+        a_x, a_y, invalid = check_proposal(self.nominal, self.nominal(obs, prm), len(b), prm)
+        a_x, a_y = clip_actions(a_x, a_y, prm)
         l1x, l1v, fx, fv = s.x[:, 1], s.v[:, 1], s.x[:, 0], s.v[:, 0]
 
         active = ~s.completed
@@ -166,8 +232,12 @@ class ClosedLoop:
             # The supervisor runs only where the lane change is under way; hesitate only where proceed failed.
             rows = np.flatnonzero(active)
             for code, lateral in ((PROCEED, a_y), (HESITATE, a_yh)):
+                if code == PROCEED:  # an invalid proposal is never executed: those rows start at hesitate
+                    skip, rows = rows[invalid[rows]], rows[~invalid[rows]]
+                elif skip.size:
+                    rows = np.sort(np.concatenate([rows, skip]))
                 if rows.size == 0:
-                    break
+                    continue
                 verdict = check_candidate(
                     *(a[rows] for a in (ex, ey, evx, evy, a_x, lateral, l1x, l1v, l1_decel, fx, fv, f_aggr)), prm
                 )
@@ -196,13 +266,40 @@ class ClosedLoop:
         if rows.size:  # only the aborting rows follow their plan: evaluate it there alone
             plan = (rows, *plan_motion(s.plan.take(rows), s.t - s.plan_t0[rows], dt))
 
-        acc = self.others_accels(s, ex, evx)
-        others = Fleet.constant(s.x, s.v, acc, dt)
+        # A leader's bound never grows in exact arithmetic (docs/simulator.md); the running minimum makes that exact
+        # in floating point too (the analysis' 1 nm tolerance lets a recomputed bound exceed an earlier one by ~1e-9).
+        leader_cap = np.minimum(s.leader_cap, chain[0])
+        acc, last_switch = self.others_accels(s, ex, evx, ey, evy, leader_cap)
+        if last_switch is None:
+            others = Fleet.constant(s.x, s.v, acc, dt)
+        else:  # L(N+1)'s profile switches inside the period: its slot gets a second segment
+            t_sw, a2 = last_switch
+            others = Fleet.switched(s.x, s.v, acc, t_sw, a2, dt)
         new_plan = _set_rows(s.plan, accepted)
+        plan_f_aggr = s.plan_f_aggr.copy()
+        for rows_acc, _ in accepted:
+            plan_f_aggr[rows_acc] = f_aggr[rows_acc]
+        # The monitor compares what the others did this period with what the held plan assumed; the supervisor
+        # sees the result from the next period on (it is observed at the period's end).
+        breach = observe_breaches(
+            s.breach, s, acc, chain[0], s.plan.l1_decel, s.plan_f_aggr, active, prm, s.t + dt, last_switch,
+            self.last_slot, stale,
+        )
         new = self.check_and_advance(s, lon, lat, plan, others, behaviour, completing, new_plan, acc, belief)
+        new = dataclasses.replace(
+            new,
+            plan_f_aggr=plan_f_aggr,
+            breach=breach,
+            n_invalid=s.n_invalid + (invalid & active),
+            leader_cap=leader_cap,
+            link=link,
+        )
+        _check_finite(new, b)
         return new, obs, behaviour
 
-    def others_accels(self, s: SimState, ex, evx):
+    def others_accels(self, s: SimState, ex, evx, ey, evy, bounds):
+        """Accelerations of the target-lane vehicles for this period ``(B, K)`` and L(N+1)'s switch inside it
+        (``(t_switch (B, K), a2 (B, K))``, ``t_switch = dt`` elsewhere) or ``None``."""
         b, prm, cfg = self.b, self.prm, self.cfg
         k = s.x.shape[1]
         slots = np.arange(k)
@@ -210,21 +307,32 @@ class ClosedLoop:
         if self.any_violation:
             violating = counter_uniform(self.seed, b.scenario_id[:, None], s.step, slots[None, :], 7) < b.p_v[:, None]
             pick = counter_uniform(self.seed, b.scenario_id[:, None], s.step, slots[None, :], 8)
-        braking = np.full(len(b), s.t + 1e-9 >= cfg.brake_start_s)
+        hooks = self.traffic
+        view = None
+        if hooks.leader_task is not None or hooks.follower_wish is not None:
+            view = TrafficView(
+                t=s.t, scenario_id=b.scenario_id, x=s.x, v=s.v, n_connected=b.n_connected, ego_x=ex, ego_y=ey,
+                ego_vx=evx, ego_vy=evy, completed=s.completed, follower_aggressive=b.follower_aggressive,
+            )
+        wanted = None
+        if hooks.leader_task is not None:
+            wanted = hook_output("leader_task", hooks.leader_task(view, prm), s.x.shape)
+        task = leader_task(s.v, self.v_desired, b.promise_decel, b.promise_accel, wanted)
+        switch = None
+        if b.last_profile_t is None:
+            a_last = np.where(s.t + 1e-9 >= cfg.brake_start_s, -b.decel_last, 0.0)
+        else:
+            a_last, t_sw, a2 = profile_segment(s.t, prm.dt, b.last_profile_t, b.last_profile_a)
+            if (t_sw < prm.dt).any():
+                on = self.last_slot_mask & (t_sw < prm.dt)[:, None]
+                switch = (np.where(on, t_sw[:, None], prm.dt), np.where(on, a2[:, None], 0.0))
         acc = leader_accels(
-            s.x,
-            s.v,
-            self.margin,
-            self.roles,
-            b.promise_decel,
-            b.promise_accel,
-            self.v_desired,
-            b.decel_last,
-            braking,
-            violating,
-            pick,
-            prm,
+            s.x, s.v, self.margin, self.roles, bounds, task, a_last, b.decel_last, violating, pick, prm
         )
+        f_wish = None
+        if hooks.follower_wish is not None:
+            f_wish = np.clip(hook_output("follower_wish", hooks.follower_wish(view, prm), (len(b),)), -prm.a_x_d,
+                             prm.a_x_a)
         acc[:, 0] = follower_accel(
             s.x[:, 0],
             s.v[:, 0],
@@ -238,8 +346,10 @@ class ClosedLoop:
             prm,
             cfg.follower_open_decel,
             cfg.follower_open_gap_m,
+            wanted=f_wish,
+            ignores_ego=cfg.follower_ignores_ego,
         )
-        return acc
+        return acc, switch
 
     def check_and_advance(self, s, lon, lat, plan, others, behaviour, completing, new_plan, acc, belief) -> SimState:
         prm = self.prm
@@ -281,6 +391,24 @@ class ClosedLoop:
             min_gap_f=min_gap_f,
             min_gap_l1=min_gap_l1,
             counts=counts,
+            plan_f_aggr=s.plan_f_aggr,
+            breach=s.breach,
+            n_invalid=s.n_invalid,
+            leader_cap=s.leader_cap,
+            link=s.link,
+        )
+
+
+def _check_finite(s: SimState, b: ScenarioBatch) -> None:
+    """A NaN or inf in the state is a bug, never a silent "no collision": stop the run and name the scenarios."""
+    ex, ey, evx, evy = s.ego
+    bad = ~(np.isfinite(ex) & np.isfinite(ey) & np.isfinite(evx) & np.isfinite(evy))
+    bad |= ~np.isfinite(s.x).all(1) | ~np.isfinite(s.v).all(1)
+    if bad.any():
+        ids = b.scenario_id[bad][:5].tolist()
+        raise FloatingPointError(
+            f"non-finite simulator state at t = {s.t:.1f} s in scenario(s) {ids} ({int(bad.sum())} in all): a bug in "
+            "a behaviour model or hook, not an outcome"
         )
 
 

@@ -1,0 +1,42 @@
+"""Nominal proposals are checked, not trusted.
+
+A planner's answer must be two arrays of numbers of the batch's shape ``(B,)``; anything else (a wrong shape, a
+string, booleans, ``None``) is a programming error and raises a ``TypeError``/``ValueError`` naming the planner.
+A finite action inside the mechanical limits (to ``1e-9`` m/s²) is a valid proposal; a non-finite one or one
+outside the limits is a *failed proposal*: it never reaches the state — the supervisor treats the row as if the
+planner had proposed to hesitate (``a_x = 0`` and the lateral speed driven to zero, still checked) and aborts if
+that is unsafe — and it is counted per scenario (``n_invalid_proposals`` in the results table).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ..params import Params
+
+_RANGE_TOL = 1e-9
+
+
+def check_proposal(planner, proposal, batch: int, prm: Params):
+    """``(a_x, a_y, invalid)`` from a planner's raw answer; invalid rows hold ``0`` (see the module docstring)."""
+    name = getattr(planner, "__name__", type(planner).__name__)
+    if not isinstance(proposal, tuple | list) or len(proposal) != 2:
+        raise TypeError(f"nominal planner {name} must return a pair (a_x, a_y); got {type(proposal).__name__}")
+    out = []
+    for axis, value in zip(("a_x", "a_y"), proposal, strict=True):
+        arr = np.asarray(value)
+        if arr.dtype.kind not in "fiu":
+            raise TypeError(
+                f"nominal planner {name} returned {axis} of dtype {arr.dtype} ({type(value).__name__}); numbers "
+                "are required"
+            )
+        if arr.shape != (batch,):
+            raise ValueError(f"nominal planner {name} returned {axis} of shape {arr.shape}; expected ({batch},)")
+        out.append(arr.astype(float))
+    a_x, a_y = out
+    with np.errstate(invalid="ignore"):
+        ok = np.isfinite(a_x) & np.isfinite(a_y)
+        ok &= (a_x >= -prm.a_x_d - _RANGE_TOL) & (a_x <= prm.a_x_a + _RANGE_TOL)
+        ok &= np.abs(a_y) <= prm.a_y_m + _RANGE_TOL
+    invalid = ~ok
+    return np.where(ok, a_x, 0.0), np.where(ok, a_y, 0.0), invalid

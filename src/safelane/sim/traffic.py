@@ -1,0 +1,145 @@
+"""Public extension point for the target-lane traffic: behaviours *inside* the paper's assumptions.
+
+The simulator's built-in behaviours (:mod:`safelane.sim.behaviours`) are the paper's. A study that wants other
+behaviours — an adversarial search, a recorded drive, a different driver model — plugs them in here, without
+subclassing anything:
+
+* :class:`TrafficHooks` — callables the closed loop asks every period for what a vehicle *wants* to do. The
+  simulator then enforces the assumptions the guarantee rests on: a connected leader's wish is clipped into its
+  promise ``[−a_m_d, a_m_a]`` and then to what keeps it safe against the vehicle ahead's worst case (it may
+  brake beyond its promise only as far as the chain analysis allows); F's wish is clipped into its type's
+  range and filtered by responsible following. A hook therefore cannot leave the assumptions by accident.
+* :func:`with_last_profile` — the braking profile of ``L(N+1)`` (the non-connected head of the chain): piecewise
+  constant accelerations inside ``[−a_x_d, a_x_a]`` that may switch at any instant, also inside a control
+  period (at most one switch per period).
+
+Both are passed to :func:`safelane.sim.simulate_batch` (``traffic=``, and the batch itself).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from collections.abc import Callable
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..params import Params
+
+
+@dataclass(frozen=True)
+class TrafficView:
+    """What a traffic hook sees at the start of a period (read-only arrays; the batch on the leading axis).
+
+    Attributes:
+        t: time [s] at the start of the period.
+        scenario_id: ``(B,)`` stable scenario ids (index per-scenario parameters with them: a batch may be split
+            over worker processes, so row numbers are not stable, ids are).
+        x, v: ``(B, K)`` positions and speeds of the target-lane vehicles (slot 0 = F, 1..N the connected leaders,
+            N+1 = L(N+1), padding beyond).
+        n_connected: ``(B,)`` N.
+        ego_x, ego_y, ego_vx, ego_vy: ``(B,)`` the ego's state.
+        completed: ``(B,)`` the lane change has completed.
+        follower_aggressive: ``(B,)`` F's true type.
+    """
+
+    t: float
+    scenario_id: np.ndarray
+    x: np.ndarray
+    v: np.ndarray
+    n_connected: np.ndarray
+    ego_x: np.ndarray
+    ego_y: np.ndarray
+    ego_vx: np.ndarray
+    ego_vy: np.ndarray
+    completed: np.ndarray
+    follower_aggressive: np.ndarray
+
+
+#: ``hook(view, params) -> (B, K)`` wanted accelerations [m/s²] of the connected leaders (other slots ignored).
+LeaderTask = Callable[[TrafficView, Params], np.ndarray]
+#: ``hook(view, params) -> (B,)`` wanted acceleration [m/s²] of F.
+FollowerWish = Callable[[TrafficView, Params], np.ndarray]
+
+
+@dataclass(frozen=True)
+class TrafficHooks:
+    """Behaviour hooks; ``None`` keeps the built-in behaviour.
+
+    Attributes:
+        leader_task: each connected leader's *own driving task* (built-in: hold the initial speed). Clipped into the
+            promise, then made safe against the vehicle ahead's worst case (see the module docstring).
+        follower_wish: F's wanted acceleration (built-in: collaborative opens a gap, aggressive closes on L1).
+            Clipped into ``[−a_x_d, a_x_a]`` and, for a collaborative F, to ``<= 0`` while the ego is changing lanes
+            in front of it (a collaborative F never pushes); then filtered by responsible following.
+    """
+
+    leader_task: LeaderTask | None = None
+    follower_wish: FollowerWish | None = None
+
+
+def hook_output(name: str, value, shape: tuple[int, ...]) -> np.ndarray:
+    """A hook's answer as a finite float array of ``shape``, or a ``ValueError`` naming the hook."""
+    try:
+        arr = np.asarray(value, dtype=float)
+    except (TypeError, ValueError) as exc:
+        raise ValueError(
+            f"traffic hook {name} must return numbers of shape {shape}; got {type(value).__name__}"
+        ) from exc
+    if arr.shape != shape:
+        raise ValueError(f"traffic hook {name} must return shape {shape}; got {arr.shape}")
+    if not np.isfinite(arr).all():
+        raise ValueError(f"traffic hook {name} returned a non-finite value {arr[~np.isfinite(arr)].flat[0]!r}")
+    return arr
+
+
+def with_last_profile(batch, switch_times_s, accels_mps2, params: Params | None = None):
+    """``batch`` with L(N+1) driving a piecewise-constant acceleration profile instead of the sudden braking.
+
+    Args:
+        batch: a :class:`~safelane.sim.ScenarioBatch`.
+        switch_times_s: ``(B, P)`` ascending times [s] at which segment ``j`` starts; ``[:, 0]`` must be 0. Pad
+            unused segments by repeating the last time (zero-length segments are ignored).
+        accels_mps2: ``(B, P)`` acceleration of each segment, inside ``[−a_x_d, a_x_a]`` (a deceleration beyond
+            ``a_x_d`` leaves the assumptions: it is rejected here; use ``decel_last`` for that study).
+        params: the limits to check against (default ``Params()``).
+
+    Consecutive switches must be at least one control period apart apart from padding (at most one switch
+    inside any period); the simulator integrates the switch exactly.
+    """
+    prm = params or Params()
+    t = np.asarray(switch_times_s, dtype=float)
+    a = np.asarray(accels_mps2, dtype=float)
+    n = len(batch)
+    if t.ndim != 2 or t.shape[0] != n or a.shape != t.shape:
+        raise ValueError(f"switch_times_s and accels_mps2 must both have shape ({n}, P); got {t.shape} and {a.shape}")
+    if not (np.isfinite(t).all() and np.isfinite(a).all()):
+        raise ValueError("switch_times_s and accels_mps2 must be finite")
+    if (t[:, 0] != 0.0).any():
+        raise ValueError(f"switch_times_s[:, 0] must be 0 (the profile starts at t = 0); got {t[t[:, 0] != 0, 0][0]!r}")
+    steps = np.diff(t, axis=1)
+    if (steps < 0).any():
+        raise ValueError("switch_times_s must be ascending along each row")
+    if ((steps > 0) & (steps < prm.dt - 1e-12)).any():
+        raise ValueError(f"switches must be at least one period (dt={prm.dt} s) apart (at most one per period)")
+    if (a < -prm.a_x_d - 1e-12).any() or (a > prm.a_x_a + 1e-12).any():
+        bad = a[(a < -prm.a_x_d - 1e-12) | (a > prm.a_x_a + 1e-12)].flat[0]
+        raise ValueError(f"accels_mps2 must lie in [-a_x_d={-prm.a_x_d}, a_x_a={prm.a_x_a}]; got {bad!r}")
+    return dataclasses.replace(batch, last_profile_t=t, last_profile_a=a)
+
+
+def profile_segment(t_start: float, dt: float, times: np.ndarray, accels: np.ndarray):
+    """The profile over the period ``[t_start, t_start + dt]``: ``(a1, t_switch, a2)`` per row, ``t_switch``
+    relative to the period's start (``dt`` and ``a2 = a1`` where nothing switches inside it)."""
+    eps = 1e-9
+    idx = (times <= t_start + eps).sum(1) - 1  # the last segment started by now (padding repeats a start)
+    rows = np.arange(len(times))
+    a1 = accels[rows, idx]
+    later = times > t_start + eps
+    has_later = later.any(1)
+    t_next = np.where(has_later, times[rows, np.argmax(later, 1)], np.inf)
+    last_at = (times <= t_next[:, None]).sum(1) - 1  # the segment that starts at t_next
+    inside = t_next < t_start + dt - eps
+    a2 = np.where(inside, accels[rows, np.minimum(last_at, times.shape[1] - 1)], a1)
+    t_sw = np.where(inside, t_next - t_start, dt)
+    return a1, t_sw, a2
