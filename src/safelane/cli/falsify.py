@@ -50,7 +50,7 @@ def falsify(
         task = bar.add_task("falsifying", total=max(scenarios, 1), status="")
 
         def on_batch(report: fz.Report) -> None:
-            failures = sum(report.counts.values())
+            failures = sum(report.counts[name] for name in fz.OUTCOMES)
             status = f"{report.simulated:,} simulated, min gap/p_m {report.min_ratio:.12f}, failures {failures}"
             bar.update(task, completed=min(report.simulated, scenarios), status=status)
 

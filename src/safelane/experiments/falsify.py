@@ -40,6 +40,10 @@ from . import falsify_space as space
 
 METHODS = ("random", "cem", "knife")
 OUTCOMES = ("collision", "safety_violation", "leader_collision", "leader_violation")
+#: Counted too, not failures: the assumption monitor's verdict (inside the assumptions it should stay silent) and
+#: proposals the closed loop rejected (the adversaries return finite, clipped actions). Zero where the simulator
+#: has no such column.
+NOTES = ("assumption_breach", "n_invalid_proposals")
 
 
 def hooks_live() -> bool:
@@ -106,6 +110,8 @@ def evaluate(spec: dict, setting: Setting) -> tuple[pd.DataFrame, dict]:
         out = pd.DataFrame({"row": rows})
         for name in OUTCOMES:
             out[name] = table[name].to_numpy(bool)
+        for name in NOTES:
+            out[name] = table[name].to_numpy(np.int64) if name in table else 0
         out["ratio_l1"] = table["min_gap_leader_m"].to_numpy() / prm.p_m
         out["ratio_f"] = table["min_gap_follower_m"].to_numpy() / prm.p_m
         out["lane_ratio"] = recorder.min_ratio if recorder is not None else np.nan
@@ -163,7 +169,7 @@ class Report:
     generated: int = 0
     simulated: int = 0
     wall_s: float = 0.0
-    counts: dict = field(default_factory=lambda: {name: 0 for name in OUTCOMES})
+    counts: dict = field(default_factory=lambda: {name: 0 for name in (*OUTCOMES, *NOTES)})
     by_method: dict = field(default_factory=dict)
     min_ratio: float = np.inf
     min_ratio_l1: float = np.inf
@@ -183,6 +189,8 @@ class Report:
         bad = outcome[list(OUTCOMES)].to_numpy(bool)
         for name, col in zip(OUTCOMES, bad.T, strict=True):
             self.counts[name] += int(col.sum())
+        for name in NOTES:
+            self.counts[name] += int(outcome[name].sum()) if name in outcome else 0
         m["failures"] += int(bad.any(1).sum())
         for i in np.flatnonzero(bad.any(1))[: max(0, 20 - len(self.failures))]:
             self.failures.append(scenario_record(spec, i, outcome.iloc[i], setting, method))
@@ -213,6 +221,8 @@ class Report:
             "p_m_violations_ego": self.counts["safety_violation"],
             "leader_collisions": self.counts["leader_collision"],
             "p_m_violations_leaders": self.counts["leader_violation"],
+            "assumption_breaches_flagged": self.counts["assumption_breach"],
+            "invalid_proposals": self.counts["n_invalid_proposals"],
             "min_gap_over_p_m": self.min_ratio,
             "min_gap_over_p_m_l1": self.min_ratio_l1,
             "min_gap_over_p_m_f": self.min_ratio_f,
@@ -353,7 +363,7 @@ def merge(reports: list[Report]) -> Report:
         out.generated += r.generated
         out.simulated += r.simulated
         out.wall_s = max(out.wall_s, r.wall_s)
-        for name in OUTCOMES:
+        for name in (*OUTCOMES, *NOTES):
             out.counts[name] += r.counts[name]
         for name, m in r.by_method.items():
             acc = out.by_method.setdefault(name, {"generated": 0, "simulated": 0, "min_ratio": np.inf, "failures": 0})
@@ -409,6 +419,8 @@ def _parallel(scenarios, minutes, seed, method, batch_size, setting, on_batch, w
                     "safety_violation": sum(v[0]["p_m_violations_ego"] for v in latest.values()),
                     "leader_collision": sum(v[0]["leader_collisions"] for v in latest.values()),
                     "leader_violation": sum(v[0]["p_m_violations_leaders"] for v in latest.values()),
+                    "assumption_breach": sum(v[0]["assumption_breaches_flagged"] for v in latest.values()),
+                    "n_invalid_proposals": sum(v[0]["invalid_proposals"] for v in latest.values()),
                 }
                 on_batch(partial)
             if len(done) == len(futures):
