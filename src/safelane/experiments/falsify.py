@@ -77,7 +77,17 @@ class Setting:
     sim: SimConfig = field(default_factory=lambda: SimConfig(assessment="truth"))
     seed: int = 0
     decel_last_max: float | None = None  # > a_x_d: L(N+1) may brake beyond the assumptions (studies, tests)
-    use_hooks: bool = True  # traffic hooks and L(N+1) profiles, where the simulator has them
+    use_hooks: bool = True  # traffic hooks, where the simulator has them
+    use_profiles: bool = True  # L(N+1) profiles, where the simulator has them (else sudden braking at decel_last)
+
+    def resolved(self) -> Setting:
+        """This setting with ``use_hooks`` / ``use_profiles`` saying what this simulator really does (dumps record
+        it, so a replay on a newer simulator uses the same behaviour models)."""
+        return dataclasses.replace(
+            self,
+            use_hooks=self.use_hooks and hooks_live(),
+            use_profiles=self.use_profiles and space.with_profile_fields() and self.decel_last_max is None,
+        )
 
 
 def evaluate(spec: dict, setting: Setting) -> tuple[pd.DataFrame, dict]:
@@ -87,8 +97,8 @@ def evaluate(spec: dict, setting: Setting) -> tuple[pd.DataFrame, dict]:
     spec = dict(spec)
     if setting.decel_last_max is not None:
         spec["decel_last"] = spec["decel_last"] / prm.a_x_d * setting.decel_last_max
-    hooks = setting.use_hooks and hooks_live()
-    profiles = setting.use_hooks and space.with_profile_fields() and setting.decel_last_max is None
+    setting = setting.resolved()
+    hooks, profiles = setting.use_hooks, setting.use_profiles
     batch, ok = space.build(spec, prm, profiles=profiles)
     keep = np.flatnonzero(ok)
     frames = []
@@ -263,6 +273,7 @@ def scenario_record(spec: dict, i: int, outcome_row, setting: Setting, method: s
         "sim": setting.sim.model_dump(),
         "decel_last_max": setting.decel_last_max,
         "use_hooks": setting.use_hooks,
+        "use_profiles": setting.use_profiles,
         "spec": {k: np.asarray(v[i]).tolist() for k, v in spec.items()},
         "outcome": {k: json_scalar(v) for k, v in outcome_row.items() if k != "row"},
     }
@@ -285,6 +296,7 @@ def replay(record: dict | str | Path) -> pd.DataFrame:
         seed=record["seed"],
         decel_last_max=record["decel_last_max"],
         use_hooks=record["use_hooks"],
+        use_profiles=record.get("use_profiles", record["use_hooks"]),
     )
     return evaluate(spec, setting)[0]
 
@@ -314,18 +326,12 @@ def falsify(
     if scenarios < 0 or minutes < 0 or batch_size < 1 or workers < 1:
         raise ValueError("scenarios and minutes must be >= 0, batch_size and workers >= 1")
     setting = setting or Setting(seed=seed)
-    setting = dataclasses.replace(setting, seed=seed)
+    setting = dataclasses.replace(setting, seed=seed).resolved()
     if workers > 1:
         return _parallel(scenarios, minutes, seed, method, batch_size, setting, on_batch, workers)
     prm = setting.params
     dim = space.dimension(prm)
-    hooks = setting.use_hooks and hooks_live()
-    report = Report(
-        seed=seed,
-        methods=methods,
-        hooks=hooks,
-        profiles=setting.use_hooks and space.with_profile_fields() and setting.decel_last_max is None,
-    )
+    report = Report(seed=seed, methods=methods, hooks=setting.use_hooks, profiles=setting.use_profiles)
     cem = CrossEntropy(dim)
     start = time.perf_counter()
     index = 0
