@@ -63,7 +63,7 @@ def calibrate(
     finalists = min(finalists, candidates)
     total = candidates + refine + finalists
     console.print(f"calibration: {total} candidates ({candidates} search, {refine} refine, {finalists} final); "
-                  "loss: mean |ours - paper| over 40 cells; * = best so far")
+                  "loss: mean |ours - paper| over 40 cells; * = best so far", soft_wrap=True)
     best = [float("inf")]
     start = time.perf_counter()
 
