@@ -7,7 +7,6 @@ import pandas as pd
 import pytest
 
 from safelane import Params
-from safelane.experiments import calibration
 from safelane.experiments.calibration import Preset, load_preset
 from safelane.experiments.claims import check_claims, table1_side_by_side
 from safelane.experiments.paper_data import DECELS, PLANNERS, TABLE1
