@@ -124,6 +124,11 @@ def test_simulate_bad_options_name_the_option(tmp_path, args, needles):
     assert not any(tmp_path.iterdir())  # nothing written
 
 
+def test_check_and_reproduce_name_the_option():
+    assert_usage_error(invoke("check", "--ego-vx", "-5"), "--ego-vx", "ego_vx must be >= 0; got -5.0")
+    assert_usage_error(invoke("reproduce", "--only", "bogus"), "--only", "'bogus'", "table1")
+
+
 def test_debug_shows_the_traceback_and_version(tmp_path):
     plain = invoke("check", "--params", tmp_path / "nope.yaml")
     assert plain.exit_code == 2 and "Traceback" not in plain.output
@@ -147,7 +152,7 @@ def test_preset_runs_do_not_overwrite_plain_runs_and_record_provenance(tmp_path)
     for extra in ([], ["--preset", "paper", "--nominal", "mlp"]):
         assert invoke("simulate", *TINY, "--out", tmp_path, *extra).exit_code == 0
     runs = sorted(tmp_path.iterdir())
-    assert len(runs) == 2
+    assert len(runs) == 2 and sum(r.name.endswith("seed3-paper-mlp") for r in runs) == 1
     infos = [json.loads((r / "run.json").read_text()) for r in runs]
     by_nominal = {i["nominal"]: i for i in infos}
     assert set(by_nominal) == {"expert", "mlp"}

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import re
 from pathlib import Path
 
 import typer
@@ -66,7 +67,7 @@ def check(
             decel = params.a_x_d if l1_decel is None else l1_decel
         plan = plan_evasion(ego_px, ego_py, ego_vx, ego_vy, l1_p, l1_v, decel, f_p, f_v, aggressive, params)
     except ValueError as exc:
-        raise typer.BadParameter(str(exc)) from exc
+        raise typer.BadParameter(str(exc), param_hint=_option_named_in(str(exc))) from exc
     reasons = [r.name for r in Reason if r and int(plan.reason) & int(r)]
     out = {
         "evasion_exists": bool(plan.feasible),
@@ -82,3 +83,14 @@ def check(
         "params": params.model_dump(),
     }
     typer.echo(json.dumps(out, indent=2))
+
+
+_STATE_OPTIONS = ("ego_px", "ego_py", "ego_vx", "ego_vy", "l1_p", "l1_v", "l1_decel", "f_p", "f_v")
+
+
+def _option_named_in(message: str) -> str | None:
+    """The option whose argument the safety API's message names (``ego_vx`` → ``--ego-vx``), if any."""
+    for name in _STATE_OPTIONS:
+        if re.search(rf"\b{name}\b", message):
+            return "--" + name.replace("_", "-")
+    return None

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import re
 from pathlib import Path
 
 import typer
@@ -83,6 +84,7 @@ def simulate(
     out = check_out_dir(out)
 
     label = f"{planner}_N{leaders}_decel{decel:g}_pv{p_v:g}_seed{seed}"
+    label += "".join(f"-{re.sub(r'[^A-Za-z0-9_.]+', '_', part)}" for part in (chosen and chosen.name, nominal) if part)
     info = {
         "kind": "simulate",
         "preset": preset_record(chosen),
