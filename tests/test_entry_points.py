@@ -162,9 +162,10 @@ def test_preset_runs_do_not_overwrite_plain_runs_and_record_provenance(tmp_path)
         assert info["status"] == "complete" and info["samples"] == 4
 
 
-@pytest.mark.parametrize("command", ["simulate", "train", "calibrate", "reproduce"])
+@pytest.mark.parametrize("command", ["simulate", "train", "calibrate", "reproduce", "falsify"])
 def test_unwritable_out_fails_before_any_work(tmp_path, monkeypatch, command):
     import safelane.experiments.calibration as calibration
+    import safelane.experiments.falsify as falsify_module
     import safelane.experiments.reproduce as reproduce_module
     import safelane.sim as sim_module
     import safelane.training.train as train_module
@@ -173,7 +174,7 @@ def test_unwritable_out_fails_before_any_work(tmp_path, monkeypatch, command):
         raise AssertionError("work started before --out was checked")
 
     for module, name in ((sim_module, "simulate"), (train_module, "train"), (calibration, "calibrate"),
-                         (reproduce_module, "reproduce")):  # fmt: skip
+                         (reproduce_module, "reproduce"), (falsify_module, "falsify")):  # fmt: skip
         monkeypatch.setattr(module, name, forbidden)
     blocker = tmp_path / "a_file"
     blocker.write_text("")

@@ -45,6 +45,9 @@ def falsify(
         )
     from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
 
+    from ._runs import check_out_dir
+
+    out = check_out_dir(out)  # before minutes of search, not after
     columns = (TextColumn("{task.description}"), BarColumn(), TextColumn("{task.fields[status]}"), TimeElapsedColumn())
     with Progress(*columns, disable=not progress, transient=True) as bar:
         task = bar.add_task("falsifying", total=max(scenarios, 1), status="")
