@@ -1,0 +1,325 @@
+"""The batched lane-change task behind the Gymnasium environments — no Gymnasium in here.
+
+:class:`LaneChangeTask` drives one :class:`safelane.sim.step.ClosedLoop` over ``B`` episodes at once: the agent's
+actions are the *nominal planner's proposals* (:class:`ActionPlanner`), the shield (the simulator's supervisor,
+``SimConfig.supervised``) decides what is executed, and the task turns the state change of one control period
+into observations, rewards, costs and flags. :class:`~safelane.envs.LaneChangeEnv` is this task with ``B = 1``;
+:class:`~safelane.envs.LaneChangeVectorEnv` is the same task over the whole batch.
+
+Resets (the vector env's auto-reset): the rows that finished get fresh scenarios, sampled row by row from their own
+generators exactly as a single env samples them; a new ``ClosedLoop`` is built for the whole batch (its constant
+arrays), and the finished rows of the state are overwritten by the initial state of their new scenarios (where the
+initial state has no record at all — the shield's memory of the previous period — the rows' record is emptied, see
+:func:`vacate_rows`). The batch
+shares one clock, so a row that restarts at batch time ``T`` runs its episode at ``T, T + dt, …``: its plan's clock
+is shifted by ``T`` and nothing else in the closed loop reads the absolute time — as long as ``L(N+1)`` brakes
+from ``t = 0`` (``SimConfig.brake_start_s = 0``) and V2X is perfect, which the vector env therefore requires.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from collections.abc import Sequence
+
+import numpy as np
+from pydantic import BaseModel, ConfigDict, Field
+
+from ..params import Params
+from ..planners.base import Observation
+from ..planners.features import FEATURE_NAMES, features
+from ..planners.variants import get_variant
+from ..sim.config import SimConfig
+from ..sim.scenario import ScenarioBatch, ScenarioConfig, paper_scenarios
+from ..sim.step import ClosedLoop
+from ..sim.traffic import TrafficHooks
+
+#: The supervisor's behaviour codes (``info["behaviour"]``) and their names.
+PROCEED, HESITATE, ABORT, COMPLETED = 0, 1, 2, -1
+BEHAVIOUR_NAMES = {PROCEED: "proceed", HESITATE: "hesitate", ABORT: "abort", COMPLETED: "completed"}
+
+
+class RewardConfig(BaseModel):
+    """Weights of the reward; every term is per control period (``dt``).
+
+    ``reward = progress·Δp_y/(w_l/2) + success·[completed safely] − collision·[crashed] − comfort·(a_x² + a_y²)·dt
+    − time − cost·cost_t``, where ``Δp_y`` is the ego's lateral progress over the period (the lane change completes
+    when its centre crosses the lane boundary at ``w_l/2``, so the progress terms of a completed lane change add up
+    to about ``progress``) and ``(a_x, a_y)`` is the *executed* acceleration (``info["executed_action"]``).
+    """
+
+    model_config = ConfigDict(frozen=True, extra="forbid", allow_inf_nan=False)
+
+    progress: float = Field(1.0, description="Weight of the lateral progress toward the lane boundary.")
+    success: float = Field(1.0, description="Bonus when the lane change completes without a collision.")
+    collision: float = Field(1.0, description="Penalty on a collision of the ego (the episode ends).")
+    comfort: float = Field(0.01, ge=0.0, description="Penalty per (m/s²)²·s of executed acceleration.")
+    time: float = Field(0.0, ge=0.0, description="Penalty per period (hurry).")
+    cost: float = Field(0.0, ge=0.0, description="Penalty per unit of cost (0: leave it to a constrained method).")
+
+
+class ActionPlanner:
+    """A nominal planner whose proposal is whatever was set last: the agent's action, ``(B, 2)``."""
+
+    def __init__(self, batch: int):
+        self.a_x = np.zeros(batch)
+        self.a_y = np.zeros(batch)
+
+    def set(self, action: np.ndarray) -> None:
+        self.a_x = np.ascontiguousarray(action[:, 0], dtype=float)
+        self.a_y = np.ascontiguousarray(action[:, 1], dtype=float)
+
+    def __call__(self, obs: Observation, params: Params) -> tuple[np.ndarray, np.ndarray]:
+        return self.a_x, self.a_y
+
+
+@dataclasses.dataclass(frozen=True)
+class ScenarioSampler:
+    """Draws one scenario from a generator: the paper's sampler with ``N`` drawn from ``n_leaders`` and
+    ``a_x_N+1_d`` from ``decel`` (a number, or ``(lo, hi)`` for ``U[lo, hi]``), padded to ``max(n_leaders) + 2``
+    vehicles so that every episode fits one batch."""
+
+    variant: str = "CV_all"
+    n_leaders: tuple[int, ...] = (3,)
+    decel: tuple[float, float] = (5.0, 5.0)
+    scenario: ScenarioConfig = dataclasses.field(default_factory=ScenarioConfig)
+    p_v: float = 0.0
+
+    @classmethod
+    def build(cls, variant="CV_all", n_leaders=3, decel=5.0, scenario=None, p_v=0.0) -> ScenarioSampler:
+        get_variant(variant)
+        leaders = (n_leaders,) if np.isscalar(n_leaders) else tuple(n_leaders)
+        if not leaders or any(int(n) != n or n < 0 for n in leaders):
+            raise ValueError(f"n_leaders must be a non-negative integer or a sequence of them; got {n_leaders!r}")
+        span = (float(decel), float(decel)) if np.isscalar(decel) else tuple(float(d) for d in decel)
+        if len(span) != 2 or not 0.0 < span[0] <= span[1]:
+            raise ValueError(f"decel must be a positive number or a range (lo, hi) with 0 < lo <= hi; got {decel!r}")
+        if isinstance(scenario, dict):
+            scenario = ScenarioConfig(**scenario)
+        return cls(variant, tuple(int(n) for n in leaders), span, scenario or ScenarioConfig(), float(p_v))
+
+    @property
+    def width(self) -> int:
+        return max(self.n_leaders) + 2
+
+    def draw(self, rng: np.random.Generator) -> ScenarioBatch:
+        n = self.n_leaders[rng.integers(len(self.n_leaders))] if len(self.n_leaders) > 1 else self.n_leaders[0]
+        lo, hi = self.decel
+        decel = rng.uniform(lo, hi) if hi > lo else lo
+        row = paper_scenarios(self.variant, n, decel, 1, rng, self.scenario, p_v=self.p_v)
+        # A fresh id per episode keys the simulator's counter-based draws (promise violations, sensor noise).
+        row = dataclasses.replace(row, scenario_id=rng.integers(0, 2**62, size=1))
+        return pad_vehicles(row, self.width)
+
+
+def pad_vehicles(batch: ScenarioBatch, k: int) -> ScenarioBatch:
+    """``batch`` with its vehicle axis padded to ``k`` slots the way :func:`safelane.sim.concat` pads (invalid,
+    not connected, 1 km apart beyond the last vehicle)."""
+    extra = k - batch.x.shape[1]
+    if extra <= 0:
+        return batch
+    out = {}
+    for f in dataclasses.fields(batch):
+        a = getattr(batch, f.name)
+        if isinstance(a, np.ndarray) and a.ndim == 2 and not f.name.startswith("last_profile"):
+            pad = np.repeat(a[:, -1:], extra, axis=1)
+            if f.name in ("valid", "connected", "human"):
+                pad = np.zeros_like(pad)
+            elif f.name == "x":
+                pad = pad + 1e6 * np.arange(1, extra + 1)
+            a = np.concatenate([a, pad], axis=1)
+        out[f.name] = a
+    return ScenarioBatch(**out)
+
+
+def stack_rows(rows: Sequence[ScenarioBatch]) -> ScenarioBatch:
+    """One batch from single-row batches of the same width."""
+    return ScenarioBatch(
+        **{
+            f.name: None if getattr(rows[0], f.name) is None else np.concatenate([getattr(r, f.name) for r in rows])
+            for f in dataclasses.fields(ScenarioBatch)
+        }
+    )
+
+
+def replace_rows(tree, fresh, rows: np.ndarray, batch: int):
+    """``tree`` (a state, a batch: nested frozen dataclasses and tuples of arrays) with ``rows`` of every array whose
+    leading axis is the batch taken from ``fresh`` (the same structure over ``len(rows)`` rows); scalars (the clock)
+    stay ``tree``'s. Arrays keep their memory layout (the engine keeps per-vehicle arrays column-major)."""
+    if isinstance(tree, np.ndarray):
+        if tree.ndim == 0 or tree.shape[0] != batch:
+            return tree
+        out = tree.copy(order="K")
+        out[rows] = fresh
+        return out
+    if isinstance(tree, tuple):
+        return tuple(replace_rows(a, b, rows, batch) for a, b in zip(tree, fresh, strict=True))
+    if dataclasses.is_dataclass(tree) and not isinstance(tree, type):
+        changes = {}
+        for f in dataclasses.fields(tree):
+            old, new = getattr(tree, f.name), getattr(fresh, f.name)
+            if new is None and dataclasses.is_dataclass(old):
+                changes[f.name] = vacate_rows(old, rows, batch)
+            elif isinstance(old, np.ndarray | tuple) or dataclasses.is_dataclass(old):
+                changes[f.name] = replace_rows(old, new, rows, batch)
+        return dataclasses.replace(tree, **changes)
+    return tree
+
+
+def vacate_rows(record, rows: np.ndarray, batch: int):
+    """``record`` with ``rows`` emptied where a fresh state has no record at all (``None``: the shield's memory of
+    the previous period before the first one): flags ``False``, counts ``-1``, values NaN — every comparison with
+    an emptied row is false, so nothing is inferred from it."""
+    if isinstance(record, np.ndarray):
+        if record.ndim == 0 or record.shape[0] != batch:
+            return record
+        out = record.copy(order="K")
+        out[rows] = False if out.dtype == bool else (-1 if out.dtype.kind in "iu" else np.nan)
+        return out
+    if isinstance(record, tuple):
+        return tuple(vacate_rows(a, rows, batch) for a in record)
+    if dataclasses.is_dataclass(record) and not isinstance(record, type):
+        return dataclasses.replace(
+            record, **{f.name: vacate_rows(getattr(record, f.name), rows, batch) for f in dataclasses.fields(record)}
+        )
+    return record
+
+
+def shift_plan_clock(tree, t: float):
+    """``tree`` (a fresh initial state) with the time origin of its held plans (every field ``plan_t0``, wherever
+    the state keeps it) moved from 0 to the batch time ``t``."""
+    if not dataclasses.is_dataclass(tree) or isinstance(tree, type):
+        return tree
+    changes = {}
+    for f in dataclasses.fields(tree):
+        value = getattr(tree, f.name)
+        if f.name == "plan_t0":
+            changes[f.name] = value + t
+        elif dataclasses.is_dataclass(value):
+            changes[f.name] = shift_plan_clock(value, t)
+    return dataclasses.replace(tree, **changes)
+
+
+@dataclasses.dataclass
+class StepOutcome:
+    """What one period gives, per row."""
+
+    obs: np.ndarray  # (B, F) float32
+    reward: np.ndarray  # (B,)
+    terminated: np.ndarray
+    truncated: np.ndarray
+    behaviour: np.ndarray  # (B,) int
+    intervened: np.ndarray
+    nominal_action: np.ndarray  # (B, 2)
+    executed_action: np.ndarray  # (B, 2)
+    cost: np.ndarray  # (B,)
+    crashed: np.ndarray
+    success: np.ndarray
+
+
+class LaneChangeTask:
+    """``B`` lane-change episodes in one closed loop; the agent's actions are the nominal proposals."""
+
+    def __init__(
+        self,
+        batch: int,
+        sampler: ScenarioSampler,
+        *,
+        params: Params | None = None,
+        sim_config: SimConfig | None = None,
+        shield: bool = True,
+        traffic: TrafficHooks | None = None,
+        reward: RewardConfig | None = None,
+        horizon_s: float | None = None,
+    ):
+        self.n = batch
+        self.sampler = sampler
+        self.params = params or Params()
+        cfg = sim_config or SimConfig()
+        if isinstance(cfg, dict):
+            cfg = SimConfig(**cfg)
+        self.config = cfg.model_copy(update={"supervised": bool(shield)})
+        self.traffic = traffic
+        self.reward_config = reward or RewardConfig()
+        horizon = self.config.horizon_s if horizon_s is None else float(horizon_s)
+        self.max_steps = max(1, round(horizon / self.params.dt))
+        self.planner = ActionPlanner(batch)
+        # The simulator's in-loop draws are keyed by (seed, scenario id, step): the ids are random per episode
+        # (drawn from the episode's generator), so one fixed seed serves every episode.
+        self.seed = 0
+        self.loop: ClosedLoop | None = None
+        self.batch: ScenarioBatch | None = None
+        self.state = None
+        self.steps = np.zeros(batch, np.int64)
+
+    @property
+    def n_features(self) -> int:
+        return len(FEATURE_NAMES)
+
+    def action_bounds(self) -> tuple[np.ndarray, np.ndarray]:
+        p = self.params
+        return np.array([-p.a_x_d, -p.a_y_m]), np.array([p.a_x_a, p.a_y_m])
+
+    def start(self, rngs: Sequence[np.random.Generator]) -> np.ndarray:
+        """Every row starts a fresh episode (row ``i`` drawn from ``rngs[i]``); the observations ``(B, F)``."""
+        self.batch = stack_rows([self.sampler.draw(rng) for rng in rngs])
+        self.loop = self._loop(self.batch)
+        self.state = self.loop.initial_state()
+        self.steps[:] = 0
+        return self.observe()
+
+    def restart(self, rows: np.ndarray, rngs: Sequence[np.random.Generator]) -> None:
+        """Rows ``rows`` start fresh episodes (each drawn from its generator), the others go on (see the module
+        docstring for how the shared clock is handled)."""
+        fresh = stack_rows([self.sampler.draw(rng) for rng in rngs])
+        self.batch = replace_rows(self.batch, fresh, rows, self.n)
+        start = self._loop(fresh).initial_state()
+        start = shift_plan_clock(start, self.state.t)
+        self.loop = self._loop(self.batch)
+        self.state = replace_rows(self.state, start, rows, self.n)
+        self.steps[rows] = 0
+
+    def _loop(self, batch: ScenarioBatch) -> ClosedLoop:
+        return ClosedLoop(batch, self.seed, self.params, self.config, self.planner, self.traffic)
+
+    def observe(self) -> np.ndarray:
+        return features(self.loop.observe(self.state), self.params).astype(np.float32)
+
+    def step(self, action: np.ndarray) -> StepOutcome:
+        """One control period with the agent's ``(B, 2)`` proposals (clipped to the action box)."""
+        lo, hi = self.action_bounds()
+        proposal = np.clip(np.asarray(action, dtype=float).reshape(self.n, 2), lo, hi)  # NaN stays: an invalid one
+        self.planner.set(proposal)
+        before = self.state
+        self.state, _, behaviour = self.loop.step(before)
+        after = self.state
+        self.steps += 1
+        dt, prm, rc = self.params.dt, self.params, self.reward_config
+        executed = np.stack([(after.ego[2] - before.ego[2]) / dt, (after.ego[3] - before.ego[3]) / dt], axis=1)
+        crashed = after.collided & ~before.collided
+        cost = ((after.collided | after.violated) & ~(before.collided | before.violated)).astype(float)
+        completed = after.completed & ~before.completed
+        success = completed & ~after.collided
+        terminated = completed | after.collided
+        truncated = ~terminated & (self.steps >= self.max_steps)
+        progress = (after.ego[1] - before.ego[1]) / prm.y_boundary
+        reward = (
+            rc.progress * progress
+            + rc.success * success
+            - rc.collision * crashed
+            - rc.comfort * (executed**2).sum(1) * dt
+            - rc.time
+            - rc.cost * cost
+        )
+        return StepOutcome(
+            obs=self.observe(),
+            reward=reward,
+            terminated=terminated,
+            truncated=truncated,
+            behaviour=np.asarray(behaviour, np.int64),
+            intervened=(behaviour == HESITATE) | (behaviour == ABORT),
+            nominal_action=proposal,
+            executed_action=executed,
+            cost=cost,
+            crashed=crashed,
+            success=success,
+        )
