@@ -39,8 +39,8 @@ MIXED_F = ScenarioConfig(follower_connected_share=0.5, follower_aggressive_share
 SETTINGS = {
     "inside the assumptions": ("CV_all", TRUTH, None, (4.0, 6.0), 0.0),
     "aggressive F believed collaborative": ("CV_follow", TRUTH, "connected_aggressive", (4.0, 6.0), 0.0),
-    "wrong assessment (observed, sensor noise 0.5 m/s)": (
-        "CV_none", SimConfig(assessment="observed", sensor_noise_std=0.5), None, (4.0, 6.0), 0.0),
+    "observed assessment, sensor noise 0.2 m/s": (
+        "CV_none", SimConfig(assessment="observed", sensor_noise_std=0.2), None, (4.0, 6.0), 0.0),
     "F ignores the ego": ("CV_follow", TRUTH.model_copy(update={"follower_ignores_ego": True}), None, (4.0, 6.0), 0.0),
     "p_v = 0.01": ("CV_all", TRUTH, None, (4.0, 6.0), 0.01),
     "p_v = 0.1": ("CV_all", TRUTH, None, (4.0, 6.0), 0.1),
@@ -49,12 +49,12 @@ SETTINGS = {
     "V2X: 10 % of messages lost": ("CV_all", TRUTH.model_copy(update={"v2x_loss": 0.1}), None, (4.0, 6.0), 0.0),
     "V2X: 50 % of messages lost": ("CV_all", TRUTH.model_copy(update={"v2x_loss": 0.5}), None, (4.0, 6.0), 0.0),
     "V2X: 1 period late": ("CV_all", TRUTH.model_copy(update={"v2x_latency_periods": 1}), None, (4.0, 6.0), 0.0),
-    "V2X: 3 periods late (stale)": (
+    "V2X: 3 periods late (0.3 s = max age: fresh)": (
         "CV_all", TRUTH.model_copy(update={"v2x_latency_periods": 3}), None, (4.0, 6.0), 0.0),
     "V2X: 10 periods late (stale)": (
         "CV_all", TRUTH.model_copy(update={"v2x_latency_periods": 10}), None, (4.0, 6.0), 0.0),
-    "V2X: 3 periods late, max age 1 s (stale messages trusted)": (
-        "CV_all", TRUTH.model_copy(update={"v2x_latency_periods": 3, "v2x_max_age_s": 1.0}), None, (4.0, 6.0), 0.0),
+    "V2X: 8 periods late, max age 1 s (old messages trusted)": (
+        "CV_all", TRUTH.model_copy(update={"v2x_latency_periods": 8, "v2x_max_age_s": 1.0}), None, (4.0, 6.0), 0.0),
 }  # fmt: skip
 
 

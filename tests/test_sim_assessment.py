@@ -9,8 +9,8 @@ import numpy as np
 import pandas as pd
 import pytest
 
+from safelane.shield import assessment as assess
 from safelane.sim import ScenarioConfig, SimConfig, concat, paper_scenarios, simulate_batch
-from safelane.sim import assessment as assess
 
 DT, WINDOW, THRESHOLD = 0.1, 5, 0.2
 #: Non-connected followers only, half of them aggressive: every follower must be assessed.

@@ -19,6 +19,7 @@ from hypothesis import strategies as st
 from safelane import Params
 from safelane._motion import advance
 from safelane.safety import plan_evasion
+from safelane.shield.decide import plan_motion
 from safelane.sim.checks import ego_checks, lane_checks, stop_pair_extrema
 from safelane.sim.kinematics import (
     Fleet,
@@ -28,7 +29,6 @@ from safelane.sim.kinematics import (
     gap_extrema,
     windowed_gap_extrema,
 )
-from safelane.sim.supervisor import plan_motion
 from sim_scenarios import mid_period_contact
 
 PARAMS = Params()
@@ -178,7 +178,8 @@ def test_abort_plan_motion_matches_stepped_reference_across_switches():
         t2 = events[2]
         ages = [0.0, min(max(u - 0.37 * dt, 0.0), T), min(max(t2 - 0.55 * dt, 0.0), T), max(T - 0.6 * dt, 0.0)]
         for age in ages:
-            lon, lat = plan_motion(plan.take(np.array([i])), np.array([age]), dt)
+            knots, px, vx, py, vy = plan_motion(plan.take(np.array([i])), np.array([age]), dt)
+            lon, lat = Motion.from_samples(knots, px, vx), Motion.from_samples(knots, py, vy)
             inside = (times >= age - 1e-15) & (times <= age + dt + 1e-15)
             tq = times[inside] - age
             xq, vq = lon.at(tq[None, :])

@@ -9,7 +9,7 @@ from hypothesis import example, given, settings
 from hypothesis import strategies as st
 
 from safelane import Params
-from safelane.sim.behaviours import final_stop_accel, responsible_accel, responsible_bounds, responsible_ok
+from safelane.safety.responsible import final_stop_accel, responsible_accel, responsible_bounds, responsible_ok
 
 PRM = Params()
 

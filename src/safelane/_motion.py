@@ -1,4 +1,5 @@
-"""Exact one-segment motion at constant acceleration, stopping at rest (speed never goes negative).
+"""Exact one-segment motion at constant acceleration, stopping at rest (speed never goes negative), and the maximum
+of a free (non-stopping) one.
 
 NumPy only, so that :mod:`safelane.v2x` (imported with the package) and the simulator (:mod:`safelane.sim`)
 share it without the simulator's imports.
@@ -21,3 +22,12 @@ def advance(x, v, a, dt):
     """Exact state after ``dt`` at constant acceleration ``a``, stopping at rest: ``(x', v')``."""
     ts = stop_time(v, a, dt)
     return x + v * ts + 0.5 * a * ts * ts, np.where(ts < dt, 0.0, np.maximum(v + a * dt, 0.0))
+
+
+def free_max(y0, vy0, a, dt: float):
+    """Exact maximum over ``[0, dt]`` of ``y0 + vy0 t + a t²/2`` (one constant-acceleration segment)."""
+    end = y0 + vy0 * dt + 0.5 * a * dt * dt
+    safe = np.where(a < 0.0, a, -1.0)
+    tau = np.where(a < 0.0, -vy0 / safe, -1.0)
+    vertex = np.where((tau > 0.0) & (tau < dt), y0 + 0.5 * vy0 * tau, -np.inf)
+    return np.maximum(np.maximum(y0, end), vertex)

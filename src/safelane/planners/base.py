@@ -1,6 +1,6 @@
 """The nominal-planner interface: ``(observation) -> (a_x, a_y)`` over a batch.
 
-A nominal planner proposes accelerations; the safety supervisor (:mod:`safelane.sim.supervisor`) decides
+A nominal planner proposes accelerations; the safety supervisor (the shield, :mod:`safelane.shield`) decides
 whether they are executed. Planners never see the true type of the follower or the worst case; they see
 what the ego senses plus what V2X adds.
 """

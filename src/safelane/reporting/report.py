@@ -17,7 +17,7 @@ import pandas as pd
 
 from ..experiments.paper_data import PLANNERS, PUBLISHED_N
 from ..experiments.registry import EXPERIMENTS
-from ..sim.supervisor import ABORT
+from ..shield import ABORT
 from .document import Document
 
 if TYPE_CHECKING:

@@ -11,7 +11,7 @@ from pathlib import Path
 
 import pandas as pd
 
-from ..sim.supervisor import ABORT, HESITATE
+from ..shield import ABORT, HESITATE
 
 #: Columns a trace must have (``SimResult.trace``).
 TRACE_COLUMNS = ("scenario_id", "planner", "t", "ego_y", "ego_vx", "behaviour")

@@ -1,4 +1,4 @@
-"""The runtime safety supervisor (paper §3.1): proceed, hesitate, or abort — every control period.
+"""The shield's decision (paper §3.1): proceed, hesitate, or abort — every control period.
 
 Each period, in strictly decreasing preference:
 
@@ -24,7 +24,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .._motion import advance
+from .._motion import advance, free_max
 from ..params import Params
 from ..safety._backend import ARRAY
 from ..safety.chain import min_follow_decel
@@ -32,8 +32,7 @@ from ..safety.evasion import evasion_core
 from ..safety.lateral import LATERAL_TOL_M, lateral_core
 from ..safety.longitudinal import FEASIBILITY_TOL_M
 from ..safety.plan import EvasionPlan, plan_from_core
-from .behaviours import pair_min_gap
-from .kinematics import Motion, free_max
+from ..safety.responsible import pair_min_gap
 
 #: The supervisor's choice per step (the trace's ``behaviour``); ``COMPLETED``: the lane change is done.
 PROCEED, HESITATE, ABORT, COMPLETED = 0, 1, 2, -1
@@ -114,7 +113,8 @@ def hesitate_lateral(ego_vy, prm: Params):
 
 
 def plan_motion(plan: EvasionPlan, age, dt: float):
-    """Exact longitudinal and lateral :class:`Motion` of the ego executing ``plan`` on ``[age, age + dt]``.
+    """Exact longitudinal and lateral motion of the ego executing ``plan`` on ``[age, age + dt]``, as knots
+    ``(t, px, vx, py, vy)`` (``(..., 8)`` each; ``t`` relative to the period's start).
 
     Knots: the period's ends and every switch of the plan inside it (``t_x1``, end of braking, L1's stop,
     ``t_y_f``, the lateral switch and end), so each segment has constant accelerations.
@@ -124,4 +124,4 @@ def plan_motion(plan: EvasionPlan, age, dt: float):
     rel = [np.clip(s - age, 0.0, dt) for s in switches]
     knots = np.sort(np.stack([np.zeros_like(age), *rel, np.full_like(age, dt)], -1), -1)
     px, py, vx, vy = plan.take((..., None)).state(age[..., None] + knots)
-    return Motion.from_samples(knots, px, vx), Motion.from_samples(knots, py, vy)
+    return knots, px, vx, py, vy

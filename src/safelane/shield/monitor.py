@@ -1,9 +1,9 @@
 """The assumption monitor: every period, did the others do what the ego's held plan assumed?
 
-The guarantee holds while the assumptions hold. The monitor makes a breach visible instead of silent: at the end
-of each period it compares what the target-lane vehicles did with what the analysis assumed, records which
-assumption broke and when, and — with ``SimConfig.monitor`` on — makes the supervisor use the most conservative
-assumptions from the next period on (``L1`` at ``a_x_d``, ``F`` aggressive). Kinds (:data:`BREACH_KINDS`):
+The guarantee holds while the assumptions hold. The monitor makes a breach visible instead of silent: at the start
+of each period it compares what the target-lane vehicles did in the last one with what the analysis assumed,
+records which assumption broke and when, and — with ``ShieldConfig.monitor`` on — makes the shield use the most
+conservative assumptions from then on (``L1`` at ``a_x_d``, ``F`` aggressive). Kinds (:data:`BREACH_KINDS`):
 
 * ``l1_decel`` — ``L1`` braked harder than the deceleration the held plan assumed for it;
 * ``leader_bound`` — a connected leader braked harder than its chain bound (an *unexpected* promise violation);
@@ -15,8 +15,8 @@ assumptions from the next period on (``L1`` at ``a_x_d``, ``F`` aggressive). Kin
   staleness fallback already treats that sender as non-connected; the monitor records it and, from then on,
   assumes the worst of everyone.
 
-Everything compared is what the ego can observe at the period's end (accelerations from consecutive V2X or
-sensed states); the comparison itself is exact up to ``TOL_MPS2``.
+Everything compared is what the ego observes: consecutive situations (positions of the chain and F) against the
+positions the assumptions allow; exact up to ``TOL_M``.
 """
 
 from __future__ import annotations
@@ -26,11 +26,12 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..params import Params
-from .behaviours import responsible_bound
+from ..safety._backend import ARRAY
+from ..safety.chain import braked_position
 
 BREACH_KINDS = ("l1_decel", "leader_bound", "last_decel", "follower", "stale_v2x")
-#: Accelerations within this of the assumed bound count as inside it (round-off of the behaviours' closed forms).
-TOL_MPS2 = 1e-6
+#: Positions within this of the assumed worst case count as inside it (round-off).
+TOL_M = 1e-7
 
 
 @dataclass(frozen=True)
@@ -50,41 +51,27 @@ class Breach:
         return self.flags.any(1)
 
 
-def observe_breaches(
-    prev: Breach,
-    s,
-    acc,
-    bounds,
-    plan_l1_decel,
-    plan_f_aggr,
-    active,
-    prm: Params,
-    t_end: float,
-    last_switch,
-    last_slot,
-    stale=None,
-) -> Breach:
-    """The record after one period: ``s`` the state at its start, ``acc (B, K)`` what the others applied (and
-    ``last_switch``, L(N+1)'s second segment inside the period, if any), ``bounds (B, K)`` the chain's bounds at
-    its start, ``plan_l1_decel``/``plan_f_aggr`` what the held plan assumed, ``active`` the lane change under way."""
-    bsz, k = acc.shape
-    decel = -acc
-    if last_switch is not None:  # the harder of the two segments
-        decel = np.maximum(decel, np.where(last_switch[0] < prm.dt, -last_switch[1], -np.inf))
-    slots = np.arange(k)[None, :]
-    is_last = slots == last_slot[:, None]
-    connected = (slots >= 1) & (slots < last_slot[:, None])
+def observe_breaches(prev: Breach, last, situation, prm: Params, t_now: float) -> Breach:
+    """The record after one period: ``last`` (:class:`~safelane.shield.core.Snapshot`) is what the shield knew and
+    assumed at the period's start, ``situation`` what it sees at its end. A vehicle that braked no harder than
+    assumed is at or ahead of the position braking at the assumed deceleration would give it (exact, with
+    stopping); an F no more pushy than a responsible follower of the ego is at or behind the position its
+    responsible limit would give it. Positions are compared to ``TOL_M``. Where the chain changed length (a
+    vehicle left or joined it) the leader comparisons are skipped for that period."""
+    from .core import predicted_positions
+
+    bsz = len(prev.first_s)
     flags = np.zeros((bsz, len(BREACH_KINDS)), bool)
-    flags[:, 0] = active & (decel[:, 1] > plan_l1_decel + TOL_MPS2)
-    flags[:, 1] = (connected & (decel > bounds + TOL_MPS2)).any(1)
-    flags[:, 2] = (is_last & (decel > prm.a_x_d + TOL_MPS2)).any(1)
-    ex, evx = s.ego[0], s.ego[2]
-    gap = ex - s.x[:, 0]
-    with np.errstate(all="ignore"):
-        limit = np.maximum(responsible_bound(gap - prm.p_m, s.v[:, 0], evx, np.full(bsz, prm.a_x_d), prm), -prm.a_x_d)
-    flags[:, 3] = active & ~plan_f_aggr & (gap > 0.0) & (acc[:, 0] > limit + TOL_MPS2)
-    if stale is not None:
-        flags[:, 4] = active & stale
+    lowest, f_highest = predicted_positions(last, prm.dt)
+    active = last.active
+    if situation.chain_x.shape == last.chain_x.shape:
+        behind = situation.chain_x < lowest - TOL_M
+        l1_lowest = braked_position(ARRAY, last.chain_x[:, 0], last.chain_v[:, 0], last.plan_l1_decel, prm.dt)
+        flags[:, 0] = active & (situation.chain_x[:, 0] < l1_lowest - TOL_M)
+        slots = np.arange(behind.shape[1])[None, :]
+        flags[:, 1] = (behind & (slots < last.n_connected[:, None])).any(1)
+        flags[:, 2] = (behind & (slots == last.n_connected[:, None])).any(1)
+    flags[:, 3] = active & ~last.plan_f_aggr & np.isfinite(last.f_limit) & (situation.f_x > f_highest + TOL_M)
     new = flags & ~prev.flags
-    first = np.where(np.isnan(prev.first_s) & new.any(1), t_end, prev.first_s)
+    first = np.where(np.isnan(prev.first_s) & new.any(1), t_now, prev.first_s)
     return Breach(flags=prev.flags | flags, first_s=first)

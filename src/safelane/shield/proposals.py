@@ -19,7 +19,7 @@ _RANGE_TOL = 1e-9
 
 def check_proposal(planner, proposal, batch: int, prm: Params):
     """``(a_x, a_y, invalid)`` from a planner's raw answer; invalid rows hold ``0`` (see the module docstring)."""
-    name = getattr(planner, "__name__", type(planner).__name__)
+    name = planner if isinstance(planner, str) else getattr(planner, "__name__", type(planner).__name__)
     if not isinstance(proposal, tuple | list) or len(proposal) != 2:
         raise TypeError(f"nominal planner {name} must return a pair (a_x, a_y); got {type(proposal).__name__}")
     out = []

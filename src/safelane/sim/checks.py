@@ -33,7 +33,7 @@ def ego_checks(
 
     ``lon``, ``lat``: the ego's constant-command motions (:meth:`Motion.constant`, :meth:`Motion.free`);
     ``plan``: ``(rows, plan_lon, plan_lat)`` for the rows executing an evasion plan instead (multi-segment motions,
-    see :func:`~safelane.sim.supervisor.plan_motion`), or None. Only pairs that could come within ``p_m`` during
+    see :func:`~safelane.shield.decide.plan_motion`), or None. Only pairs that could come within ``p_m`` during
     the period are evaluated exactly (a bound on how far a gap can move in one period —
     ``|Δv| dt + (a_max,ego + a_max,others) dt²/2`` — filters the rest); the result is the same, faster. The
     reported minimum gaps to F and L1 are exact where the pair came that near, and sampled at the period's ends

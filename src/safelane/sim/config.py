@@ -38,6 +38,6 @@ class SimConfig(BaseModel):
     )
     monitor: bool = Field(
         True,
-        description="After a breach of the assumptions (safelane.sim.monitor) use the most conservative ones "
+        description="After a breach of the assumptions (safelane.shield.monitor) use the most conservative ones "
         "(L1 at a_x_d, F aggressive). False only records breaches.",
     )

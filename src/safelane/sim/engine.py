@@ -113,6 +113,7 @@ def simulate_batch(
                 observations.append(obs)
             if trace:
                 rows.append(trace_rows(batch, state, behaviour, trace_limit))
+    state = sim.finish(state)
     table = results_table(batch, state)
     trace_df = pd.concat(rows, ignore_index=True) if trace and rows else None
     return SimResult(table=table, trace=trace_df, observations=observations)

@@ -13,7 +13,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .._motion import stop_time
+from .._motion import free_max, stop_time
+
+__all__ = ["Fleet", "Motion", "crossing_knots", "extrema", "free_max", "gap_extrema", "windowed_gap_extrema"]
 
 
 @dataclass(frozen=True)
@@ -195,15 +197,6 @@ def gap_extrema(behind: Motion, ahead: Motion):
     xa, va = ahead.at(knots)
     xb, vb = behind.at(knots)
     return _extrema(knots, xa - xb, va - vb)
-
-
-def free_max(y0, vy0, a, dt: float):
-    """Exact maximum over ``[0, dt]`` of ``y0 + vy0 t + a t²/2`` (one constant-acceleration segment)."""
-    end = y0 + vy0 * dt + 0.5 * a * dt * dt
-    safe = np.where(a < 0.0, a, -1.0)
-    tau = np.where(a < 0.0, -vy0 / safe, -1.0)
-    vertex = np.where((tau > 0.0) & (tau < dt), y0 + 0.5 * vy0 * tau, -np.inf)
-    return np.maximum(np.maximum(y0, end), vertex)
 
 
 def extrema(m: Motion):

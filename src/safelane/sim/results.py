@@ -9,7 +9,7 @@ import pandas as pd
 
 from ..planners.base import Observation
 from ..planners.variants import VARIANT_NAMES
-from .monitor import BREACH_KINDS
+from ..shield.monitor import BREACH_KINDS
 from .scenario import ScenarioBatch
 
 

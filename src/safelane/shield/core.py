@@ -1,0 +1,399 @@
+"""The shield: a batched, stateful runtime supervisor over a pure functional core.
+
+``init(situation, params, config, variant) -> ShieldState`` and
+``step(state, situation, proposal, params, config, variant) -> (ShieldState, Decision)`` — the gymnax shape — and
+:class:`Shield`, the stateful wrapper (``reset(situation)``, ``step(situation, proposal) -> Decision``). Every
+period the shield
+
+1. updates its belief about F (the aggressiveness assessment, :mod:`.assessment`) and checks what the others did
+   against what its held plan assumed (the assumption monitor, :mod:`.monitor`);
+2. takes L1's worst case and F's assumed type from the information its variant uses (:mod:`.policies`), or the
+   most conservative ones after a breach;
+3. checks the proposal (:mod:`.proposals`) and decides: proceed with it, hesitate, or abort on the held plan
+   (:mod:`.decide`), or — once the lane change is complete — follow L1 responsibly.
+
+It never sees a simulator's state: a :class:`~.situation.Situation` and a proposal in, a :class:`Decision` out
+(ad-rss's shape), so the batched simulator, a Gymnasium environment, highway-env or SUMO all call it the same way.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass
+
+import numpy as np
+from pydantic import BaseModel, ConfigDict, Field, field_validator
+
+from .._motion import advance
+from ..params import Params
+from ..safety._backend import ARRAY
+from ..safety.chain import braked_position, propagate_chain
+from ..safety.evasion import plan_evasion
+from ..safety.plan import EvasionPlan
+from ..safety.responsible import responsible_accel, responsible_bound
+from . import assessment as assess
+from .decide import ABORT, COMPLETED, HESITATE, PROCEED, check_candidate, hesitate_lateral, plan_motion
+from .monitor import Breach, observe_breaches
+from .policies import ASSESSMENTS, COMPLETION_RULES, check_policy, variant_flags
+from .proposals import check_proposal
+from .situation import Situation
+
+
+class ShieldConfig(BaseModel):
+    """How the shield decides (not what it knows: that is the :class:`Situation`)."""
+
+    model_config = ConfigDict(frozen=True, extra="forbid", allow_inf_nan=False)
+
+    assessment: str = Field("observed", description="Registered assessment model ('observed', 'truth').")
+    assess_window: int = Field(5, ge=2, description="Observations in the assessment's slope window.")
+    assess_threshold: float = Field(0.2, gt=0.0, description="Evidence threshold on F's acceleration [m/s²].")
+    monitor: bool = Field(True, description="After a breach of the assumptions, assume the worst (L1 at a_x_d, F "
+                          "aggressive); False only records breaches.")  # fmt: skip
+    completion: str = Field("commit_guard", description="Registered completion rule.")
+    enabled: bool = Field(True, description="False passes the (clipped, checked) proposal through unfiltered.")
+
+    @field_validator("assessment")
+    @classmethod
+    def _assessment(cls, value: str) -> str:
+        return check_policy("assessment", value, ASSESSMENTS)
+
+    @field_validator("completion")
+    @classmethod
+    def _completion(cls, value: str) -> str:
+        return check_policy("completion rule", value, COMPLETION_RULES)
+
+
+@dataclass(frozen=True)
+class Snapshot:
+    """What the monitor needs from the previous period: the chain, F and the ego, the chain's bounds and what the
+    held plan assumed (``(B,)`` or ``(B, M)``)."""
+
+    chain_x: np.ndarray
+    chain_v: np.ndarray
+    bounds: np.ndarray
+    n_connected: np.ndarray
+    f_x: np.ndarray
+    f_v: np.ndarray
+    f_limit: np.ndarray  # the largest acceleration a responsible follower of the ego could apply
+    plan_l1_decel: np.ndarray
+    plan_f_aggr: np.ndarray
+    active: np.ndarray
+
+
+@dataclass(frozen=True)
+class ShieldState:
+    """Everything the shield carries from one period to the next (the batch on the leading axis)."""
+
+    t: float
+    plan: EvasionPlan  # the verified evasion plan held (time origin ``plan_t0``)
+    plan_t0: np.ndarray
+    plan_f_aggr: np.ndarray  # the F type the held plan assumed
+    belief: assess.AssessmentState
+    breach: Breach
+    completed: np.ndarray
+    last: Snapshot | None  # the previous period, for the monitor
+
+
+@dataclass(frozen=True)
+class Decision:
+    """The shield's answer for one period (``(B,)`` arrays unless noted).
+
+    Attributes:
+        behaviour: :data:`PROCEED`, :data:`HESITATE`, :data:`ABORT` or :data:`COMPLETED` (the lane change is done;
+            the ego follows L1 responsibly).
+        a_x, a_y: the accelerations to apply for the period [m/s²] (shield frame). For an aborting row they are the
+            held plan's at the period's start; the plan switches inside the period, so apply :meth:`abort_motion`
+            where the simulator can (exact), or re-ask the shield every period.
+        completing: this period's motion takes the ego's centre across the lane boundary.
+        invalid: the proposal was invalid (non-finite or out of range) and never executed.
+        plan, plan_t0: the held plan after this decision (verified from the predicted state at the period's end).
+        l1_decel: L1's worst-case deceleration used; f_aggressive: F's assumed type.
+        breach: the assumption monitor's record (which assumption broke, and when).
+        nominal_x, nominal_y: the proposal as given (after the type and shape checks).
+    """
+
+    behaviour: np.ndarray
+    a_x: np.ndarray
+    a_y: np.ndarray
+    completing: np.ndarray
+    invalid: np.ndarray
+    plan: EvasionPlan
+    plan_t0: np.ndarray
+    l1_decel: np.ndarray
+    f_aggressive: np.ndarray
+    breach: Breach
+    nominal_x: np.ndarray
+    nominal_y: np.ndarray
+    _abort: tuple  # (rows, knots, px, vx, py, vy) of the aborting rows' exact motion over the period
+
+    @property
+    def intervened(self) -> np.ndarray:
+        """The executed command differs from the proposal (hesitate, abort, or an invalid proposal)."""
+        return (self.behaviour == HESITATE) | (self.behaviour == ABORT) | self.invalid
+
+    def abort_motion(self):
+        """``(rows, knots, px, vx, py, vy)``: the exact motion of the aborting rows over the period (knots relative
+        to its start, shield frame)."""
+        return self._abort
+
+    def reasons(self) -> list[str]:
+        """A readable reason per row."""
+        names = {PROCEED: "proceed: the proposal keeps a safe evasion", COMPLETED: "completed: following L1"}
+        out = []
+        for i, code in enumerate(self.behaviour.tolist()):
+            why = names.get(code)
+            if code == HESITATE:
+                why = "hesitate: " + ("invalid proposal" if self.invalid[i] else "the proposal leaves no safe evasion")
+            elif code == ABORT:
+                why = "abort: neither the proposal nor hesitating keeps a safe evasion; executing the held plan"
+            if self.breach.flags[i].any():
+                why += " (assumptions breached: most conservative worst case)"
+            out.append(why)
+        return out
+
+
+def chain_analysis(situation: Situation, prm: Params):
+    """``(bounds (B, M), unsafe (B,))``: each chain vehicle's worst-case deceleration (Eqs. 1–3, corrected) from
+    what the ego knows."""
+    n = len(situation)
+    m = situation.chain_x.shape[1]
+    in_chain = np.arange(m - 1)[None, :] < situation.n_connected[:, None]
+    promise = np.where(in_chain, situation.chain_promise, prm.a_x_d)
+    margin = np.where(situation.chain_human & in_chain, prm.p_m_human, prm.p_m)
+    with np.errstate(all="ignore"):  # the situation was validated where it was built: the scan alone
+        decel, _, unsafe = propagate_chain(
+            ARRAY, situation.chain_x.T, situation.chain_v.T, promise.T, margin.T, prm, m - 1
+        )
+    bounds = np.column_stack([np.broadcast_to(d, (n,)) for d in decel])
+    return bounds, np.broadcast_to(np.asarray(unsafe, bool), (n,))
+
+
+def init(situation: Situation, params: Params, config: ShieldConfig | None = None, variant="CV_all") -> ShieldState:
+    """The shield's state for a lane change starting at ``situation``: the plan held at the start is computed under
+    the most conservative assumptions (L1 at ``a_x_d``, F aggressive)."""
+    cfg = config or ShieldConfig()
+    n = len(situation)
+    s = situation
+    plan = plan_evasion(s.ego_x, s.ego_y, s.ego_vx, s.ego_vy, s.chain_x[:, 0], s.chain_v[:, 0], params.a_x_d, s.f_x,
+                        s.f_v, True, params)  # fmt: skip
+    return ShieldState(
+        t=s.t,
+        plan=plan,
+        plan_t0=np.full(n, s.t),
+        plan_f_aggr=np.ones(n, bool),
+        belief=assess.AssessmentState.start(n, cfg.assess_window),
+        breach=Breach.none(n),
+        completed=np.zeros(n, bool),
+        last=None,
+    )
+
+
+def step(
+    state: ShieldState,
+    situation: Situation,
+    proposal,
+    params: Params,
+    config: ShieldConfig | None = None,
+    variant="CV_all",
+    *,
+    planner_name: str = "the nominal planner",
+    chain=None,
+) -> tuple[ShieldState, Decision]:
+    """One period: ``(state, situation, proposal) -> (state', Decision)`` (see the module docstring).
+
+    ``proposal``: ``(a_x, a_y)`` arrays of shape ``(B,)`` in the shield's frame. ``variant``: a registered variant
+    name, or ``(B,)`` names or registry indices. ``chain``: the :func:`chain_analysis` of this very situation, when
+    the caller has it already (the simulator computes it for the traffic).
+    """
+    cfg = config or ShieldConfig()
+    prm = params
+    s = situation
+    dt = prm.dt
+    n = len(s)
+    uses_chain, uses_f_v2x, uses_assessment = variant_flags(variant, n)
+
+    # 1. What happened last period: the assessment's new observation, the monitor's comparison.
+    belief = assess.update(state.belief, s.observed_f_speed, s.t, dt, cfg.assess_threshold)
+    bounds, unsafe = chain_analysis(s, prm) if chain is None else chain
+    breach = state.breach
+    if state.last is not None:
+        breach = observe_breaches(state.breach, state.last, s, prm, s.t)
+
+    # 2. The worst case from the information the variant uses; the most conservative one after a breach.
+    l1_decel = np.where(uses_chain & ~unsafe, bounds[:, 0], prm.a_x_d)
+    if cfg.assessment == "truth":
+        if s.f_aggressive_truth is None:
+            raise ValueError("the 'truth' assessment needs Situation.f_aggressive_truth (a simulation study only)")
+        assessed = s.f_aggressive_truth
+    else:
+        assessed = belief.aggressive
+    trusted = uses_f_v2x & s.f_connected & s.f_collaborative
+    f_aggr = np.where(trusted, False, np.where(uses_assessment, assessed, True))
+    if cfg.monitor:
+        broken = breach.any
+        l1_decel = np.where(broken, prm.a_x_d, l1_decel)
+        f_aggr = f_aggr | broken
+
+    # 3. The proposal, checked; then proceed / hesitate / abort where the lane change is under way.
+    a_x, a_y, invalid = check_proposal(planner_name, proposal, n, prm)
+    nominal_x, nominal_y = a_x, a_y
+    a_x = np.clip(a_x, -prm.a_x_d, prm.a_x_a)
+    a_y = np.clip(a_y, -prm.a_y_m, prm.a_y_m)
+    ex, ey, evx, evy = s.ego_x, s.ego_y, s.ego_vx, s.ego_vy
+    l1x, l1v, fx, fv = s.chain_x[:, 0], s.chain_v[:, 0], s.f_x, s.f_v
+    active = ~state.completed
+    behaviour = np.where(active, PROCEED, COMPLETED)
+    completing = np.zeros(n, bool)
+    accepted = []
+    a_yh = hesitate_lateral(evy, prm)
+    if cfg.enabled:
+        rows = np.flatnonzero(active)
+        skip = rows[:0]
+        for code, lateral in ((PROCEED, a_y), (HESITATE, a_yh)):
+            if code == PROCEED:  # an invalid proposal is never executed: those rows start at hesitate
+                skip, rows = rows[invalid[rows]], rows[~invalid[rows]]
+            elif skip.size:
+                rows = np.sort(np.concatenate([rows, skip]))
+            if rows.size == 0:
+                continue
+            verdict = check_candidate(
+                *(arr[rows] for arr in (ex, ey, evx, evy, a_x, lateral, l1x, l1v, l1_decel, fx, fv, f_aggr)), prm
+            )
+            ok_rows = rows[verdict.ok]
+            behaviour[ok_rows] = code
+            completing[ok_rows] = verdict.completing[verdict.ok]
+            accepted.extend((rows[idx], plan) for idx, plan in verdict.plans)
+            rows = rows[~verdict.ok]
+        behaviour[rows] = ABORT
+    else:
+        completing = active & (ey + evy * dt + 0.5 * a_y * dt * dt >= prm.y_boundary)
+
+    # After completion: centre in the target lane, follow L1 responsibly under its worst case.
+    done = np.flatnonzero(state.completed)
+    ax_cmd = a_x.copy()
+    ay_cmd = np.where(behaviour == HESITATE, a_yh, a_y)
+    if done.size:
+        ax_cmd[done] = responsible_accel(
+            a_x[done], (l1x - ex - prm.p_m)[done], evx[done], l1v[done], l1_decel[done], prm
+        )
+        ay_cmd[done] = np.clip(0.8 * (prm.lane_width - ey[done]) - 1.6 * evy[done], -prm.a_y_m, prm.a_y_m)
+    abort_rows = np.flatnonzero(behaviour == ABORT)
+    abort = (abort_rows, None, None, None, None, None)
+    if abort_rows.size:  # only the aborting rows follow their plan: evaluate it there alone
+        knots, px, vx, py, vy = plan_motion(state.plan.take(abort_rows), s.t - state.plan_t0[abort_rows], dt)
+        abort = (abort_rows, knots, px, vx, py, vy)
+        span = np.maximum(knots[:, 1] - knots[:, 0], 1e-300)
+        ax_cmd[abort_rows] = np.where(knots[:, 1] > 0.0, (vx[:, 1] - vx[:, 0]) / span, 0.0)
+        ay_cmd[abort_rows] = np.where(knots[:, 1] > 0.0, (vy[:, 1] - vy[:, 0]) / span, 0.0)
+
+    new_plan = _set_rows(state.plan, accepted)
+    replanned = (behaviour == PROCEED) | (behaviour == HESITATE)
+    plan_f_aggr = state.plan_f_aggr.copy()
+    for rows_acc, _ in accepted:
+        plan_f_aggr[rows_acc] = f_aggr[rows_acc]
+    # For the monitor at the next period: what a responsible follower of the ego could do this period.
+    with np.errstate(all="ignore"):
+        f_limit = np.maximum(responsible_bound(ex - fx - prm.p_m, fv, evx, np.full(n, prm.a_x_d), prm), -prm.a_x_d)
+    last = Snapshot(
+        chain_x=s.chain_x, chain_v=s.chain_v, bounds=bounds, n_connected=s.n_connected, f_x=fx, f_v=fv,
+        f_limit=np.where(ex - fx > 0.0, f_limit, np.inf), plan_l1_decel=new_plan.l1_decel,
+        plan_f_aggr=plan_f_aggr, active=active,
+    )  # fmt: skip
+    if s.v2x_stale is not None:
+        breach = _with_stale(breach, active & s.v2x_stale, s.t)
+    new_state = ShieldState(
+        t=s.t + dt,
+        plan=new_plan,
+        plan_t0=np.where(replanned, s.t + dt, state.plan_t0),
+        plan_f_aggr=plan_f_aggr,
+        belief=belief,
+        breach=breach,
+        completed=state.completed | completing,
+        last=last,
+    )
+    decision = Decision(
+        behaviour=behaviour, a_x=ax_cmd, a_y=ay_cmd, completing=completing & active, invalid=invalid & active,
+        plan=new_plan, plan_t0=new_state.plan_t0, l1_decel=l1_decel, f_aggressive=f_aggr, breach=breach,
+        nominal_x=nominal_x, nominal_y=nominal_y, _abort=abort,
+    )  # fmt: skip
+    return new_state, decision
+
+
+def observe(state: ShieldState, situation: Situation, params: Params) -> ShieldState:
+    """The state with the monitor's view of the last period recorded, without deciding anything (e.g. after a run's
+    final period, which :func:`step` would observe only at the next one)."""
+    if state.last is None:
+        return state
+    breach = observe_breaches(state.breach, state.last, situation, params, situation.t)
+    return dataclasses.replace(state, breach=breach)
+
+
+def _with_stale(breach: Breach, stale, t: float) -> Breach:
+    from .monitor import BREACH_KINDS
+
+    col = BREACH_KINDS.index("stale_v2x")
+    new = stale & ~breach.flags[:, col]
+    if not new.any():
+        return breach
+    flags = breach.flags.copy()
+    flags[:, col] |= stale
+    first = np.where(np.isnan(breach.first_s) & new, t, breach.first_s)
+    return Breach(flags=flags, first_s=first)
+
+
+def _set_rows(plan: EvasionPlan, pieces) -> EvasionPlan:
+    """``plan`` with the rows of each ``(rows, sub_plan)`` piece replaced by ``sub_plan`` (same order); each field
+    is copied once."""
+    pieces = [(rows, sub) for rows, sub in pieces if rows.size]
+    if not pieces:
+        return plan
+    out = {}
+    for f in dataclasses.fields(plan):
+        if f.name == "params":
+            continue
+        arr = getattr(plan, f.name).copy()
+        for rows, sub in pieces:
+            arr[rows] = getattr(sub, f.name)
+        out[f.name] = arr
+    return EvasionPlan(**out, params=plan.params)
+
+
+class Shield:
+    """The stateful shield for a batch of ``B`` lane changes: ``reset(situation)``, then ``step(situation,
+    proposal) -> Decision`` every control period (``params.dt``).
+
+    Example::
+
+        shield = Shield(Params(), variant="CV_all")
+        shield.reset(situation)
+        decision = shield.step(situation, (a_x, a_y))   # apply decision.a_x, decision.a_y for one period
+    """
+
+    def __init__(self, params: Params | None = None, variant="CV_all", config: ShieldConfig | None = None):
+        self.params = params or Params()
+        self.config = config or ShieldConfig()
+        variant_flags(variant, 1 if isinstance(variant, str) else len(np.atleast_1d(variant)))  # validate now
+        self.variant = variant
+        self.state: ShieldState | None = None
+
+    def reset(self, situation: Situation) -> None:
+        situation.validate(self.params)
+        self.state = init(situation, self.params, self.config, self.variant)
+
+    def step(self, situation: Situation, proposal) -> Decision:
+        if self.state is None:
+            raise RuntimeError("Shield.step before Shield.reset(situation): the shield needs the starting situation")
+        situation.validate(self.params)
+        if len(situation) != len(self.state.completed):
+            raise ValueError(f"the situation has {len(situation)} rows; the shield was reset with "
+                             f"{len(self.state.completed)}")  # fmt: skip
+        self.state, decision = step(self.state, situation, proposal, self.params, self.config, self.variant)
+        return decision
+
+
+def predicted_positions(snapshot: Snapshot, dt: float):
+    """Where the monitor expects the chain and F at the end of the period at the latest/earliest: the chain
+    braking at its bounds (lowest positions), F at its responsible limit (highest position)."""
+    tx = braked_position(ARRAY, snapshot.chain_x, snapshot.chain_v, snapshot.bounds, dt)
+    fx, _ = advance(snapshot.f_x, snapshot.f_v, np.where(np.isinf(snapshot.f_limit), 0.0, snapshot.f_limit), dt)
+    return tx, fx

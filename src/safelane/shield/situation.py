@@ -1,0 +1,236 @@
+"""What the ego knows at a control step: :class:`Situation`, the shield's only input besides the proposal.
+
+A batch of ``B`` situations, every array with the batch on its leading axis. The frame is the paper's: ``x`` along
+the direction of travel, ``y`` the lateral position of the ego's centre from the *original* lane's centre, positive
+toward the target lane (target-lane centre at ``y = Params.lane_width``). A simulator with other conventions maps
+them in one place with :class:`LaneFrame` (e.g. highway-env: ``y`` grows to the right, lane 0 leftmost).
+
+The leader chain is as the ego sees it: ``L1`` (sensed) and, ahead of it, the connected leaders whose V2X messages
+are fresh, then the first non-connected (or stale) leader ``L(N+1)``; vehicles beyond it are padding far ahead
+(see :func:`safelane.v2x.received_chain`, which builds exactly these arrays from messages).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..params import Params
+
+_PAD_GAP_M = 1e6
+
+
+@dataclass(frozen=True)
+class LaneFrame:
+    """Maps a simulator's lateral coordinate into the shield's: ``y = sign · (y_sim − origin_y)``.
+
+    Attributes:
+        origin_y: the original lane's centre in the simulator's frame.
+        sign: ``+1`` if the target lane lies at larger ``y_sim``, ``−1`` otherwise.
+    """
+
+    origin_y: float = 0.0
+    sign: float = 1.0
+
+    def __post_init__(self):
+        if self.sign not in (1.0, -1.0):
+            raise ValueError(f"LaneFrame.sign must be +1 or -1; got {self.sign!r}")
+        if not np.isfinite(self.origin_y):
+            raise ValueError(f"LaneFrame.origin_y must be finite; got {self.origin_y!r}")
+
+    def y(self, y_sim, vy_sim):
+        """``(y, v_y)`` in the shield's frame."""
+        return self.sign * (np.asarray(y_sim, float) - self.origin_y), self.sign * np.asarray(vy_sim, float)
+
+    def y_back(self, a_y):
+        """A lateral acceleration of the shield's frame in the simulator's."""
+        return self.sign * np.asarray(a_y, float)
+
+
+@dataclass(frozen=True)
+class Situation:
+    """A batch of ``B`` snapshots of what the ego knows (see the module docstring for the frame).
+
+    Attributes:
+        t: time [s] (scalar).
+        ego_x, ego_y, ego_vx, ego_vy: ``(B,)`` the ego's state.
+        f_x, f_v: ``(B,)`` the follower F's sensed position and speed.
+        f_connected: ``(B,)`` F's latest V2X message is fresh.
+        f_collaborative: ``(B,)`` F declares itself collaborative over V2X (counts only where ``f_connected``).
+        chain_x, chain_v: ``(B, M)`` ``L1, L2, …`` as the ego sees them (``L1`` first; ``M >= 1``).
+        chain_promise: ``(B, M−1)`` promised maximum deceleration of ``L1..L(M−1)`` (used for ``L_i``, ``i <= N``).
+        chain_human: ``(B, M−1)`` connected human-driven (they keep ``p_m_human``).
+        n_connected: ``(B,)`` N, the connected leaders at the head of the chain (``L(N+1)`` is the next slot).
+        f_speed_observed: ``(B,)`` the ego's measurement of F's speed for the aggressiveness assessment (default
+            ``f_v``; a simulator adds its sensor noise here).
+        f_aggressive_truth: ``(B,)`` F's true type, or ``None``; only the ``truth`` assessment (a study of the
+            paper's guarantee, which assumes an exact assessment) reads it.
+        v2x_stale: ``(B,)`` some sender's latest message is stale (the chain and F above already fall back).
+    """
+
+    t: float
+    ego_x: np.ndarray
+    ego_y: np.ndarray
+    ego_vx: np.ndarray
+    ego_vy: np.ndarray
+    f_x: np.ndarray
+    f_v: np.ndarray
+    f_connected: np.ndarray
+    f_collaborative: np.ndarray
+    chain_x: np.ndarray
+    chain_v: np.ndarray
+    chain_promise: np.ndarray
+    chain_human: np.ndarray
+    n_connected: np.ndarray
+    f_speed_observed: np.ndarray | None = None
+    f_aggressive_truth: np.ndarray | None = None
+    v2x_stale: np.ndarray | None = None
+
+    def __len__(self) -> int:
+        return len(self.ego_x)
+
+    @property
+    def observed_f_speed(self) -> np.ndarray:
+        return self.f_v if self.f_speed_observed is None else self.f_speed_observed
+
+    @classmethod
+    def from_arrays(
+        cls,
+        *,
+        t: float,
+        ego: tuple,
+        follower: tuple,
+        leaders: tuple,
+        n_connected,
+        promise_decel=0.5,
+        human_driven=False,
+        f_connected=False,
+        f_collaborative=False,
+        frame: LaneFrame | None = None,
+        params: Params | None = None,
+    ) -> Situation:
+        """A validated batch from plain arrays (any batch size; scalars give ``B = 1``).
+
+        Args:
+            ego: ``(x, y, vx, vy)`` in the simulator's frame (mapped by ``frame``).
+            follower: ``(x, v)`` of F.
+            leaders: ``(x, v)``, each ``(B, M)`` (or ``(M,)``): ``L1`` first.
+            n_connected: ``(B,)`` or scalar N (``<= M − 1``).
+            promise_decel, human_driven: scalars or ``(B, M−1)``.
+            f_connected, f_collaborative: scalars or ``(B,)``.
+        """
+        prm = params or Params()
+        frame = frame or LaneFrame()
+        ex, ey, evx, evy = (np.atleast_1d(np.asarray(a, float)) for a in ego)
+        ey, evy = frame.y(ey, evy)
+        fx, fv = (np.atleast_1d(np.asarray(a, float)) for a in follower)
+        lx, lv = (np.atleast_2d(np.asarray(a, float)) for a in leaders)
+        b = max(len(ex), len(fx), len(lx))
+        ex, ey, evx, evy, fx, fv = (np.broadcast_to(a, (b,)).copy() for a in (ex, ey, evx, evy, fx, fv))
+        lx, lv = (np.broadcast_to(a, (b, a.shape[-1])).copy() for a in (lx, lv))
+        m = lx.shape[1]
+        n = np.broadcast_to(np.asarray(n_connected), (b,)).astype(np.int64)
+        promise = np.broadcast_to(np.asarray(promise_decel, float), (b, m - 1)).copy()
+        human = np.broadcast_to(np.asarray(human_driven, bool), (b, m - 1)).copy()
+        f_conn = np.broadcast_to(np.asarray(f_connected, bool), (b,)).copy()
+        f_coll = np.broadcast_to(np.asarray(f_collaborative, bool), (b,)).copy()
+        situation = cls(
+            t=float(t), ego_x=ex, ego_y=ey, ego_vx=evx, ego_vy=evy, f_x=fx, f_v=fv, f_connected=f_conn,
+            f_collaborative=f_coll, chain_x=lx, chain_v=lv, chain_promise=promise, chain_human=human, n_connected=n,
+        )  # fmt: skip
+        situation.validate(prm)
+        return situation
+
+    @classmethod
+    def from_v2x(
+        cls,
+        *,
+        t: float,
+        ego: tuple,
+        follower,
+        leaders,
+        frame: LaneFrame | None = None,
+        params: Params | None = None,
+        max_age_s: float | None = None,
+    ) -> Situation:
+        """One situation (``B = 1``) from :mod:`safelane.v2x` objects, with the staleness fallback applied.
+
+        Args:
+            ego: ``(x, y, vx, vy)`` in the simulator's frame.
+            follower: F as a :class:`~safelane.v2x.V2XMessage` (its ``intent`` says whether it is collaborative)
+                or a :class:`~safelane.v2x.SensedVehicle`.
+            leaders: ``L1, L2, …`` nearest first, messages or sensed vehicles (:func:`safelane.v2x.leader_arrays`).
+        """
+        from .. import v2x
+
+        prm = params or Params()
+        age = v2x.MAX_AGE_S if max_age_s is None else max_age_s
+        chain = v2x.leader_arrays(leaders, t, prm, max_age_s=age)
+        if isinstance(follower, v2x.V2XMessage):
+            status = v2x.follower_status(follower, t, prm, max_age_s=age)
+            connected, collaborative = status.connected, status.collaborative
+            fx, fv = v2x.extrapolate(follower.position_m, follower.speed_mps, follower.accel_mps2,
+                                     max(t - follower.timestamp_s, 0.0))  # fmt: skip
+        else:
+            connected = collaborative = False
+            fx, fv = v2x.extrapolate(follower.position_m, follower.speed_mps, -prm.a_x_d,
+                                     max(t - follower.timestamp_s, 0.0))  # fmt: skip
+        n = chain.n_connected
+        stale = bool(chain.stale_ids) or (isinstance(follower, v2x.V2XMessage) and not connected)
+        situation = cls.from_arrays(
+            t=t, ego=ego, follower=(fx, fv), leaders=(chain.p[None, :], chain.v[None, :]), n_connected=n,
+            promise_decel=np.concatenate([chain.promise_decel, np.zeros(0)])[None, :] if n else np.zeros((1, 0)),
+            human_driven=chain.human_driven[None, :] if n else np.zeros((1, 0), bool),
+            f_connected=connected, f_collaborative=collaborative, frame=frame, params=prm,
+        )  # fmt: skip
+        return _replace(situation, v2x_stale=np.array([stale]))
+
+    def validate(self, params: Params) -> None:
+        """Raise a ``ValueError`` naming the field for shapes that disagree or values the analysis cannot take."""
+        b = len(self.ego_x)
+        for name in ("ego_y", "ego_vx", "ego_vy", "f_x", "f_v", "f_connected", "f_collaborative", "n_connected"):
+            if np.shape(getattr(self, name)) != (b,):
+                raise ValueError(f"Situation.{name} must have shape ({b},); got {np.shape(getattr(self, name))}")
+        if self.chain_x.ndim != 2 or self.chain_x.shape[0] != b or self.chain_x.shape[1] < 1:
+            raise ValueError(f"Situation.chain_x must have shape ({b}, M >= 1); got {self.chain_x.shape}")
+        m = self.chain_x.shape[1]
+        if self.chain_v.shape != self.chain_x.shape:
+            raise ValueError(f"Situation.chain_v must have shape {self.chain_x.shape}; got {self.chain_v.shape}")
+        for name in ("chain_promise", "chain_human"):
+            if getattr(self, name).shape != (b, m - 1):
+                raise ValueError(f"Situation.{name} must have shape ({b}, {m - 1}); got {getattr(self, name).shape}")
+        for name in ("ego_x", "ego_y", "ego_vx", "ego_vy", "f_x", "f_v", "chain_x", "chain_v", "chain_promise"):
+            arr = getattr(self, name)
+            if not np.isfinite(arr).all():
+                raise ValueError(f"Situation.{name} must be finite; got {arr[~np.isfinite(arr)].flat[0]!r}")
+        for name in ("ego_vx", "f_v", "chain_v"):
+            if (getattr(self, name) < 0).any():
+                raise ValueError(f"Situation.{name} must be >= 0 (vehicles do not reverse)")
+        if ((self.chain_promise < 0) | (self.chain_promise > params.a_x_d)).any():
+            raise ValueError(f"Situation.chain_promise must lie in [0, a_x_d={params.a_x_d}]")
+        if ((self.n_connected < 0) | (self.n_connected > m - 1)).any():
+            raise ValueError(f"Situation.n_connected must lie in [0, M-1={m - 1}]")
+
+    def chain_promise_used(self, a_x_d: float) -> np.ndarray:
+        """``(B, M−1)`` promises of the connected leaders, ``a_x_d`` beyond ``L_N`` (they are not connected)."""
+        slots = np.arange(self.chain_promise.shape[1])[None, :]
+        return np.where(slots < self.n_connected[:, None], self.chain_promise, a_x_d)
+
+
+def _replace(situation: Situation, **changes) -> Situation:
+    import dataclasses
+
+    return dataclasses.replace(situation, **changes)
+
+
+def pad_chain(x, v, n_connected):
+    """Neutral padding beyond ``L(N+1)`` (``1e6`` m apart ahead of it, at its speed) for ragged chains."""
+    rows = np.arange(len(x))
+    slots = np.arange(x.shape[1])[None, :]
+    beyond = slots > n_connected[:, None]
+    head_x, head_v = x[rows, n_connected], v[rows, n_connected]
+    return (
+        np.where(beyond, head_x[:, None] + _PAD_GAP_M * (slots - n_connected[:, None]), x),
+        np.where(beyond, head_v[:, None], v),
+    )
