@@ -75,6 +75,27 @@ def test_spaces_are_the_feature_map_and_the_mechanical_limits():
     np.testing.assert_array_equal(env.action_space.high, np.float32([prm.a_x_a, prm.a_y_m]))
 
 
+@pytest.mark.parametrize(
+    ("n_leaders", "decel", "scenario"),
+    [
+        ((3,), (2.0, 6.0), None),
+        ((0, 1, 3, 10), (2.0, 6.0), {"human_share": 0.5, "follower_connected_share": 0.5}),
+        ((2,), 4.0, {"gap": (5, 9)}),
+    ],
+)
+def test_batched_sampler_draws_the_paper_samplers_scenarios(n_leaders, decel, scenario):
+    import dataclasses
+
+    from safelane.envs.core import ScenarioSampler, stack_rows
+
+    sampler = ScenarioSampler.build("CV_follow", n_leaders, decel, scenario, p_v=0.1)
+    fast = sampler.draw_many([np.random.default_rng(s) for s in range(40)])
+    reference = stack_rows([sampler.draw(np.random.default_rng(s)) for s in range(40)])
+    for f in dataclasses.fields(fast):
+        a, b = getattr(fast, f.name), getattr(reference, f.name)
+        assert (a is None and b is None) or (np.array_equal(a, b) and a.dtype == b.dtype), f.name
+
+
 def run_episode(env, actions, seed):
     obs, _ = env.reset(seed=seed)
     rows = [obs]

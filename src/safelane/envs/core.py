@@ -27,7 +27,7 @@ from pydantic import BaseModel, ConfigDict, Field
 from ..params import Params
 from ..planners.base import Observation
 from ..planners.features import FEATURE_NAMES, features
-from ..planners.variants import get_variant
+from ..planners.variants import VARIANT_NAMES, get_variant
 from ..sim.config import SimConfig
 from ..sim.scenario import ScenarioBatch, ScenarioConfig, paper_scenarios
 from ..sim.step import ClosedLoop
@@ -101,14 +101,67 @@ class ScenarioSampler:
     def width(self) -> int:
         return max(self.n_leaders) + 2
 
-    def draw(self, rng: np.random.Generator) -> ScenarioBatch:
+    def _settings(self, rng: np.random.Generator) -> tuple[int, float]:
         n = self.n_leaders[rng.integers(len(self.n_leaders))] if len(self.n_leaders) > 1 else self.n_leaders[0]
         lo, hi = self.decel
-        decel = rng.uniform(lo, hi) if hi > lo else lo
+        return n, (rng.uniform(lo, hi) if hi > lo else lo)
+
+    def draw(self, rng: np.random.Generator) -> ScenarioBatch:
+        """One scenario through :func:`~safelane.sim.paper_scenarios` itself (the reference :meth:`draw_many`
+        is tested against)."""
+        n, decel = self._settings(rng)
         row = paper_scenarios(self.variant, n, decel, 1, rng, self.scenario, p_v=self.p_v)
         # A fresh id per episode keys the simulator's counter-based draws (promise violations, sensor noise).
         row = dataclasses.replace(row, scenario_id=rng.integers(0, 2**62, size=1))
         return pad_vehicles(row, self.width)
+
+    def draw_many(self, rngs: Sequence[np.random.Generator]) -> ScenarioBatch:
+        """One scenario from each generator, as one batch: the same draws in the same order as :meth:`draw`, hence
+        the same scenarios, but the arrays are built once for all rows (``paper_scenarios`` per row costs ~0.1 ms,
+        a third of a vector step at 1,024 envs)."""
+        cfg, k = self.scenario, self.width
+        m = len(rngs)
+        n, decel = np.zeros(m, np.int64), np.zeros(m)
+        gap, ego_vx, f_conn_u, f_aggr_u = (np.zeros(m) for _ in range(4))
+        human = np.zeros((m, k), bool)
+        sid = np.zeros(m, np.int64)
+        lo, hi = self.decel
+        for i, rng in enumerate(rngs):
+            # The draws of _settings and paper_scenarios(samples=1), in their order, as one call: uniform(a, b) is
+            # a + (b - a)·random() on the same stream (the equality is tested).
+            n[i] = self.n_leaders[rng.integers(len(self.n_leaders))] if len(self.n_leaders) > 1 else self.n_leaders[0]
+            u = rng.random(5 + n[i]) if hi > lo else np.concatenate([[0.0], rng.random(4 + n[i])])
+            decel[i], gap[i], ego_vx[i], f_conn_u[i], f_aggr_u[i] = u[:5]
+            human[i, 1 : n[i] + 1] = u[5:] < cfg.human_share
+            sid[i] = rng.integers(0, 2**62)
+        decel = lo + (hi - lo) * decel if hi > lo else np.full(m, lo)
+        gap = cfg.gap[0] + (cfg.gap[1] - cfg.gap[0]) * gap
+        ego_vx = cfg.ego_speed[0] + (cfg.ego_speed[1] - cfg.ego_speed[0]) * ego_vx
+        f_connected = f_conn_u < cfg.follower_connected_share
+        slots = np.arange(k)[None, :]
+        last = n[:, None] + 1  # L(N+1)'s slot; beyond it: padding
+        x = np.where(slots == 0, -1.0, np.minimum(slots, last)) * gap[:, None] + 1e6 * np.maximum(slots - last, 0)
+        connected = (slots >= 1) & (slots <= n[:, None])
+        connected[:, 0] = f_connected
+        return ScenarioBatch(
+            ego_x=np.zeros(m),
+            ego_y=np.zeros(m),
+            ego_vx=ego_vx,
+            ego_vy=np.zeros(m),
+            x=x,
+            v=np.full((m, k), cfg.traffic_speed),
+            valid=slots <= last,
+            connected=connected,
+            human=human,
+            promise_decel=np.full((m, k), cfg.promise_decel),
+            promise_accel=np.full((m, k), cfg.promise_accel),
+            n_connected=n,
+            follower_aggressive=~f_connected & (f_aggr_u < cfg.follower_aggressive_share),
+            decel_last=decel,
+            p_v=np.full(m, self.p_v),
+            variant=np.full(m, VARIANT_NAMES.index(self.variant)),
+            scenario_id=sid,
+        )
 
 
 def pad_vehicles(batch: ScenarioBatch, k: int) -> ScenarioBatch:
@@ -261,7 +314,7 @@ class LaneChangeTask:
 
     def start(self, rngs: Sequence[np.random.Generator]) -> np.ndarray:
         """Every row starts a fresh episode (row ``i`` drawn from ``rngs[i]``); the observations ``(B, F)``."""
-        self.batch = stack_rows([self.sampler.draw(rng) for rng in rngs])
+        self.batch = self.sampler.draw_many(rngs)
         self.loop = self._loop(self.batch)
         self.state = self.loop.initial_state()
         self.steps[:] = 0
@@ -270,7 +323,7 @@ class LaneChangeTask:
     def restart(self, rows: np.ndarray, rngs: Sequence[np.random.Generator]) -> None:
         """Rows ``rows`` start fresh episodes (each drawn from its generator), the others go on (see the module
         docstring for how the shared clock is handled)."""
-        fresh = stack_rows([self.sampler.draw(rng) for rng in rngs])
+        fresh = self.sampler.draw_many(rngs)
         self.batch = replace_rows(self.batch, fresh, rows, self.n)
         start = self._loop(fresh).initial_state()
         start = shift_plan_clock(start, self.state.t)

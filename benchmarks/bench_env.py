@@ -1,0 +1,113 @@
+"""Throughput of the Gymnasium environments: the native vector env vs the single env looped.
+
+*Vector*: :class:`safelane.envs.LaneChangeVectorEnv` with ``--envs`` sub-envs (default 1,024) — one batched closed
+loop, the shield on, same-step auto-reset of finished sub-envs included. *Loop*: one
+:class:`safelane.envs.LaneChangeEnv` stepped ``--envs`` times per vector step (what a ``SyncVectorEnv`` of single
+envs would do, without its bookkeeping), resetting when an episode ends. Both in this one process, measured in
+the same run; env-steps = sub-envs × vector steps.
+
+Two action streams: *expert* (the rule-based expert planner's law computed from the observation: lane changes
+that complete in about 3 s, so many resets) and *random* (uniform in the action box: long, hesitant episodes).
+The scenario distribution is the environment's default (``CV_all``, N = 3, ``a_x_N+1_d ~ U[2, 6]``). The vector
+time is the best of ``--repeat`` runs of ``--steps`` steps after ``--warmup`` steps, on the wall clock and in CPU
+time of this process (on a busy machine the wall clock also counts the time other processes held the core).
+Target: >= 100,000 env-steps/s at 1,024 sub-envs. Run with ``python benchmarks/bench_env.py [--envs 1024]
+[--quick]``; it prints, never asserts.
+"""
+
+from __future__ import annotations
+
+import argparse
+import time
+
+import numpy as np
+from threadpoolctl import threadpool_limits
+
+from safelane import Params
+from safelane.envs import LaneChangeEnv, LaneChangeVectorEnv
+
+TARGET = 100_000  # env-steps/s at 1,024 sub-envs
+
+
+def expert_actions(obs: np.ndarray, rng: np.random.Generator, prm: Params) -> np.ndarray:
+    """The expert planner's law (:class:`safelane.planners.ExpertPlanner`) on the feature map ``(B, 12)``."""
+    obs = np.atleast_2d(obs)
+    p_y, v_y, gap_l, gap_f, dv_l = obs[:, 0], obs[:, 1], obs[:, 3], obs[:, 4], obs[:, 5]
+    a_x = 0.3 * 0.5 * (gap_l - gap_f) + 0.8 * dv_l
+    a_y = 0.65**2 * (prm.lane_width - p_y) - 2 * 0.65 * v_y
+    return np.stack([np.clip(a_x, -prm.a_x_d, prm.a_x_a), np.clip(a_y, -prm.a_y_m, prm.a_y_m)], 1)
+
+
+def random_actions(obs: np.ndarray, rng: np.random.Generator, prm: Params) -> np.ndarray:
+    n = len(np.atleast_2d(obs))
+    return np.stack([rng.uniform(-prm.a_x_d, prm.a_x_a, n), rng.uniform(-prm.a_y_m, prm.a_y_m, n)], 1)
+
+
+def time_vector(policy, envs: int, steps: int, warmup: int, repeat: int, prm: Params):
+    best, best_cpu, episodes = np.inf, np.inf, 0
+    for r in range(repeat):
+        venv = LaneChangeVectorEnv(envs)
+        rng = np.random.default_rng(r)
+        obs, _ = venv.reset(seed=r)
+        for _ in range(warmup):
+            obs, *_ = venv.step(policy(obs, rng, prm))
+        done = 0
+        t0, c0 = time.perf_counter(), time.process_time()
+        for _ in range(steps):
+            obs, _, terminated, truncated, _ = venv.step(policy(obs, rng, prm))
+            done += int((terminated | truncated).sum())
+        elapsed, cpu = time.perf_counter() - t0, time.process_time() - c0
+        best_cpu = min(best_cpu, cpu)
+        if elapsed < best:
+            best, episodes = elapsed, done
+    return envs * steps / best, envs * steps / best_cpu, episodes
+
+
+def time_loop(policy, envs: int, vector_steps: int, prm: Params):
+    env = LaneChangeEnv()
+    rng = np.random.default_rng(0)
+    obs, _ = env.reset(seed=0)
+    done = 0
+    t0, c0 = time.perf_counter(), time.process_time()
+    for _ in range(vector_steps):
+        for _ in range(envs):
+            obs, _, terminated, truncated, _ = env.step(policy(obs, rng, prm)[0])
+            if terminated or truncated:
+                obs, _ = env.reset()
+                done += 1
+    return envs * vector_steps / (time.perf_counter() - t0), envs * vector_steps / (time.process_time() - c0)
+
+
+def main(argv=None) -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--envs", type=int, default=1024, help="sub-envs of the vector env")
+    ap.add_argument("--steps", type=int, default=200, help="timed vector steps per run")
+    ap.add_argument("--warmup", type=int, default=50, help="untimed vector steps first (episodes in flight)")
+    ap.add_argument("--repeat", type=int, default=3, help="vector runs (the best counts)")
+    ap.add_argument("--loop-steps", type=int, default=2, help="vector steps' worth of single-env steps in the loop")
+    ap.add_argument("--quick", action="store_true", help="128 envs, 20 steps, 1 run (a smoke run)")
+    args = ap.parse_args(argv)
+    if args.quick:
+        args.envs, args.steps, args.warmup, args.repeat, args.loop_steps = 128, 20, 5, 1, 1
+    prm = Params()
+    print(
+        f"bench_env: safelane/LaneChange-v0 defaults (CV_all, N = 3, decel U[2, 6], shield on), {args.envs} sub-envs, "
+        f"{args.steps} steps after {args.warmup} (best of {args.repeat}); loop: one env x {args.envs} x "
+        f"{args.loop_steps}"
+    )
+    print(f"target: vector >= {TARGET:,} env-steps/s at 1,024 sub-envs\n")
+    print("env-steps/s of wall-clock time (and per CPU-second of this process, in brackets: on a busy machine the")
+    print("wall clock also counts the time other processes held the core)\n")
+    print(f"{'actions':<8} {'vector':>22} {'episodes':>9} {'single env looped':>20} {'ratio':>6}")
+    with threadpool_limits(limits=1, user_api="blas"):
+        for name, policy in (("expert", expert_actions), ("random", random_actions)):
+            vec, vec_cpu, episodes = time_vector(policy, args.envs, args.steps, args.warmup, args.repeat, prm)
+            loop, loop_cpu = time_loop(policy, args.envs, args.loop_steps, prm)
+            print(
+                f"{name:<8} {vec:>10,.0f} ({vec_cpu:>9,.0f}) {episodes:>9} {loop:>8,.0f} ({loop_cpu:>8,.0f}) "
+                f"{vec / loop:>5.0f}x"
+            )
+
+
+if __name__ == "__main__":
+    main()
