@@ -80,6 +80,36 @@ def leader_accels(x, v, margin, roles, bounds, task, a_last, decel_last, violati
     return np.asfortranarray(acc)
 
 
+def reactive_leader_accels(x, v, margin, roles, task, a_last, decel_last, violating, violate_pick, prm: Params):
+    """The *reactive* leader rule (``SimConfig.leader_rule = "reactive"``, the paper-faithful preset's): a connected
+    ``L_i`` keeps its task unless the vehicle ahead's *current* braking needs more, then takes the minimal safe
+    deceleration of Eqs. 2–3 against that (an expected violation); decisions resolved front to back within a period
+    (perfect V2X coordination). Physically natural — leaders brake only when the traffic ahead does — and what
+    reproduces the paper's Table 1, but **outside the guarantee's assumptions**: a leader may later brake harder
+    than the bound the chain analysis gave it (when the vehicle ahead brakes, eases off, then brakes harder), which
+    can void an ego's held plan (docs/simulator.md, "Leader rules"). Same arguments as :func:`leader_accels` but
+    no bounds. The loop runs over the chain (each link reacts to the one ahead), vectorized over the batch.
+    """
+    bsz, k = x.shape
+    is_last, acts = roles
+    mixed = is_last.any(0) | ~acts.all(0)  # per slot: not every row an acting connected leader (then a mask)
+    acc = np.zeros((bsz, k), order="F")  # column-major: filled vehicle by vehicle
+    slack = x[:, 1:] - x[:, :-1] - margin[:, :-1]
+    with np.errstate(all="ignore"):
+        for i in range(k - 1, 0, -1):  # front to back: each link reacts to the one ahead (a scan over vehicles)
+            if i + 1 < k:
+                ahead_decel = np.maximum(-acc[:, i + 1], 0.0)
+                z = np.minimum(min_follow_decel(ARRAY, slack[:, i], v[:, i], v[:, i + 1], ahead_decel), prm.a_x_d)
+            else:
+                z = np.zeros(bsz)
+            a_conn = np.minimum(task[:, i], -z)
+            if violating is not None:
+                lo, hi = np.minimum(z, decel_last), np.maximum(z, decel_last)
+                a_conn = np.where(violating[:, i], -(lo + violate_pick[:, i] * (hi - lo)), a_conn)
+            acc[:, i] = np.where(is_last[:, i], a_last, np.where(acts[:, i], a_conn, 0.0)) if mixed[i] else a_conn
+    return acc
+
+
 def leader_task(v, v_desired, promise_decel, promise_accel, wanted=None):
     """Each connected leader's own driving task, inside its promise ``[−a_m_d, a_m_a]``: ``wanted`` (a traffic
     hook's wish) or, by default, holding its initial speed (a P law)."""

@@ -31,6 +31,12 @@ class SimConfig(BaseModel):
     v2x_max_age_s: float = Field(
         0.3, ge=0.0, description="Older messages are stale: their sender counts as non-connected (safelane.v2x)."
     )
+    leader_rule: Literal["worst_case", "reactive"] = Field(
+        "worst_case",
+        description="How connected leaders brake: 'worst_case' keeps a safe distance against the vehicle ahead's "
+        "worst case with their own chain bound (the guarantee's assumption); 'reactive' reacts to the vehicle "
+        "ahead's current braking (the paper-faithful preset; outside the guarantee, see docs/simulator.md).",
+    )
     follower_ignores_ego: bool = Field(
         False,
         description="Outside the assumptions: F never yields to the ego (it follows L1 only, even after the lane "

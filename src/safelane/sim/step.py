@@ -22,7 +22,7 @@ from ..safety.chain import propagate_chain
 from ..safety.lateral import LATERAL_TOL_M
 from ..shield import ABORT, HESITATE, PROCEED, ShieldConfig, ShieldState, Situation
 from ..shield import core as shield
-from .behaviours import follower_accel, leader_accels, leader_roles, leader_task
+from .behaviours import follower_accel, leader_accels, leader_roles, leader_task, reactive_leader_accels
 from .checks import ego_checks, lane_checks, lane_pairs
 from .config import SimConfig
 from .kinematics import Fleet, Motion
@@ -276,9 +276,12 @@ class ClosedLoop:
             if (t_sw < prm.dt).any():
                 on = self.last_slot_mask & (t_sw < prm.dt)[:, None]
                 switch = (np.where(on, t_sw[:, None], prm.dt), np.where(on, a2[:, None], 0.0))
-        acc = leader_accels(
-            s.x, s.v, self.margin, self.roles, bounds, task, a_last, b.decel_last, violating, pick, prm
-        )
+        if cfg.leader_rule == "worst_case":
+            acc = leader_accels(s.x, s.v, self.margin, self.roles, bounds, task, a_last, b.decel_last, violating, pick,
+                                prm)  # fmt: skip
+        else:
+            acc = reactive_leader_accels(s.x, s.v, self.margin, self.roles, task, a_last, b.decel_last, violating,
+                                         pick, prm)  # fmt: skip
         f_wish = None
         if hooks.follower_wish is not None:
             f_wish = np.clip(hook_output("follower_wish", hooks.follower_wish(view, prm), (len(b),)), -prm.a_x_d,
