@@ -364,3 +364,21 @@ def test_v2x_emulation_off_is_perfect_v2x_and_on_is_conservative():
     late = SimConfig(v2x_latency_periods=2, v2x_max_age_s=0.3)
     table = simulate("CV_all", n_leaders=3, decel=4.0, samples=200, seed=2, config=late).table
     assert not table.breach_stale_v2x.any()  # 0.2 s old messages are still fresh
+
+
+def test_leader_closed_form_is_exact_when_its_own_bound_is_at_least_the_one_ahead():
+    """leader_accels skips the exact check where own >= d: there the closed form must be safe and maximal."""
+    from safelane.safety.responsible import responsible_bound, responsible_ok
+
+    rng = np.random.default_rng(11)
+    n = 100_000
+    slack = rng.choice([0.0, 1e-9, 0.5, 3.0, 12.0], n) + rng.uniform(0, 2, n)
+    v_f, v_l = rng.uniform(0, 35, n), rng.uniform(0, 35, n)
+    d = rng.uniform(0, PRM.a_x_d, n)
+    own = d + rng.uniform(0, PRM.a_x_d, n) * (PRM.a_x_d - d) / PRM.a_x_d  # own in [d, a_x_d]
+    a = responsible_bound(slack, v_f, v_l, d, PRM, brake=own) - 1e-9
+    inside = a >= -own
+    ok = responsible_ok(a, slack, v_f, v_l, d, PRM, brake=own, tol=1e-9)
+    assert ok[inside].all()
+    larger = responsible_ok(a + 1e-6, slack, v_f, v_l, d, PRM, brake=own)
+    assert not larger[inside & (a + 1e-6 < PRM.a_x_a)].any()

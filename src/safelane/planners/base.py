@@ -31,6 +31,8 @@ class Observation:
         l1_connected, f_connected: whether that information came over V2X.
         completed: the lane change has completed (centre across the lane boundary).
         t: simulation time [s] (scalar).
+        scenario_id: ``(B,)`` stable scenario ids where the caller has them (the simulator does): planners with
+            per-scenario parameters index them by id, since a batch may be split over worker processes.
     """
 
     p_x: np.ndarray
@@ -46,6 +48,7 @@ class Observation:
     f_connected: np.ndarray
     completed: np.ndarray
     t: float = 0.0
+    scenario_id: np.ndarray | None = None
 
     def state_matrix(self) -> np.ndarray:
         """The 8 ASP-DAC'23 features ``(B, 8)`` in :data:`STATE_FEATURES` order (absolute values)."""

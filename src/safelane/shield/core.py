@@ -292,11 +292,16 @@ def step(
     for rows_acc, _ in accepted:
         plan_f_aggr[rows_acc] = f_aggr[rows_acc]
     # For the monitor at the next period: what a responsible follower of the ego could do this period.
-    with np.errstate(all="ignore"):
-        f_limit = np.maximum(responsible_bound(ex - fx - prm.p_m, fv, evx, np.full(n, prm.a_x_d), prm), -prm.a_x_d)
+    f_limit = np.full(n, np.inf)  # only an F the held plan takes for collaborative, with the ego ahead, is watched
+    watch = np.flatnonzero(active & ~plan_f_aggr & (ex - fx > 0.0))
+    if watch.size:
+        with np.errstate(all="ignore"):
+            gap = (ex - fx - prm.p_m)[watch]
+            limit = responsible_bound(gap, fv[watch], evx[watch], np.full(watch.size, prm.a_x_d), prm)
+        f_limit[watch] = np.maximum(limit, -prm.a_x_d)
     last = Snapshot(
         chain_x=s.chain_x, chain_v=s.chain_v, bounds=bounds, n_connected=s.n_connected, f_x=fx, f_v=fv,
-        f_limit=np.where(ex - fx > 0.0, f_limit, np.inf), plan_l1_decel=new_plan.l1_decel,
+        f_limit=f_limit, plan_l1_decel=new_plan.l1_decel,
         plan_f_aggr=plan_f_aggr, active=active,
     )  # fmt: skip
     if s.v2x_stale is not None:

@@ -71,7 +71,7 @@ def observe_breaches(prev: Breach, last, situation, prm: Params, t_now: float) -
         slots = np.arange(behind.shape[1])[None, :]
         flags[:, 1] = (behind & (slots < last.n_connected[:, None])).any(1)
         flags[:, 2] = (behind & (slots == last.n_connected[:, None])).any(1)
-    flags[:, 3] = active & ~last.plan_f_aggr & np.isfinite(last.f_limit) & (situation.f_x > f_highest + TOL_M)
+    flags[:, 3] = np.isfinite(last.f_limit) & (situation.f_x > f_highest + TOL_M)  # finite only where watched
     new = flags & ~prev.flags
     first = np.where(np.isnan(prev.first_s) & new.any(1), t_now, prev.first_s)
     return Breach(flags=prev.flags | flags, first_s=first)

@@ -182,6 +182,7 @@ class ClosedLoop:
             f_connected=b.connected[:, 0],
             completed=s.completed,
             t=s.t,
+            scenario_id=b.scenario_id,
         )
 
     def chain(self, s: SimState):

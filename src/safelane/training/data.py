@@ -112,6 +112,10 @@ def concat_observations(batches: Sequence[Observation]) -> Observation:
     for f in fields(Observation):
         if f.name == "t":
             continue
+        if f.name == "scenario_id":  # ids only where every batch has them
+            ids = [b.scenario_id for b in batches]
+            out[f.name] = None if any(i is None for i in ids) else np.concatenate(ids)
+            continue
         if f.name == "l1_plan":
             arrays = [np.pad(np.asarray(b.l1_plan, float), ((0, 0), (0, h - np.shape(b.l1_plan)[1]))) for b in batches]
         else:
@@ -123,7 +127,12 @@ def concat_observations(batches: Sequence[Observation]) -> Observation:
 def take(obs: Observation, index: np.ndarray) -> Observation:
     """The sub-batch ``obs[index]`` (``index``: integer or boolean array over the batch)."""
     return replace(
-        obs, **{f.name: np.asarray(getattr(obs, f.name))[index] for f in fields(Observation) if f.name != "t"}
+        obs,
+        **{
+            f.name: np.asarray(getattr(obs, f.name))[index]
+            for f in fields(Observation)
+            if f.name != "t" and getattr(obs, f.name) is not None
+        },
     )
 
 
