@@ -19,7 +19,6 @@ from .inputs import cell_rng, check_cell_args, check_settings, resolve
 from .results import SimResult, results_table, trace_rows
 from .scenario import ScenarioBatch, ScenarioConfig, check_batch, paper_scenarios
 from .step import ClosedLoop
-from .traffic import TrafficHooks
 
 
 def simulate(
@@ -39,13 +38,15 @@ def simulate(
     progress: bool = False,
     preset: str | None = None,
     trace_limit: int = 16,
+    traffic=None,
 ) -> SimResult:
     """Simulate one experiment cell of the paper's sampler.
 
     ``preset`` (a name such as ``"paper"``, a YAML path or a ``Preset``) supplies ``params``, ``config`` and the
     nominal planner where those are not given; ``nominal`` takes a registered name (``"mlp"``). The cell's
     scenarios come from :func:`~safelane.sim.inputs.cell_rng`, as in ``safelane reproduce``: the same cell and
-    seed give the same numbers as the report. Bad arguments raise ``InputError`` naming the argument.
+    seed give the same numbers as the report. Bad arguments raise ``InputError`` naming the argument. ``traffic``:
+    as for :func:`simulate_batch`.
 
     Example: ``simulate("CV_all", n_leaders=5, decel=5.0, samples=1000, seed=0).summary()``.
     """
@@ -63,6 +64,7 @@ def simulate(
         record_observations=record_observations,
         progress=progress,
         trace_limit=trace_limit,
+        traffic=traffic,
     )
 
 
@@ -78,14 +80,15 @@ def simulate_batch(
     progress: bool = False,
     trace_limit: int = 16,
     workers: int = 1,
-    traffic: TrafficHooks | None = None,
+    traffic=None,
 ) -> SimResult:
     """Run every scenario of ``batch`` in closed loop; see :class:`SimResult`.
 
     ``workers > 1`` splits the batch across processes; scenarios are independent and their random draws are
     counter-based, so the table is identical to a single-process run (traces and observations need
-    ``workers=1``). ``traffic``: behaviour hooks (:class:`~safelane.sim.traffic.TrafficHooks`, the public
-    extension point; with workers they must be picklable and index per-scenario data by ``scenario_id``).
+    ``workers=1``). ``traffic``: the target-lane traffic — a registered name (``safelane.sim.traffic.TRAFFIC_MODELS``),
+    a :class:`~safelane.sim.traffic.TrafficModel`, or :class:`~safelane.sim.traffic.TrafficHooks` (the paper's model
+    with some wishes replaced); with workers it must be picklable and index per-scenario data by ``scenario_id``.
     """
     prm = params or Params()
     cfg = config or SimConfig()

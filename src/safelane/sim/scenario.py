@@ -224,3 +224,81 @@ def check_batch(batch: ScenarioBatch, prm: Params) -> None:
             raise ValueError(f"{name} must be >= 0")
     if (batch.v < 0).any():
         raise ValueError("vehicle speeds v must be >= 0")
+
+
+def explicit_scenarios(
+    *,
+    ego,
+    follower,
+    leaders,
+    n_connected=None,
+    planner: str = "CV_all",
+    decel_last=5.0,
+    follower_connected=True,
+    follower_aggressive=False,
+    promise_decel=0.5,
+    promise_accel=0.5,
+    human=False,
+    p_v=0.0,
+    first_id: int = 0,
+) -> ScenarioBatch:
+    """A batch of explicit initial states — the one documented way to build scenarios by hand.
+
+    Args:
+        ego: ``(x, y, vx, vy)``, each a scalar or ``(B,)`` (``y`` from the original lane's centre).
+        follower: ``(x, v)`` of F.
+        leaders: ``(x, v)``, each ``(M,)`` or ``(B, M)``: ``L1, L2, …``, nearest first; the last one is ``L(N+1)``.
+        n_connected: N (default ``M − 1``: all but the last connected); leaders beyond ``L(N+1)`` are dropped.
+        planner: the variant's name. decel_last: ``a_x_N+1_d``. p_v: unexpected promise-violation rate.
+        follower_connected, follower_aggressive, promise_decel, promise_accel, human: scalars or per-scenario.
+
+    Leader positions must increase along the chain and F must be behind L1; speeds are ``>= 0``.
+    """
+    ex, ey, evx, evy = (np.atleast_1d(np.asarray(a, float)) for a in ego)
+    fx, fv = (np.atleast_1d(np.asarray(a, float)) for a in follower)
+    lx, lv = (np.atleast_2d(np.asarray(a, float)) for a in leaders)
+    b = max(len(ex), len(ey), len(evx), len(evy), len(fx), len(fv), lx.shape[0], lv.shape[0])
+    try:
+        ex, ey, evx, evy, fx, fv = (np.broadcast_to(a, (b,)).copy() for a in (ex, ey, evx, evy, fx, fv))
+        lx, lv = (np.broadcast_to(a, (b, lx.shape[1])).copy() for a in (lx, lv))
+    except ValueError as exc:
+        raise ValueError(f"ego, follower and leaders must share one batch size; {exc}") from None
+    m = lx.shape[1]
+    n = m - 1 if n_connected is None else int(n_connected)
+    if not 0 <= n <= m - 1:
+        raise ValueError(f"n_connected must lie in [0, {m - 1}] for {m} leaders; got {n_connected!r}")
+    lx, lv = lx[:, : n + 1], lv[:, : n + 1]
+    if not np.isfinite(np.concatenate([ex, ey, evx, evy, fx, fv, lx.ravel(), lv.ravel()])).all():
+        raise ValueError("explicit scenario states must be finite")
+    if (np.concatenate([evx, fv, lv.ravel()]) < 0).any():
+        raise ValueError("speeds (ego vx, follower v, leaders v) must be >= 0")
+    if (np.diff(lx, axis=1) <= 0).any():
+        raise ValueError("leader positions must increase along the chain (L1 nearest)")
+    if (fx >= lx[:, 0]).any():
+        raise ValueError("the follower must be behind L1 (follower x < leaders x[:, 0])")
+    get_variant(planner)
+    k = n + 2
+    x = np.column_stack([fx, lx])
+    v = np.column_stack([fv, lv])
+    slots = np.arange(k)
+    connected = np.broadcast_to((slots >= 1) & (slots <= n), (b, k)).copy()
+    connected[:, 0] = np.broadcast_to(np.asarray(follower_connected, bool), (b,))
+    human_rows = np.zeros((b, k), bool)
+    human_rows[:, 1 : n + 1] = _per_row(human, b, bool)[:, None]
+    promise_d = np.repeat(_per_row(promise_decel, b, float)[:, None], k, 1)
+    promise_a = np.repeat(_per_row(promise_accel, b, float)[:, None], k, 1)
+    return ScenarioBatch(
+        ego_x=ex, ego_y=ey, ego_vx=evx, ego_vy=evy, x=x, v=v, valid=np.ones((b, k), bool), connected=connected,
+        human=human_rows, promise_decel=promise_d, promise_accel=promise_a, n_connected=np.full(b, n),
+        follower_aggressive=_per_row(follower_aggressive, b, bool), decel_last=_per_row(decel_last, b, float),
+        p_v=_per_row(p_v, b, float), variant=np.full(b, VARIANT_NAMES.index(planner)),
+        scenario_id=np.arange(first_id, first_id + b, dtype=np.int64),
+    )  # fmt: skip
+
+
+def _per_row(value, b: int, dtype) -> np.ndarray:
+    """A scalar or ``(B,)`` setting as a ``(B,)`` array."""
+    arr = np.asarray(value, dtype=dtype)
+    if arr.ndim > 1 or (arr.ndim == 1 and arr.shape != (b,)):
+        raise ValueError(f"a per-scenario setting must be a scalar or have shape ({b},); got {arr.shape}")
+    return np.broadcast_to(arr, (b,)).copy()

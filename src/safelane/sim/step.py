@@ -22,14 +22,13 @@ from ..safety.chain import propagate_chain
 from ..safety.lateral import LATERAL_TOL_M
 from ..shield import ABORT, HESITATE, PROCEED, ShieldConfig, ShieldState, Situation
 from ..shield import core as shield
-from .behaviours import follower_accel, leader_accels, leader_roles, leader_task, reactive_leader_accels
 from .checks import ego_checks, lane_checks, lane_pairs
 from .config import SimConfig
 from .kinematics import Fleet, Motion
 from .link import Link
-from .rng import counter_normal, counter_uniform
+from .rng import counter_normal
 from .scenario import ScenarioBatch
-from .traffic import TrafficHooks, TrafficView, hook_output, profile_segment
+from .traffic import TrafficView, resolve_traffic
 
 
 @dataclass(frozen=True)
@@ -79,7 +78,7 @@ class ClosedLoop:
         prm: Params,
         cfg: SimConfig,
         nominal: NominalPlanner,
-        traffic: TrafficHooks | None = None,
+        traffic=None,
     ):
         # (B, K) arrays are kept column-major: the engine works vehicle by vehicle (x[:, i]), and a strided
         # column costs NumPy several times a contiguous one.
@@ -87,7 +86,7 @@ class ClosedLoop:
             batch, **{f.name: _columns(getattr(batch, f.name)) for f in dataclasses.fields(batch)}
         )
         self.b, self.seed, self.prm, self.cfg, self.nominal = batch, seed, prm, cfg, nominal
-        self.traffic = traffic or TrafficHooks()
+        self.traffic_step = resolve_traffic(traffic).bind(batch, seed, prm, cfg)
         self.uses_chain = np.array([VARIANTS[name].uses_chain for name in VARIANT_NAMES])[batch.variant]
         self.shield_config = ShieldConfig(
             assessment=cfg.assessment, assess_window=cfg.assess_window, assess_threshold=cfg.assess_threshold,
@@ -100,16 +99,10 @@ class ClosedLoop:
         # The chain's inputs as contiguous rows (vehicle-major), for the unchecked scan of the chain.
         self.chain_promise = np.where(in_chain, batch.promise_decel[:, 1:], prm.a_x_d)[:, :-1].T.copy()
         self.chain_margin = np.where((batch.human[:, 1:] & in_chain)[:, :-1].T, prm.p_m_human, prm.p_m)
-        self.gap0 = batch.ego_x - batch.x[:, 0]
-        self.any_violation = bool((batch.p_v > 0.0).any())
-        self.v_desired = batch.v.copy(order="F")
-        self.margin = np.where(batch.human, prm.p_m_human, prm.p_m)
-        self.roles = leader_roles(batch.valid, batch.connected, batch.n_connected)
         self.lane_pairs = lane_pairs(batch, prm)
         self.last_slot = batch.n_connected + 1
         self.emulate_v2x = cfg.v2x_loss > 0.0 or cfg.v2x_latency_periods > 0
         self.chain_connected = np.column_stack([in_chain, np.zeros(len(batch), bool)])[:, : k - 1]
-        self.last_slot_mask = np.arange(k)[None, :] == self.last_slot[:, None]
         self.situation_promise = batch.promise_decel[:, 1:-1]
         self.situation_human = batch.human[:, 1:-1]
 
@@ -249,61 +242,15 @@ class ClosedLoop:
         return dataclasses.replace(s, shield=shield.observe(s.shield, situation, self.prm))
 
     def others_accels(self, s: SimState, ex, evx, ey, evy, bounds):
-        """Accelerations of the target-lane vehicles for this period ``(B, K)`` and L(N+1)'s switch inside it
-        (``(t_switch (B, K), a2 (B, K))``, ``t_switch = dt`` elsewhere) or ``None``."""
-        b, prm, cfg = self.b, self.prm, self.cfg
-        k = s.x.shape[1]
-        slots = np.arange(k)
-        violating = pick = None  # counter-based: skipping the draws when p_v = 0 everywhere changes nothing else
-        if self.any_violation:
-            violating = counter_uniform(self.seed, b.scenario_id[:, None], s.step, slots[None, :], 7) < b.p_v[:, None]
-            pick = counter_uniform(self.seed, b.scenario_id[:, None], s.step, slots[None, :], 8)
-        hooks = self.traffic
-        view = None
-        if hooks.leader_task is not None or hooks.follower_wish is not None:
-            view = TrafficView(
-                t=s.t, scenario_id=b.scenario_id, x=s.x, v=s.v, n_connected=b.n_connected, ego_x=ex, ego_y=ey,
-                ego_vx=evx, ego_vy=evy, completed=s.completed, follower_aggressive=b.follower_aggressive,
-            )
-        wanted = None
-        if hooks.leader_task is not None:
-            wanted = hook_output("leader_task", hooks.leader_task(view, prm), s.x.shape)
-        task = leader_task(s.v, self.v_desired, b.promise_decel, b.promise_accel, wanted)
-        switch = None
-        if b.last_profile_t is None:
-            a_last = np.where(s.t + 1e-9 >= cfg.brake_start_s, -b.decel_last, 0.0)
-        else:
-            a_last, t_sw, a2 = profile_segment(s.t, prm.dt, b.last_profile_t, b.last_profile_a)
-            if (t_sw < prm.dt).any():
-                on = self.last_slot_mask & (t_sw < prm.dt)[:, None]
-                switch = (np.where(on, t_sw[:, None], prm.dt), np.where(on, a2[:, None], 0.0))
-        if cfg.leader_rule == "worst_case":
-            acc = leader_accels(s.x, s.v, self.margin, self.roles, bounds, task, a_last, b.decel_last, violating, pick,
-                                prm)  # fmt: skip
-        else:
-            acc = reactive_leader_accels(s.x, s.v, self.margin, self.roles, task, a_last, b.decel_last, violating,
-                                         pick, prm)  # fmt: skip
-        f_wish = None
-        if hooks.follower_wish is not None:
-            f_wish = np.clip(hook_output("follower_wish", hooks.follower_wish(view, prm), (len(b),)), -prm.a_x_d,
-                             prm.a_x_a)
-        acc[:, 0] = follower_accel(
-            s.x[:, 0],
-            s.v[:, 0],
-            s.x[:, 1],
-            s.v[:, 1],
-            ex,
-            evx,
-            b.follower_aggressive,
-            s.completed,
-            self.gap0,
-            prm,
-            cfg.follower_open_decel,
-            cfg.follower_open_gap_m,
-            wanted=f_wish,
-            ignores_ego=cfg.follower_ignores_ego,
-        )
-        return acc, switch
+        """The traffic model's accelerations of the target-lane vehicles for this period ``(B, K)`` and any switch
+        inside it (see :class:`~safelane.sim.traffic.TrafficModel`)."""
+        b = self.b
+        view = TrafficView(
+            t=s.t, scenario_id=b.scenario_id, x=s.x, v=s.v, n_connected=b.n_connected, ego_x=ex, ego_y=ey,
+            ego_vx=evx, ego_vy=evy, completed=s.completed, follower_aggressive=b.follower_aggressive, step=s.step,
+            bounds=bounds,
+        )  # fmt: skip
+        return self.traffic_step(view)
 
     def check_and_advance(self, s, lon, lat, plan, others, behaviour, completing, acc) -> SimState:
         prm = self.prm

@@ -1,8 +1,12 @@
-"""Public extension point for the target-lane traffic: behaviours *inside* the paper's assumptions.
+"""Public extension points for the target-lane traffic.
 
-The simulator's built-in behaviours (:mod:`safelane.sim.behaviours`) are the paper's. A study that wants other
-behaviours — an adversarial search, a recorded drive, a different driver model — plugs them in here, without
-subclassing anything:
+The simulator asks a :class:`TrafficModel` every period for the target-lane vehicles' accelerations (the world
+side; the ego's side is the shield). The built-in one, :class:`PaperTraffic`, is the paper's behaviours
+(:mod:`safelane.sim.behaviours`); models are registered by name in :data:`TRAFFIC_MODELS` and passed as
+``simulate(..., traffic=...)`` / ``simulate_batch(..., traffic=...)`` — a name, a model, or :class:`TrafficHooks`
+(the paper's model with some wishes replaced). A whole new model implements ``bind(batch, seed, params, config)``
+returning ``step(view) -> (acc, switch)`` (see :class:`TrafficModel`); it is then responsible for staying inside
+the assumptions itself. The lighter way, for behaviours *inside* the assumptions without subclassing anything:
 
 * :class:`TrafficHooks` — callables the closed loop asks every period for what a vehicle *wants* to do. The
   simulator then enforces the assumptions the guarantee rests on: a connected leader's wish is clipped into its
@@ -21,6 +25,7 @@ from __future__ import annotations
 import dataclasses
 from collections.abc import Callable
 from dataclasses import dataclass
+from typing import Protocol, runtime_checkable
 
 import numpy as np
 
@@ -41,6 +46,9 @@ class TrafficView:
         ego_x, ego_y, ego_vx, ego_vy: ``(B,)`` the ego's state.
         completed: ``(B,)`` the lane change has completed.
         follower_aggressive: ``(B,)`` F's true type.
+        step: the period's index.
+        bounds: ``(B, K)`` each vehicle's worst-case deceleration from the chain analysis (the smallest it has had;
+            ``a_x_d`` for F's slot, ``L(N+1)`` and anything not connected) — what leaders must honour.
     """
 
     t: float
@@ -54,6 +62,8 @@ class TrafficView:
     ego_vy: np.ndarray
     completed: np.ndarray
     follower_aggressive: np.ndarray
+    step: int = 0
+    bounds: np.ndarray | None = None
 
 
 #: ``hook(view, params) -> (B, K)`` wanted accelerations [m/s²] of the connected leaders (other slots ignored).
@@ -143,3 +153,55 @@ def profile_segment(t_start: float, dt: float, times: np.ndarray, accels: np.nda
     a2 = np.where(inside, accels[rows, np.minimum(last_at, times.shape[1] - 1)], a1)
     t_sw = np.where(inside, t_next - t_start, dt)
     return a1, t_sw, a2
+
+
+@runtime_checkable
+class TrafficModel(Protocol):
+    """The target-lane vehicles' behaviour. ``bind`` is called once per run with the scenario batch, the seed, the
+    parameters and the :class:`~safelane.sim.SimConfig`; it returns ``step(view) -> (acc, switch)``, called every
+    period with a :class:`TrafficView`: ``acc`` ``(B, K)`` accelerations for the period (slot 0 is F), ``switch``
+    ``None`` or ``(t_switch (B, K), a2 (B, K))`` for vehicles whose acceleration changes to ``a2`` inside the period
+    (``t_switch = dt`` elsewhere)."""
+
+    def bind(self, batch, seed: int, params: Params, config) -> Callable[[TrafficView], tuple]: ...
+
+
+@dataclass(frozen=True)
+class PaperTraffic:
+    """The paper's traffic (docs/simulator.md, "Behaviours"): L(N+1)'s sudden braking or profile, connected leaders
+    by ``leader_rule`` (``None``: ``SimConfig.leader_rule``), F collaborative or aggressive as a responsible
+    follower; ``hooks`` replace the leaders' own tasks and F's wish."""
+
+    hooks: TrafficHooks = TrafficHooks()
+    leader_rule: str | None = None
+
+    def bind(self, batch, seed: int, params: Params, config):
+        from ._paper_traffic import BoundPaperTraffic
+
+        return BoundPaperTraffic(batch, seed, params, config, self.hooks, self.leader_rule or config.leader_rule)
+
+
+#: Registered traffic models (``traffic="name"``).
+TRAFFIC_MODELS: dict[str, TrafficModel] = {
+    "paper": PaperTraffic(),
+    "paper_worst_case": PaperTraffic(leader_rule="worst_case"),
+    "paper_reactive": PaperTraffic(leader_rule="reactive"),
+}
+
+
+def resolve_traffic(traffic) -> TrafficModel:
+    """A :class:`TrafficModel` from ``None`` (the paper's), a registered name, :class:`TrafficHooks` or a model."""
+    if traffic is None:
+        return TRAFFIC_MODELS["paper"]
+    if isinstance(traffic, str):
+        if traffic not in TRAFFIC_MODELS:
+            raise ValueError(f"unknown traffic model {traffic!r}; choose one of {', '.join(TRAFFIC_MODELS)}")
+        return TRAFFIC_MODELS[traffic]
+    if isinstance(traffic, TrafficHooks):
+        return PaperTraffic(hooks=traffic)
+    if isinstance(traffic, TrafficModel):
+        return traffic
+    raise TypeError(
+        f"traffic must be a registered name ({', '.join(TRAFFIC_MODELS)}), TrafficHooks or a TrafficModel; got "
+        f"{type(traffic).__name__}"
+    )
