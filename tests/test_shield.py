@@ -223,3 +223,26 @@ def test_explicit_scenarios_build_a_batch_from_states():
         explicit_scenarios(ego=(0, 0, 30, 0), follower=(-20, 30), leaders=([40.0, 20.0], [30.0, 30.0]))
     with pytest.raises(ValueError, match="behind L1"):
         explicit_scenarios(ego=(0, 0, 30, 0), follower=(25, 30), leaders=([20.0], [30.0]))
+
+
+def test_a_registered_assessment_plugs_in_by_name():
+    """The assessment is a small protocol: registering one and naming it in ShieldConfig is all it takes."""
+    from safelane.shield import policies
+
+    class Pessimist(policies.ObservedAssessment):
+        def aggressive(self, state, situation):
+            return np.ones(len(situation), bool)
+
+    policies.ASSESSMENTS["pessimist"] = Pessimist()
+    try:
+        sit = Situation.from_arrays(t=0.0, ego=(0.0, 0.0, 30.0, 0.0), follower=(-20.0, 30.0), leaders=([20.0], [30.0]),
+                                    n_connected=0, params=PRM)  # fmt: skip
+        shield = Shield(PRM, variant="CV_none", config=ShieldConfig(assessment="pessimist"))
+        shield.reset(sit)
+        assert shield.step(sit, (np.zeros(1), np.zeros(1))).f_aggressive.all()
+        truth = Situation(**{**sit.__dict__, "f_aggressive_truth": np.zeros(1, bool)})
+        other = Shield(PRM, variant="CV_none", config=ShieldConfig(assessment="truth"))
+        other.reset(truth)
+        assert not other.step(truth, (np.zeros(1), np.zeros(1))).f_aggressive.any()
+    finally:
+        del policies.ASSESSMENTS["pessimist"]

@@ -181,7 +181,7 @@ def init(situation: Situation, params: Params, config: ShieldConfig | None = Non
         plan=plan,
         plan_t0=np.full(n, s.t),
         plan_f_aggr=np.ones(n, bool),
-        belief=assess.AssessmentState.start(n, cfg.assess_window),
+        belief=ASSESSMENTS[cfg.assessment].start(n, cfg),
         breach=Breach.none(n),
         completed=np.zeros(n, bool),
         last=None,
@@ -213,7 +213,8 @@ def step(
     uses_chain, uses_f_v2x, uses_assessment = variant_flags(variant, n)
 
     # 1. What happened last period: the assessment's new observation, the monitor's comparison.
-    belief = assess.update(state.belief, s.observed_f_speed, s.t, dt, cfg.assess_threshold)
+    assessment = ASSESSMENTS[cfg.assessment]
+    belief = assessment.update(state.belief, s, dt, cfg)
     bounds, unsafe = chain_analysis(s, prm) if chain is None else chain
     breach = state.breach
     if state.last is not None:
@@ -221,12 +222,7 @@ def step(
 
     # 2. The worst case from the information the variant uses; the most conservative one after a breach.
     l1_decel = np.where(uses_chain & ~unsafe, bounds[:, 0], prm.a_x_d)
-    if cfg.assessment == "truth":
-        if s.f_aggressive_truth is None:
-            raise ValueError("the 'truth' assessment needs Situation.f_aggressive_truth (a simulation study only)")
-        assessed = s.f_aggressive_truth
-    else:
-        assessed = belief.aggressive
+    assessed = assessment.aggressive(belief, s)
     trusted = uses_f_v2x & s.f_connected & s.f_collaborative
     f_aggr = np.where(trusted, False, np.where(uses_assessment, assessed, True))
     if cfg.monitor:
@@ -257,8 +253,9 @@ def step(
             if rows.size == 0:
                 continue
             verdict = check_candidate(
-                *(arr[rows] for arr in (ex, ey, evx, evy, a_x, lateral, l1x, l1v, l1_decel, fx, fv, f_aggr)), prm
-            )
+                *(arr[rows] for arr in (ex, ey, evx, evy, a_x, lateral, l1x, l1v, l1_decel, fx, fv, f_aggr)), prm,
+                completion=COMPLETION_RULES[cfg.completion],
+            )  # fmt: skip
             ok_rows = rows[verdict.ok]
             behaviour[ok_rows] = code
             completing[ok_rows] = verdict.completing[verdict.ok]

@@ -47,11 +47,24 @@ class Verdict:
     plans: list[tuple[np.ndarray, EvasionPlan]]  # (accepted rows, their plans), covering ``ok``'s True rows
 
 
+def commit_guard(ex, evx, lx, lv, l1_decel, fx, fv, prm: Params):
+    """The completion rule ``commit_guard``: a step that takes the ego's centre across the lane boundary commits it
+    to the target lane, so it needs the ego able to keep ``p_m`` behind L1's worst case and a worst-case F able to
+    keep ``p_m`` behind the ego, each braking at no more than ``a_x_d`` (arguments: the predicted states at the end
+    of the period, rows that complete)."""
+    z_l = min_follow_decel(ARRAY, lx - ex - prm.p_m, evx, lv, l1_decel)
+    z_f = min_follow_decel(ARRAY, ex - fx - prm.p_m, fv, evx, prm.a_x_d)
+    return (z_l <= prm.a_x_d) & (z_f <= prm.a_x_d)
+
+
 def check_candidate(
-    ego_x, ego_y, ego_vx, ego_vy, a_x, a_y, l1_x, l1_v, l1_decel, f_x, f_v, f_aggressive, prm: Params
-) -> Verdict:
+    ego_x, ego_y, ego_vx, ego_vy, a_x, a_y, l1_x, l1_v, l1_decel, f_x, f_v, f_aggressive, prm: Params,
+    completion=commit_guard,
+) -> Verdict:  # fmt: skip
     """Is applying ``(a_x, a_y)`` for one period safe under the worst case? Returns the verdict and, for the rows
-    it accepts, the plan verified from the predicted state (time origin at the end of the period)."""
+    it accepts, the plan verified from the predicted state (time origin at the end of the period). ``completion``:
+    the completion rule for rows whose step crosses the lane boundary (a registered one, see
+    :mod:`safelane.shield.policies`)."""
     dt, tol = prm.dt, FEASIBILITY_TOL_M
     ex, evx = advance(ego_x, ego_vx, a_x, dt)
     ey = ego_y + ego_vy * dt + 0.5 * a_y * dt * dt
@@ -80,9 +93,7 @@ def check_candidate(
         guard = np.ones(n, bool)
         done = np.flatnonzero(completing)  # the completion guard replaces the evasion check (few rows)
         if done.size:
-            z_l = min_follow_decel(ARRAY, (lx - ex - prm.p_m)[done], evx[done], lv[done], l1_decel[done])
-            z_f = min_follow_decel(ARRAY, (ex - fx - prm.p_m)[done], fv[done], evx[done], prm.a_x_d)
-            guard[done] = (z_l <= prm.a_x_d) & (z_f <= prm.a_x_d)
+            guard[done] = completion(*(a[done] for a in (ex, evx, lx, lv, l1_decel, fx, fv)), prm)
         args = (ex, ey, evx, evy, lx, lv, l1_decel, fx, fv, f_aggressive)
         # Rows with nothing to evade (in the own lane, not moving out: t_y_f = 0) go through the evasion core
         # apart: with t_y_f = 0 throughout it takes its short path (same results).
