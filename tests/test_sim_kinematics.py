@@ -330,5 +330,8 @@ def test_lane_checks_between_target_lane_vehicles(gap, speeds, expect):
     v = np.asfortranarray([list(speeds)])
     others = Fleet.constant(x, v, np.zeros((1, 2), order="F"), PARAMS.dt)
     b = SimpleNamespace(valid=np.ones((1, 2), bool), human=np.zeros((1, 2), bool))
-    collided, violated = lane_checks(b, PARAMS, others)
+    collided, violated, min_ratio = lane_checks(b, PARAMS, others)
     assert (bool(collided[0]), bool(violated[0])) == expect
+    # The smallest gap over the margin: the gap at the period's end (constant speeds, the pair closes or rests).
+    end_gap = gap + (speeds[1] - speeds[0]) * PARAMS.dt
+    assert min_ratio[0] == pytest.approx(min(gap, end_gap) / PARAMS.p_m, abs=1e-12)

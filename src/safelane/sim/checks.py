@@ -201,26 +201,32 @@ def lane_pairs(b, prm: Params):
 
 
 def lane_checks(b, prm: Params, others: Fleet, pairs=None):
-    """Exact collision / margin checks between consecutive target-lane vehicles (F–L1, L1–L2, …).
+    """Exact collision / margin checks between consecutive target-lane vehicles (F–L1, L1–L2, …), and each
+    scenario's smallest ``gap / margin`` over its pairs this period (exact where a pair came near its margin,
+    sampled at the period's ends elsewhere; ``inf`` without valid pairs).
 
     Only pairs whose gap could come within the margin during the period are evaluated exactly: a gap moves by at
-    most ``|Δv| dt + a_max dt²`` in a period, with ``a_max`` the largest ``|acceleration|`` in the batch.
-    ``pairs``: :func:`lane_pairs` (computed here unless given).
+    most ``|Δv| dt + a_max dt²`` in a period, with ``a_max`` the scenario's largest ``|acceleration|`` (per scenario,
+    so that the result does not depend on the batch). ``pairs``: :func:`lane_pairs` (computed here unless given).
+    Returns ``(collided, violated, min_ratio)``.
     """
     dt = prm.dt
     valid, margin = pairs if pairs is not None else lane_pairs(b, prm)
     x0, v0 = others.x, others.v
     gap0 = x0[:, 1:] - x0[:, :-1]
-    slack = others.max_abs_acc * dt * dt + 1e-6
+    gap1 = others.x_end[:, 1:] - others.x_end[:, :-1]
+    slack = (others.row_max_abs_acc() * dt * dt + 1e-6)[:, None]
     near = valid & (gap0 - np.abs(v0[:, 1:] - v0[:, :-1]) * dt < margin + slack)
+    sampled = np.where(valid & ~near, np.minimum(gap0, gap1) / margin, np.inf)
     # Vehicles at rest all period keep their gap: such a pair at or beyond its margin needs no exact check.
     resting = (others.v_end == 0.0) & (v0 == 0.0)
     near &= ~(resting[:, 1:] & resting[:, :-1] & (gap0 >= margin))
     c, r = np.nonzero(near.T)  # the (B, K) masks are column-major: scan them vehicle by vehicle
     bsz = len(x0)
     collided, violated = np.zeros(bsz, bool), np.zeros(bsz, bool)
+    min_ratio = sampled.min(1, initial=np.inf)
     if r.size == 0:
-        return collided, violated
+        return collided, violated, min_ratio
     pair_min = np.empty(r.size)
     one = others.t_stop >= dt
     simple = one[r, c] & one[r, c + 1]
@@ -242,4 +248,5 @@ def lane_checks(b, prm: Params, others: Fleet, pairs=None):
         pair_min[pg], _ = stop_pair_extrema(*behind, *ahead, dt)
     collided[r[pair_min < prm.vehicle_length]] = True
     violated[r[pair_min < margin[r, c] - 1e-9]] = True
-    return collided, violated
+    np.minimum.at(min_ratio, r, pair_min / margin[r, c])
+    return collided, violated, min_ratio

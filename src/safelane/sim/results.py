@@ -47,6 +47,7 @@ def results_table(b: ScenarioBatch, s) -> pd.DataFrame:
             "completion_time_s": s.t_complete,
             "min_gap_follower_m": np.where(np.isinf(s.min_gap_f), np.nan, s.min_gap_f),
             "min_gap_leader_m": np.where(np.isinf(s.min_gap_l1), np.nan, s.min_gap_l1),
+            "min_lane_gap_ratio": np.where(np.isinf(s.min_lane_ratio), np.nan, s.min_lane_ratio),
             "n_proceed": s.counts[:, 0],
             "n_hesitate": s.counts[:, 1],
             "n_abort": s.counts[:, 2],

@@ -50,6 +50,7 @@ class SimState:
     leader_violated: np.ndarray
     min_gap_f: np.ndarray
     min_gap_l1: np.ndarray
+    min_lane_ratio: np.ndarray  # (B,) smallest gap / margin between consecutive target-lane vehicles so far
     counts: np.ndarray  # (B, 3) proceed / hesitate / abort
     n_invalid: np.ndarray  # (B,) periods whose nominal proposal was invalid (non-finite or out of range)
     leader_cap: np.ndarray  # (B, K) the smallest chain bound each vehicle has had: it never brakes harder
@@ -90,7 +91,8 @@ class ClosedLoop:
         self.uses_chain = np.array([VARIANTS[name].uses_chain for name in VARIANT_NAMES])[batch.variant]
         self.shield_config = ShieldConfig(
             assessment=cfg.assessment, assess_window=cfg.assess_window, assess_threshold=cfg.assess_threshold,
-            monitor=cfg.monitor, enabled=cfg.supervised,
+            monitor=cfg.monitor, enabled=cfg.supervised, completion=cfg.completion,
+            assess_delay_s=cfg.assess_delay_s, assess_miss=cfg.assess_miss,
         )  # fmt: skip
         self.planner_name = getattr(nominal, "__name__", type(nominal).__name__)
         k = batch.x.shape[1]
@@ -129,6 +131,7 @@ class ClosedLoop:
             leader_violated=np.zeros(n, bool),
             min_gap_f=np.full(n, np.inf),
             min_gap_l1=np.full(n, np.inf),
+            min_lane_ratio=np.full(n, np.inf),
             counts=np.zeros((n, 3), np.int64),
             n_invalid=np.zeros(n, np.int64),
             leader_cap=np.full(b.x.shape, np.inf),
@@ -261,7 +264,7 @@ class ClosedLoop:
             self.b, prm, s, lon, lat, others, conflict_level, overlap_level, plan
         )
 
-        leader_collided, leader_violated = lane_checks(self.b, prm, others, self.lane_pairs)
+        leader_collided, leader_violated, lane_ratio = lane_checks(self.b, prm, others, self.lane_pairs)
 
         ex1, evx1 = lon.end
         ey1, evy1 = lat.end
@@ -288,6 +291,7 @@ class ClosedLoop:
             leader_violated=s.leader_violated | leader_violated,
             min_gap_f=min_gap_f,
             min_gap_l1=min_gap_l1,
+            min_lane_ratio=np.minimum(s.min_lane_ratio, lane_ratio),
             counts=counts,
             n_invalid=s.n_invalid,
             leader_cap=s.leader_cap,
