@@ -78,15 +78,19 @@ class ExpertPlanner:
     0.5 is the middle) at L1's speed.
     Lateral: a critically damped PD law toward the target-lane centre ``y = w_l`` (natural frequency
     ``omega``), which gives a smooth lane change; both clipped to the mechanical limits.
+    ``brake_comfort`` [m/s²]: the nominal planner never proposes braking harder than this (a comfort limit; the
+    shield's abort still brakes at up to ``a_x_d``); the default (inf) is no limit.
     """
 
     k_p: float = 0.3
     k_v: float = 0.8
     omega: float = 0.65
     gap_fraction: float = 0.5
+    brake_comfort: float = float("inf")
 
     def __call__(self, obs: Observation, params: Params) -> tuple[np.ndarray, np.ndarray]:
         mid = obs.p_x_f + self.gap_fraction * (obs.p_x_l - obs.p_x_f)
         a_x = self.k_p * (mid - obs.p_x) + self.k_v * (obs.v_x_l - obs.v_x)
+        a_x = np.maximum(a_x, -self.brake_comfort)
         a_y = self.omega**2 * (params.lane_width - obs.p_y) - 2.0 * self.omega * obs.v_y
         return clip_actions(a_x, a_y, params)

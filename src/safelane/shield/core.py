@@ -50,6 +50,8 @@ class ShieldConfig(BaseModel):
     monitor: bool = Field(True, description="After a breach of the assumptions, assume the worst (L1 at a_x_d, F "
                           "aggressive); False only records breaches.")  # fmt: skip
     completion: str = Field("commit_guard", description="Registered completion rule.")
+    assess_delay_s: float = Field(1.5, ge=0.0, description="'slow' assessment: mean extra delay of a verdict [s].")
+    assess_miss: float = Field(0.0, ge=0.0, le=1.0, description="'slow' assessment: P(a collaborative F is missed).")
     enabled: bool = Field(True, description="False passes the (clipped, checked) proposal through unfiltered.")
 
     @field_validator("assessment")

@@ -102,7 +102,9 @@ def check_candidate(
         for rows in groups:
             sub_args = tuple(a[rows] for a in args)
             exists, parts = evasion_core(ARRAY, *sub_args, prm.p_m, prm.p_m, prm)
-            keep = np.flatnonzero(period_ok[rows] & np.where(completing[rows], guard[rows], exists))
+            # A rule with ``needs_evasion`` (the paper's) keeps the evasion check at the crossing step as well.
+            cross_ok = guard[rows] & (exists | (not getattr(completion, "needs_evasion", False)))
+            keep = np.flatnonzero(period_ok[rows] & np.where(completing[rows], cross_ok, exists))
             ok[rows[keep]] = True
             plan = plan_from_core(
                 ARRAY,

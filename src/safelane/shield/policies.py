@@ -8,7 +8,16 @@ assessment, the completion rule.
   which assumes an exact assessment; no real ego has it).
 * **Completion rules** (:data:`COMPLETION_RULES`): ``commit_guard`` — a step that takes the ego's centre across
   the lane boundary needs the ego able to keep ``p_m`` behind L1's worst case and a worst-case F able to keep
-  ``p_m`` behind the ego, each braking at no more than ``a_x_d`` (:func:`.decide.commit_guard`).
+  ``p_m`` behind the ego, each braking at no more than ``a_x_d`` (:func:`.decide.commit_guard`); the safe mode's,
+  the one the zero-violation guarantee covers. ``paper_evasion`` — the paper's rule: the crossing step is checked
+  like every other step, by the Eq. 9 evasion check from the predicted state alone (:func:`paper_evasion`); the
+  paper-faithful mode's, outside the guarantee (after the crossing the ego follows L1 responsibly, and L1's worst
+  case may already be closer than the ego can absorb; measured rates in docs/reproduction.md).
+* ``slow`` assessment (:class:`SlowAssessment`): the ``observed`` one, slowed and imperfect as a learned
+  classifier of driving styles is (ASP-DAC'23-style: it needs a stretch of F's trajectory): each ``collaborative``
+  verdict is released only after a per-scenario random extra delay (uniform on ``[0.5, 1.5] · assess_delay_s``),
+  and with probability ``assess_miss`` a collaborative F is never recognised. Both errors are on the conservative
+  side (F taken for aggressive), so the guarantee is unaffected.
 
 A new assessment or completion rule is registered by adding it to the dictionary under a new name
 (``ShieldConfig(assessment="mine")``).
@@ -16,6 +25,7 @@ A new assessment or completion rule is registered by adding it to the dictionary
 
 from __future__ import annotations
 
+from dataclasses import dataclass
 from typing import Protocol
 
 import numpy as np
@@ -61,11 +71,78 @@ class TruthAssessment(ObservedAssessment):
         return situation.f_aggressive_truth
 
 
-ASSESSMENTS: dict[str, Assessment] = {"observed": ObservedAssessment(), "truth": TruthAssessment()}
+def _scenario_uniform(x0, v0, salt: int) -> np.ndarray:
+    """A uniform draw in ``[0, 1)`` per row, keyed by the bits of F's first observed state (so a scenario's draw does
+    not depend on the batch it is simulated in, and needs no id); splitmix64 finaliser."""
+    with np.errstate(over="ignore"):
+        h = np.asarray(x0, np.float64).view(np.uint64) * np.uint64(0x9E3779B97F4A7C15)
+        h ^= np.asarray(v0, np.float64).view(np.uint64) + np.uint64(salt)
+        for shift, mult in ((30, 0xBF58476D1CE4E5B9), (27, 0x94D049BB133111EB)):
+            h = (h ^ (h >> np.uint64(shift))) * np.uint64(mult)
+        h ^= h >> np.uint64(31)
+    return (h >> np.uint64(11)).astype(np.float64) * (1.0 / 2**53)
+
+
+@dataclass(frozen=True)
+class SlowState:
+    """The observed assessment's state plus the slow one's per-scenario delay and miss draws."""
+
+    inner: assess.AssessmentState
+    delay_s: np.ndarray  # (B,) extra delay of a collaborative verdict [s]
+    missed: np.ndarray  # (B,) this scenario's collaborative F is never recognised
+    aggressive: np.ndarray  # (B,) the released belief
+
+    @property
+    def first_collaborative_s(self) -> np.ndarray:
+        return np.where(self.aggressive, np.nan, self.inner.first_collaborative_s + self.delay_s)
+
+
+class SlowAssessment(ObservedAssessment):
+    """``slow``: the observed estimate with a random extra delay and a miss rate (module docstring). Plausible
+    ranges (documented in docs/reproduction.md): delay 0.5–3 s (a classifier over 1–3 s of trajectory), miss
+    0–0.3."""
+
+    def start(self, n: int, config):
+        return SlowState(super().start(n, config), np.zeros(n), np.zeros(n, bool), np.ones(n, bool))
+
+    def update(self, state, situation, dt: float, config):
+        inner = super().update(state.inner, situation, dt, config)
+        delay, missed = state.delay_s, state.missed
+        fresh = inner.count == 1  # a row's first observation: draw its delay and miss
+        if fresh.any():
+            key_x, key_v = situation.f_x - situation.ego_x, situation.observed_f_speed
+            delay = np.where(fresh, config.assess_delay_s * (0.5 + _scenario_uniform(key_x, key_v, 1)), delay)
+            missed = np.where(fresh, _scenario_uniform(key_x, key_v, 2) < config.assess_miss, missed)
+        released = (situation.t - inner.first_collaborative_s) >= delay - 1e-9
+        aggressive = inner.aggressive | missed | ~released
+        return SlowState(inner, delay, missed, aggressive)
+
+    def aggressive(self, state, situation) -> np.ndarray:
+        return state.aggressive
+
+
+ASSESSMENTS: dict[str, Assessment] = {
+    "observed": ObservedAssessment(),
+    "truth": TruthAssessment(),
+    "slow": SlowAssessment(),
+}
+
+
+def paper_evasion(ex, evx, lx, lv, l1_decel, fx, fv, prm):
+    """The completion rule ``paper_evasion`` (the paper's): no extra test at the crossing step — the evasion check
+    of Eq. 9 from the predicted state decides it as it decides every step (``needs_evasion``). The paper counts a
+    lane change as successful if the ego "finally crosses the border ... within the simulation horizon without any
+    collision"; here a crossing is final (after it the ego follows L1), so "finally" is the first accepted crossing
+    and success is "completed and no collision" over the horizon."""
+    return np.ones(np.shape(ex), bool)
+
+
+paper_evasion.needs_evasion = True
 
 #: Completion rules: ``rule(ex, evx, lx, lv, l1_decel, fx, fv, params) -> (n,) bool`` on the predicted states of the
-#: rows whose step crosses the lane boundary (see :func:`.decide.commit_guard`).
-COMPLETION_RULES = {"commit_guard": commit_guard}
+#: rows whose step crosses the lane boundary (see :func:`.decide.commit_guard`); a rule with the attribute
+#: ``needs_evasion = True`` also requires the step's evasion check (:func:`paper_evasion`).
+COMPLETION_RULES = {"commit_guard": commit_guard, "paper_evasion": paper_evasion}
 
 _FLAGS = np.array([[v.uses_chain, v.uses_follower_v2x, v.uses_assessment] for v in VARIANTS.values()])
 

@@ -14,8 +14,17 @@ class SimConfig(BaseModel):
 
     horizon_s: float = Field(10.0, gt=0.0, description="Simulated time [s] (our assumption; the paper's is unstated).")
     brake_start_s: float = Field(0.0, ge=0.0, description="When L(N+1) starts its sudden braking [s] (paper: t = 0).")
-    assessment: Literal["observed", "truth"] = Field(
-        "observed", description="'truth' replaces the aggressiveness assessment by F's true type."
+    assessment: Literal["observed", "truth", "slow"] = Field(
+        "observed",
+        description="'truth' replaces the aggressiveness assessment by F's true type; 'slow' delays the observed "
+        "one's 'collaborative' verdicts and misses some (safelane.shield.policies).",
+    )
+    assess_delay_s: float = Field(1.5, ge=0.0, description="'slow' assessment: mean extra delay of a verdict [s].")
+    assess_miss: float = Field(0.0, ge=0.0, le=1.0, description="'slow' assessment: P(a collaborative F is missed).")
+    completion: Literal["commit_guard", "paper_evasion"] = Field(
+        "commit_guard",
+        description="Completion rule of the step that crosses the lane boundary: 'commit_guard' (safe mode; the "
+        "guarantee's) or 'paper_evasion' (the paper's Eq. 9 evasion check only; paper-faithful mode).",
     )
     sensor_noise_std: float = Field(0.0, ge=0.0, description="Std of the ego's measurements of F's speed [m/s].")
     assess_window: int = Field(5, ge=2, description="Observations in the assessment's slope window.")
