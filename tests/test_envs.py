@@ -221,9 +221,10 @@ def test_vector_env_rejects_settings_that_read_the_shared_clock():
 def test_reward_weights_are_validated_and_used():
     with pytest.raises(ValueError, match="comfort"):
         RewardConfig(comfort=-1.0)
-    env = LaneChangeEnv(reward={"progress": 0.0, "comfort": 0.0, "time": 0.5})
+    env = LaneChangeEnv(reward={"progress": 0.0, "comfort": 0.0, "time": 0.5, "intervention": 2.0})
     env.reset(seed=0)
-    assert env.step(np.float32([0.0, 0.0]))[1] == -0.5
+    _, reward, _, _, info = env.step(np.float32([0.0, 0.0]))
+    assert reward == -0.5 - 2.0 * info["intervened"]
 
 
 @pytest.mark.rl

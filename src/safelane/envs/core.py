@@ -42,9 +42,10 @@ class RewardConfig(BaseModel):
     """Weights of the reward; every term is per control period (``dt``).
 
     ``reward = progress·Δp_y/(w_l/2) + success·[completed safely] − collision·[crashed] − comfort·(a_x² + a_y²)·dt
-    − time − cost·cost_t``, where ``Δp_y`` is the ego's lateral progress over the period (the lane change completes
-    when its centre crosses the lane boundary at ``w_l/2``, so the progress terms of a completed lane change add up
-    to about ``progress``) and ``(a_x, a_y)`` is the *executed* acceleration (``info["executed_action"]``).
+    − time − cost·cost_t − intervention·[the shield intervened]``, where ``Δp_y`` is the ego's lateral progress over
+    the period (the lane change completes when its centre crosses the lane boundary at ``w_l/2``, so the progress
+    terms of a completed lane change add up to about ``progress``) and ``(a_x, a_y)`` is the *executed* acceleration
+    (``info["executed_action"]``). The default weights are those of ``docs/envs.md``'s example.
     """
 
     model_config = ConfigDict(frozen=True, extra="forbid", allow_inf_nan=False)
@@ -55,6 +56,9 @@ class RewardConfig(BaseModel):
     comfort: float = Field(0.01, ge=0.0, description="Penalty per (m/s²)²·s of executed acceleration.")
     time: float = Field(0.0, ge=0.0, description="Penalty per period (hurry).")
     cost: float = Field(0.0, ge=0.0, description="Penalty per unit of cost (0: leave it to a constrained method).")
+    intervention: float = Field(
+        0.0, ge=0.0, description="Penalty per period in which the shield hesitated or aborted instead of proceeding."
+    )
 
 
 class ActionPlanner:
@@ -355,6 +359,7 @@ class LaneChangeTask:
         terminated = completed | after.collided
         truncated = ~terminated & (self.steps >= self.max_steps)
         progress = (after.ego[1] - before.ego[1]) / prm.y_boundary
+        intervened = (behaviour == HESITATE) | (behaviour == ABORT)
         reward = (
             rc.progress * progress
             + rc.success * success
@@ -362,6 +367,7 @@ class LaneChangeTask:
             - rc.comfort * (executed**2).sum(1) * dt
             - rc.time
             - rc.cost * cost
+            - rc.intervention * intervened
         )
         return StepOutcome(
             obs=self.observe(),
@@ -369,7 +375,7 @@ class LaneChangeTask:
             terminated=terminated,
             truncated=truncated,
             behaviour=np.asarray(behaviour, np.int64),
-            intervened=(behaviour == HESITATE) | (behaviour == ABORT),
+            intervened=intervened,
             nominal_action=proposal,
             executed_action=executed,
             cost=cost,

@@ -6,6 +6,7 @@ Observation, action, reward, termination and ``info`` are documented in ``docs/e
 
 from __future__ import annotations
 
+import warnings
 from typing import Any, ClassVar
 
 import numpy as np
@@ -42,6 +43,13 @@ def make_task(
     if isinstance(params, dict):
         params = Params(**params)
     sampler = ScenarioSampler.build(variant, n_leaders, decel, scenario, p_v)
+    limit = (params or Params()).a_x_d
+    if sampler.decel[1] > limit:
+        warnings.warn(
+            f"decel up to {sampler.decel[1]:g} exceeds params.a_x_d={limit:g}: L(N+1) can brake harder than the "
+            "worst case the shield assumes, so collisions are possible with the shield on",
+            stacklevel=2,
+        )
     return LaneChangeTask(
         batch, sampler, params=params, sim_config=sim_config, shield=shield, traffic=traffic, reward=reward,
         horizon_s=horizon_s,
