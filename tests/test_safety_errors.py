@@ -156,13 +156,27 @@ def test_non_boolean_flag_in_a_batch_is_named(fn, arg):
     assert "index (2,)" in str(info.value)
 
 
-@pytest.mark.parametrize("fn", sorted(NUMERIC_ARGS))
-def test_flags_accept_zero_and_one(fn):
+def _same(a, b) -> bool:
+    """Equal results: plain values, tuples of them, or dataclasses (an ``EvasionPlan``) field by field."""
+    if hasattr(a, "__dataclass_fields__"):
+        return type(a) is type(b) and all(_same(getattr(a, f), getattr(b, f)) for f in a.__dataclass_fields__)
+    if isinstance(a, tuple):
+        return len(a) == len(b) and all(_same(x, y) for x, y in zip(a, b, strict=True))
+    if isinstance(a, Params):
+        return a == b
+    return np.array_equal(np.asarray(a), np.asarray(b), equal_nan=True)
+
+
+@pytest.mark.parametrize("fn", sorted(BOOL_ARGS))
+@pytest.mark.parametrize("as_int", [0, 1])
+def test_flags_accept_zero_and_one(fn, as_int):
+    # 0 and 1 are read as False and True: the same result as the booleans, scalar and batched.
     call, valid = FUNCTIONS[fn]
-    kw = valid()
-    for arg in BOOL_ARGS.get(fn, ()):
-        kw[arg] = 1
-    call(**kw)
+    for batch in ((), (3,)):
+        kw = {k: np.full(batch, v) if batch and k in NUMERIC_ARGS[fn] else v for k, v in valid().items()}
+        ints = {**kw, **{arg: np.full(batch, as_int) if batch else as_int for arg in BOOL_ARGS[fn]}}
+        bools = {**kw, **{arg: np.full(batch, bool(as_int)) if batch else bool(as_int) for arg in BOOL_ARGS[fn]}}
+        assert _same(call(**ints), call(**bools))
 
 
 @pytest.mark.parametrize("fn", sorted(NUMERIC_ARGS))

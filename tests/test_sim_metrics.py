@@ -29,6 +29,11 @@ def _score_test_bounds(k: int, n: int, z: float = Z95) -> tuple[float, float]:
     return lo, hi
 
 
+_HALF_5_OF_10 = Z95 * np.sqrt(0.025 + Z95**2 / 400) / (1 + Z95**2 / 10)
+_CENTRE_1_OF_4 = (0.25 + Z95**2 / 8) / (1 + Z95**2 / 4)
+_HALF_1_OF_4 = Z95 * np.sqrt(0.25 * 0.75 / 4 + Z95**2 / 64) / (1 + Z95**2 / 4)
+
+
 @pytest.mark.parametrize(
     ("k", "n", "expected"),
     [
@@ -36,8 +41,11 @@ def _score_test_bounds(k: int, n: int, z: float = Z95) -> tuple[float, float]:
         (0, 10, (0.0, Z95**2 / (10 + Z95**2))),
         (10, 10, (1.0 - Z95**2 / (10 + Z95**2), 1.0)),
         (0, 20_000, (0.0, Z95**2 / (20_000 + Z95**2))),
-        # 5 of 10: centre 0.5, half-width z sqrt(0.025 + z²/400) / (1 + z²/10).
-        (5, 10, (0.5 - Z95 * np.sqrt(0.025 + Z95**2 / 400) / (1 + Z95**2 / 10), 0.5 + 0.2634069094874361)),
+        # 5 of 10: centre (p + z²/2n)/(1 + z²/n) = 0.5, half-width z sqrt(p(1 − p)/n + z²/4n²) / (1 + z²/n)
+        # = z sqrt(0.025 + z²/400) / (1 + z²/10) on both sides.
+        (5, 10, (0.5 - _HALF_5_OF_10, 0.5 + _HALF_5_OF_10)),
+        # 1 of 4: centre (0.25 + z²/8)/(1 + z²/4), half-width z sqrt(0.25·0.75/4 + z²/64) / (1 + z²/4).
+        (1, 4, (_CENTRE_1_OF_4 - _HALF_1_OF_4, _CENTRE_1_OF_4 + _HALF_1_OF_4)),
     ],
 )
 def test_wilson_interval_hand_computed(k, n, expected):
