@@ -12,7 +12,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from safelane.planners.variants import VARIANT_NAMES
+from safelane.planners.variants import PAPER_VARIANT_NAMES as VARIANT_NAMES  # the RSS baselines: test_rss.py
 from safelane.sim import ScenarioConfig, SimConfig, simulate, simulate_batch
 from sim_scenarios import CAMPAIGN_LEADERS, hardest_braking_chain, mixed_campaign_batch
 

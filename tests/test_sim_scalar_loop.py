@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 from safelane import Params
-from safelane.planners.variants import VARIANT_NAMES
+from safelane.planners.variants import PAPER_VARIANT_NAMES as VARIANT_NAMES  # the RSS baselines: test_rss.py
 from safelane.sim import simulate_batch
 from scalar_loop import loop_scenario
 from sim_scenarios import mixed_campaign_batch

@@ -13,7 +13,8 @@ from . import app
 @app.command()
 def simulate(
     planner: str = typer.Option(
-        "CV_all", "--planner", "-p", help="Planner variant: CV_all, CV_follow, CV_none or No_agg_assess."
+        "CV_all", "--planner", "-p", help="Planner variant: CV_all, CV_follow, CV_none or No_agg_assess; RSS "
+        "baselines: RSS, RSS_V2X, RSS_matched or RSS_V2X_matched (docs/rss.md)."
     ),
     leaders: int = typer.Option(5, "--leaders", "-n", help="Number N of connected leaders L1..LN."),
     decel: float = typer.Option(5.0, "--decel", "-d", help="Sudden deceleration a_x_N+1_d of L(N+1), in m/s²."),

@@ -27,7 +27,7 @@ import numpy as np
 
 from ..params import Params
 from ..planners.adversarial import HugFollower, HugLeader, Mixture, Oscillating, RecklessMerge, square_wave
-from ..planners.variants import VARIANT_NAMES
+from ..planners.variants import PAPER_VARIANT_NAMES, VARIANT_NAMES
 from ..safety import leader_chain, plan_evasion
 from ..sim.scenario import ScenarioBatch
 
@@ -68,7 +68,8 @@ def decode(u: np.ndarray, prm: Params, brake_start_s: float = 0.0) -> dict[str, 
     c = _Cube(u)
     n = np.minimum((c.take() * (MAX_N + 1)).astype(np.int64), MAX_N)
     spec = {"n": n}
-    spec["variant"] = np.minimum((c.take() * len(VARIANT_NAMES)).astype(np.int64), len(VARIANT_NAMES) - 1)
+    # The paper's variants only (the RSS baselines make no guarantee; their indices follow the paper's).
+    spec["variant"] = np.minimum((c.take() * len(PAPER_VARIANT_NAMES)).astype(np.int64), len(PAPER_VARIANT_NAMES) - 1)
     spec["ego_y"] = np.where(c.take() < 0.4, 0.0, _lin(c.take(), 0.0, prm.lane_width))
     spec["ego_vy"] = np.where(c.take() < 0.4, 0.0, _lin(c.take(), -2.0, 2.0))
     spec["ego_dv"] = np.where(c.take() < 0.2, 0.0, _lin(c.take(), -10.0, 10.0))  # ego speed − L1's

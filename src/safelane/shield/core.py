@@ -36,6 +36,7 @@ from .decide import ABORT, COMPLETED, HESITATE, PROCEED, check_candidate, hesita
 from .monitor import Breach, observe_breaches
 from .policies import ASSESSMENTS, COMPLETION_RULES, check_policy, variant_flags
 from .proposals import check_proposal
+from .rules import RuleInputs, rule_rows
 from .situation import Situation
 
 
@@ -213,6 +214,10 @@ def step(
     dt = prm.dt
     n = len(s)
     uses_chain, uses_f_v2x, uses_assessment = variant_flags(variant, n)
+    ruled = rule_rows(variant, n)  # rows another registered decision rule decides (RSS); [] for the paper's
+    paper_rule = np.ones(n, bool)
+    for _, rule_idx in ruled:
+        paper_rule[rule_idx] = False
 
     # 1. What happened last period: the assessment's new observation, the monitor's comparison.
     assessment = ASSESSMENTS[cfg.assessment]
@@ -245,7 +250,7 @@ def step(
     accepted = []
     a_yh = hesitate_lateral(evy, prm)
     if cfg.enabled:
-        rows = np.flatnonzero(active)
+        rows = np.flatnonzero(active & paper_rule)
         skip = rows[:0]
         for code, lateral in ((PROCEED, a_y), (HESITATE, a_yh)):
             if code == PROCEED:  # an invalid proposal is never executed: those rows start at hesitate
@@ -268,7 +273,7 @@ def step(
         completing = active & (ey + evy * dt + 0.5 * a_y * dt * dt >= prm.y_boundary)
 
     # After completion: centre in the target lane, follow L1 responsibly under its worst case.
-    done = np.flatnonzero(state.completed)
+    done = np.flatnonzero(state.completed & paper_rule)
     ax_cmd = a_x.copy()
     ay_cmd = np.where(behaviour == HESITATE, a_yh, a_y)
     if done.size:
@@ -284,6 +289,11 @@ def step(
         span = np.maximum(knots[:, 1] - knots[:, 0], 1e-300)
         ax_cmd[abort_rows] = np.where(knots[:, 1] > 0.0, (vx[:, 1] - vx[:, 0]) / span, 0.0)
         ay_cmd[abort_rows] = np.where(knots[:, 1] > 0.0, (vy[:, 1] - vy[:, 0]) / span, 0.0)
+    if cfg.enabled:  # the rows of another rule: its decision (an RSS response is an abort without a held plan)
+        for rule, idx in ruled:
+            inputs = RuleInputs(*(arr[idx] for arr in (ex, ey, evx, evy, l1x, l1v, fx, fv, a_x, a_y, a_yh, invalid,
+                                                       l1_decel, uses_chain & ~unsafe, state.completed)))  # fmt: skip
+            behaviour[idx], ax_cmd[idx], ay_cmd[idx], completing[idx] = rule.decide(inputs, prm)
 
     new_plan = _set_rows(state.plan, accepted)
     replanned = (behaviour == PROCEED) | (behaviour == HESITATE)

@@ -1,0 +1,101 @@
+"""The RSS lane-change rule: what an AV engineer would put in front of the nominal planner instead of this paper's
+shield (registered as the shield's decision rules ``rss`` and ``rss_matched``; :mod:`safelane.shield.rules`).
+
+Every control period, for the rows of an RSS variant:
+
+1. **proceed** if, after applying the proposal for one period, the ego is RSS-safe towards L1 and towards F: for
+   each of them the longitudinal safe distance holds (towards L1 with the ego behind, towards F with the ego in
+   front) *or* the lateral safe distance does (:func:`.rss.pair_check`; the others predicted at constant speed —
+   RSS's response time covers what they may do meanwhile);
+2. **hesitate** (the lateral speed driven to zero) if that is RSS-safe instead;
+3. otherwise RSS's **proper response** (counted as an abort): lateral return towards the original lane, braking
+   laterally at least at ``lat_brake_min`` while still moving out, and, when the longitudinal distance to L1 (ahead)
+   is unsafe, braking at ``brake_min`` or more.
+
+Once the lane change is complete (the ego's centre across the boundary) the ego follows L1 by RSS: the proposal while
+the longitudinal safe distance holds after the period, braking at ``brake_min`` or more otherwise; laterally it
+centres in the target lane (the paper shield's controller).
+
+What RSS assumes and this paper does not: every other vehicle responds properly — a rear vehicle (F) brakes at
+``brake_min`` at the latest after its response time, a front vehicle (L1) brakes at no more than ``brake_max``. With
+V2X (``RSS_V2X``) L1's ``brake_max`` is its worst-case deceleration from the connected chain (Eqs. 1-3), which the
+chain's promises guarantee. F is never connected to RSS: an aggressive F, or one that ignores the ego, breaks RSS's
+assumption, and a rear-end is then, by RSS's blame rule, F's fault — the simulator counts it as a collision.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from .._motion import advance
+from ..params import Params
+from .rss import pair_check, rss_params_for
+
+
+class RssRule:
+    """The rule with a registered RSS parameter set (``"ad_rss"``: ad-rss's documented defaults; ``"matched"``:
+    this world's limits)."""
+
+    def __init__(self, parameter_set: str):
+        self.parameter_set = parameter_set
+
+    def __repr__(self) -> str:
+        return f"RssRule({self.parameter_set!r})"
+
+    def safe_after(self, inp, a_x, a_y, params: Params):
+        """``(safe towards L1, safe towards F)`` at the end of one period of ``(a_x, a_y)`` (``(k,)`` each)."""
+        rss = rss_params_for(self.parameter_set, params)
+        dt = params.dt
+        ex, evx = advance(inp.ego_x, inp.ego_vx, a_x, dt)
+        ey = inp.ego_y + inp.ego_vy * dt + 0.5 * a_y * dt * dt
+        evy = inp.ego_vy + a_y * dt
+        lane = np.full_like(ex, params.lane_width)
+        zero = np.zeros_like(ex)
+        brake_l1 = np.where(inp.uses_chain, np.maximum(inp.l1_decel, 1e-9), rss.brake_max)
+        with np.errstate(all="ignore"):
+            to_l1 = pair_check(ex, ey, evx, evy, inp.l1_x + inp.l1_v * dt, lane, inp.l1_v, zero, rss, params,
+                               brake_l1)  # fmt: skip
+            to_f = pair_check(ex, ey, evx, evy, inp.f_x + inp.f_v * dt, lane, inp.f_v, zero, rss, params)
+        return to_l1[0], to_f[0], to_l1[1]
+
+    def decide(self, inp, params: Params):
+        """``(behaviour, a_x, a_y, completing)`` for the rule's rows (see the module docstring)."""
+        from ..shield.decide import ABORT, COMPLETED, HESITATE, PROCEED  # the shield imports this module
+
+        rss = rss_params_for(self.parameter_set, params)
+        dt = params.dt
+        n = inp.ego_x.shape[0]
+        a_x, a_y = inp.a_x.copy(), inp.a_y.copy()
+        behaviour = np.full(n, COMPLETED)
+        completing = np.zeros(n, bool)
+        active = ~inp.completed
+
+        ok_l1, ok_f, _ = self.safe_after(inp, a_x, a_y, params)
+        proceed = active & ~inp.invalid & ok_l1 & ok_f
+        ok_l1_h, ok_f_h, _ = self.safe_after(inp, a_x, inp.a_y_hesitate, params)
+        hesitate = active & ~proceed & ok_l1_h & ok_f_h
+        respond = active & ~proceed & ~hesitate
+        behaviour[proceed], behaviour[hesitate], behaviour[respond] = PROCEED, HESITATE, ABORT
+        a_y = np.where(hesitate, inp.a_y_hesitate, a_y)
+
+        # The proper response: lateral return, braking laterally at lat_brake_min or more while still moving out;
+        # braking at brake_min or more where the distance to L1 ahead is (now) longitudinally unsafe.
+        back = np.clip(-0.8 * inp.ego_y - 1.6 * inp.ego_vy, -params.a_y_m, params.a_y_m)
+        back = np.where(inp.ego_vy > 0.0, np.minimum(back, -min(rss.lat_brake_min, params.a_y_m)), back)
+        _, _, lon_l1_now = self.safe_after(inp, np.zeros(n), np.zeros(n), params)
+        brake = -min(rss.brake_min, params.a_x_d)
+        a_y = np.where(respond, back, a_y)
+        a_x = np.where(respond & ~lon_l1_now, np.minimum(a_x, brake), a_x)
+
+        # After completion: follow L1 by RSS, centred in the target lane.
+        done = inp.completed
+        if done.any():
+            _, _, lon_l1 = self.safe_after(inp, a_x, np.zeros(n), params)
+            a_x = np.where(done & ~lon_l1, np.minimum(a_x, brake), a_x)
+            centre = np.clip(0.8 * (params.lane_width - inp.ego_y) - 1.6 * inp.ego_vy, -params.a_y_m, params.a_y_m)
+            a_y = np.where(done, centre, a_y)
+
+        moving = proceed | hesitate
+        ey_end = inp.ego_y + inp.ego_vy * dt + 0.5 * a_y * dt * dt
+        completing = moving & (ey_end >= params.y_boundary)
+        return behaviour, a_x, a_y, completing

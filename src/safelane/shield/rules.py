@@ -1,0 +1,65 @@
+"""Decision rules other than the paper's, registered by name and chosen by variant (``Variant.rule``).
+
+The shield's core (:func:`safelane.shield.core.step`) decides every row with the paper's rule (proceed / hesitate /
+abort on a verified evasion plan, :mod:`.decide`) except the rows whose variant names another rule; those it hands,
+once per period, to that rule's ``decide``. A batch of the paper's variants alone never reaches this module's rules:
+their code path is the paper's, unchanged.
+
+* ``rss`` — Responsibility-Sensitive Safety with ad-rss's documented default parameters
+  (:class:`safelane.baselines.rss_rule.RssRule`; variants ``RSS``, ``RSS_V2X``);
+* ``rss_matched`` — the same rule with this world's limits (``RssParams.matched``; ``RSS_matched``,
+  ``RSS_V2X_matched``).
+
+A rule is an object with ``decide(inputs: RuleInputs, params) -> (behaviour, a_x, a_y, completing)`` (each ``(k,)``
+over the rule's rows); register it here and name it in a :class:`~safelane.planners.variants.Variant`.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..baselines.rss_rule import RssRule
+from ..planners.variants import VARIANT_NAMES, VARIANTS
+
+DECISION_RULES = {"rss": RssRule("ad_rss"), "rss_matched": RssRule("matched")}
+
+_RULE_OF = np.array([v.rule for v in VARIANTS.values()])
+
+
+@dataclass(frozen=True)
+class RuleInputs:
+    """What a rule sees for its rows (``(k,)`` arrays, shield frame): the ego, L1 and F, the checked and clipped
+    proposal (``invalid`` rows hold zeros), the lateral hesitation, L1's worst-case deceleration from the information
+    the variant uses (``uses_chain``: from the connected chain; otherwise ``a_x_d``), and whether the lane change was
+    complete before this period."""
+
+    ego_x: np.ndarray
+    ego_y: np.ndarray
+    ego_vx: np.ndarray
+    ego_vy: np.ndarray
+    l1_x: np.ndarray
+    l1_v: np.ndarray
+    f_x: np.ndarray
+    f_v: np.ndarray
+    a_x: np.ndarray
+    a_y: np.ndarray
+    a_y_hesitate: np.ndarray
+    invalid: np.ndarray
+    l1_decel: np.ndarray
+    uses_chain: np.ndarray
+    completed: np.ndarray
+
+
+def rule_rows(variant, n: int) -> list[tuple[object, np.ndarray]]:
+    """``[(rule, rows)]`` for the rows whose variant names a registered rule other than the paper's (empty for the
+    paper's variants). ``variant``: a name, or ``(n,)`` names or registry indices (validated by
+    :func:`.policies.variant_flags`)."""
+    if isinstance(variant, str):
+        rule = VARIANTS[variant].rule
+        return [] if rule == "paper" else [(DECISION_RULES[rule], np.arange(n))]
+    arr = np.asarray(variant)
+    idx = np.array([VARIANT_NAMES.index(v) for v in arr.tolist()]) if arr.dtype.kind in "US" else arr
+    rules = _RULE_OF[idx]
+    return [(DECISION_RULES[name], np.flatnonzero(rules == name)) for name in np.unique(rules) if name != "paper"]
