@@ -12,6 +12,8 @@ $(STAMP): pyproject.toml
 	# The pinned CPU build of PyTorch first: an unpinned torch would pull several GB of CUDA wheels.
 	$(PY) -m pip install --quiet torch==2.13.0
 	$(PY) -m pip install --quiet -e ".[dev,train,gym,rl]"
+	# ad-rss (extra rss; wheels for Linux x86_64): the RSS parity tests need it and skip, saying so, where it is absent.
+	$(PY) -m pip install --quiet -e ".[rss]" || echo "ad-rss could not be installed here: the RSS parity tests will skip"
 	touch $(STAMP)
 
 install: $(STAMP)
