@@ -116,7 +116,7 @@ def test_ordering_ignores_overlapping_intervals():
 def test_information_claims_need_a_clear_gain():
     gain = summary([("CV_follow", 5, 4.0, 0.0, 95, 100), ("CV_none", 5, 4.0, 0.0, 60, 100)])
     claim = by_key(check_claims({"fig4_n5": gain}))["follower_information"]
-    assert claim.holds is True and claim.evidence.startswith("1 of 1 cells clearly above")
+    assert claim.holds is True and claim.evidence.startswith("1 of 1 cells clearly above by >= 0.05")
     tie = summary([("CV_follow", 5, 4.0, 0.0, 60, 100), ("CV_none", 5, 4.0, 0.0, 60, 100)])
     claim = by_key(check_claims({"fig4_n5": tie}))["follower_information"]
     assert claim.holds is False and "largest difference +0.000" in claim.evidence
@@ -172,7 +172,7 @@ def test_robustness_claims():
 
 def test_claims_without_experiments_are_not_checked():
     claims = check_claims({})
-    assert len(claims) == 8
+    assert len(claims) == 13
     assert all(c.holds is None for c in claims)
 
 
@@ -230,3 +230,35 @@ def test_preset_yaml_round_trip(tmp_path):
     path.write_text(PRESET.to_yaml())
     loaded = load_preset(path)
     assert (loaded.params, loaded.sim) == (PRESET.params, PRESET.sim)
+
+
+def test_magnitude_claims_slightly_and_conclusion_1():
+    """'Slightly' is a stated threshold (<= 0.05 per cell) and conclusion (1) compares the two effects' sums."""
+    rows = [("CV_all", 1, 4.0, 0.0, 40, 100), ("CV_follow", 1, 4.0, 0.0, 38, 100), ("CV_none", 1, 4.0, 0.0, 20, 100)]
+    claims = by_key(check_claims({"table1": summary(rows)}))
+    assert claims["chain_information"].holds is True
+    assert (
+        claims["conclusion_1"].holds is True
+        and "follower effect 0.180, chain effect 0.020" in claims["conclusion_1"].evidence
+    )
+    rows[0] = ("CV_all", 1, 4.0, 0.0, 90, 100)
+    claims = by_key(check_claims({"table1": summary(rows)}))
+    assert claims["chain_information"].holds is False and claims["conclusion_1"].holds is False
+
+
+def test_fig5_claims_on_a_hand_made_trace():
+    t = np.round(np.arange(1, 61) * 0.1, 1)
+    peak = np.minimum(t, 6.0 - t).clip(0) * 0.6  # rises to 1.8 m at t = 3 s, back to 0 at t = 6 s
+    frames = []
+    for planner, y, done in (
+        ("CV_all", np.minimum(t, 3.0) * 0.8, t >= 2.8),
+        ("CV_follow", peak * 1.1, t < 0),
+        ("CV_none", peak, t < 0),
+        ("No_agg_assess", peak, t < 0),
+    ):
+        frames.append(pd.DataFrame({"planner": planner, "t": t, "ego_y": y, "completed": done}))
+    claims = by_key(check_claims({}, fig5_trace=pd.concat(frames)))
+    assert claims["fig5_cv_all_3s"].holds is True and "2.8 s" in claims["fig5_cv_all_3s"].evidence
+    assert claims["fig5_turn_back_3s"].holds is True
+    assert claims["fig5_follow_longer"].holds is True
+    assert claims["fig5_none_coincide"].holds is True

@@ -29,10 +29,15 @@ CLAIM_KEYS = {
     "ordering",
     "follower_information",
     "chain_information",
+    "conclusion_1",
     "falls_with_decel",
     "rises_with_n",
     "robust_low_pv",
     "degrades_high_pv",
+    "fig5_cv_all_3s",
+    "fig5_turn_back_3s",
+    "fig5_follow_longer",
+    "fig5_none_coincide",
 }
 META = {
     "loss_mean_abs_diff": 0.1234,
