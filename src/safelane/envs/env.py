@@ -85,8 +85,9 @@ class LaneChangeEnv(gym.Env):
     Observation: ``Box(12,)`` float32, the neural planners' feature map
     (:data:`safelane.planners.features.FEATURE_NAMES`: ``p_y, v_y, v_x, gap_l, gap_f, dv_l, dv_f, l1_dv_1s …
     l1_dv_4s, f_connected``). Action: ``Box([-a_x_d, -a_y_m], [a_x_a, a_y_m])`` float32, ``(a_x, a_y)`` in m/s²
-    (clipped to the box; a non-finite action is an invalid proposal the shield never executes). ``terminated``
-    when the lane change completes or the ego collides; ``truncated`` at the horizon. ``info``: ``behaviour``
+    (clipped to the box; a non-finite action is an invalid proposal, never executed: the shield hesitates or aborts,
+    without it the ego holds ``(0, 0)``). ``terminated`` when the lane change completes or the ego collides;
+    ``truncated`` at the horizon. ``info``: ``behaviour``
     (``"proceed"``, ``"hesitate"``, ``"abort"``), ``intervened``, ``nominal_action``, ``executed_action`` (the
     ego's mean acceleration over the period), ``cost`` (1.0 in the period a collision or the first ``p_m``
     violation of the episode happens), ``crashed``, ``success``.
