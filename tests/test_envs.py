@@ -228,23 +228,20 @@ def test_reward_weights_are_validated_and_used():
 
 
 @pytest.mark.rl
-def test_ppo_smoke_with_the_shield():
-    """A few hundred PPO steps on the vector env through the SB3 adapter: it trains and the shield holds."""
+def test_ppo_example_smoke_with_the_shield():
+    """The RL example's training function (``examples/ppo_shield.py``) for 512 steps: PPO trains in the vector env
+    through the SB3 adapter, the counts come back, and with the shield no step had a cost."""
     pytest.importorskip("stable_baselines3", reason="the RL example needs the rl extra: pip install -e '.[rl]'")
-    from stable_baselines3 import PPO
+    import importlib.util
+    from pathlib import Path
 
-    from safelane.envs.sb3 import SB3VecEnv
-
-    venv = SB3VecEnv(16, seed=0)
-    costs = []
-
-    from stable_baselines3.common.callbacks import BaseCallback
-
-    class Costs(BaseCallback):
-        def _on_step(self) -> bool:
-            costs.extend(info["cost"] for info in self.locals["infos"])
-            return True
-
-    model = PPO("MlpPolicy", venv, n_steps=16, batch_size=64, n_epochs=1, seed=0, device="cpu")
-    model.learn(total_timesteps=512, callback=Costs())
-    assert len(costs) >= 512 and sum(costs) == 0.0
+    path = Path(__file__).resolve().parents[1] / "examples" / "ppo_shield.py"
+    spec = importlib.util.spec_from_file_location("ppo_shield", path)
+    example = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(example)
+    result = example.train(shield=True, steps=512, envs=16, seed=0, eval_episodes=32)
+    assert result["timesteps"] >= 512 and result["curve"]
+    assert result["training"]["cost"] == 0.0 and result["training"]["collisions"] == 0
+    for evaluation in result["evaluation"].values():
+        assert evaluation["episodes"] >= 32
+    assert result["evaluation"]["shield_on"]["collisions"] == 0
