@@ -225,13 +225,12 @@ def pair_check(ego_x, ego_y, ego_vx, ego_vy, x, y, vx, vy, rss: RssParams, param
     ego_vx, vx = np.maximum(ego_vx, 0.0), np.maximum(vx, 0.0)  # ad-rss takes speeds >= 0 (vehicles stop)
     ahead = x > ego_x
     lon_distance = np.maximum(np.abs(x - ego_x) - params.vehicle_length, 0.0)
-    lon_safe_distance = np.where(
-        ahead,
-        longitudinal_safe_distance_exact(vx, ego_vx, rss.response_time_ego, rss.accel_max, rss.brake_min,
-                                         brake_other, rss.max_speed_on_acceleration,
-                                         rss.min_longitudinal_safety_distance),
-        longitudinal_safe_distance(ego_vx, vx, rss.response_time_other, rss.accel_max, rss.brake_min, rss.brake_max,
-                                   rss.max_speed_on_acceleration, rss.min_longitudinal_safety_distance),
+    # One evaluation for both orders: the rear vehicle is the ego where the other is ahead.
+    lon_safe_distance = longitudinal_safe_distance_exact(
+        np.where(ahead, vx, ego_vx), np.where(ahead, ego_vx, vx),
+        np.where(ahead, rss.response_time_ego, rss.response_time_other), rss.accel_max, rss.brake_min,
+        np.where(ahead, brake_other, rss.brake_max), rss.max_speed_on_acceleration,
+        rss.min_longitudinal_safety_distance,
     )  # fmt: skip
     left = y > ego_y  # the other vehicle is on the left (towards the target lane)
     lat_distance = np.maximum(np.abs(y - ego_y) - params.vehicle_width, 0.0)

@@ -5,8 +5,8 @@ Every control period, for the rows of an RSS variant:
 
 1. **proceed** if, after applying the proposal for one period, the ego is RSS-safe towards L1 and towards F: for
    each of them the longitudinal safe distance holds (towards L1 with the ego behind, towards F with the ego in
-   front) *or* the lateral safe distance does (:func:`.rss.pair_check`; the others predicted at constant speed —
-   RSS's response time covers what they may do meanwhile);
+   front) *or* the lateral safe distance does (:func:`.rss.pair_check`; the others predicted at the worst RSS
+   allows them over the period: L1 braking at its ``brake_max``, F accelerating at ``accel_max``);
 2. **hesitate** (the lateral speed driven to zero) if that is RSS-safe instead;
 3. otherwise RSS's **proper response** (counted as an abort): lateral return towards the original lane, braking
    laterally at least at ``lat_brake_min`` while still moving out, and, when the longitudinal distance to L1 (ahead)
@@ -42,21 +42,42 @@ class RssRule:
     def __repr__(self) -> str:
         return f"RssRule({self.parameter_set!r})"
 
+    def brake_max(self, inp, params: Params):
+        """``(k, M)``: each chain vehicle's ``brake_max`` — RSS's, or with V2X (``uses_chain``) a connected leader's
+        bound from the chain analysis (L1's as the variant's worst case gives it)."""
+        rss = rss_params_for(self.parameter_set, params)
+        m = inp.chain_x.shape[1]
+        bounds = np.full(inp.chain_x.shape, rss.brake_max)
+        cols = min(m, inp.chain_bounds.shape[1])
+        bounds[:, :cols] = inp.chain_bounds[:, :cols]
+        connected = np.arange(m)[None, :] < inp.n_connected[:, None]
+        out = np.where(inp.uses_chain[:, None] & connected, bounds, rss.brake_max)
+        out[:, 0] = np.where(inp.uses_chain, inp.l1_decel, rss.brake_max)
+        return np.maximum(out, 1e-9)
+
     def safe_after(self, inp, a_x, a_y, params: Params):
-        """``(safe towards L1, safe towards F)`` at the end of one period of ``(a_x, a_y)`` (``(k,)`` each)."""
+        """After one period of ``(a_x, a_y)``: ``(safe towards every target-lane vehicle ahead, safe towards F,
+        longitudinally safe towards every vehicle ahead)``, each ``(k,)``.
+
+        The others are predicted at the worst RSS allows them over the period (the chain braking at its
+        ``brake_max``, F accelerating at ``accel_max``), so the state checked is RSS-safe whatever they do within
+        RSS's assumptions. Every chain vehicle is checked, not only L1: straddling the lane line (laterally safe) the
+        ego may drive past L1."""
         rss = rss_params_for(self.parameter_set, params)
         dt = params.dt
         ex, evx = advance(inp.ego_x, inp.ego_vx, a_x, dt)
         ey = inp.ego_y + inp.ego_vy * dt + 0.5 * a_y * dt * dt
         evy = inp.ego_vy + a_y * dt
-        lane = np.full_like(ex, params.lane_width)
-        zero = np.zeros_like(ex)
-        brake_l1 = np.where(inp.uses_chain, np.maximum(inp.l1_decel, 1e-9), rss.brake_max)
+        brake = self.brake_max(inp, params)
+        cx, cv = advance(inp.chain_x, inp.chain_v, -brake, dt)
+        fx, fv = advance(inp.f_x, inp.f_v, rss.accel_max, dt)
+        lane = params.lane_width
         with np.errstate(all="ignore"):
-            to_l1 = pair_check(ex, ey, evx, evy, inp.l1_x + inp.l1_v * dt, lane, inp.l1_v, zero, rss, params,
-                               brake_l1)  # fmt: skip
-            to_f = pair_check(ex, ey, evx, evy, inp.f_x + inp.f_v * dt, lane, inp.f_v, zero, rss, params)
-        return to_l1[0], to_f[0], to_l1[1]
+            col = (ex[:, None], ey[:, None], evx[:, None], evy[:, None])
+            chain = pair_check(*col, cx, lane, cv, 0.0, rss, params, brake)
+            to_f = pair_check(ex, ey, evx, evy, fx, lane, fv, 0.0, rss, params)
+        ahead = cx > ex[:, None]
+        return chain[0].all(1), to_f[0], (chain[1] | ~ahead).all(1)
 
     def decide(self, inp, params: Params):
         """``(behaviour, a_x, a_y, completing)`` for the rule's rows (see the module docstring)."""
@@ -70,30 +91,27 @@ class RssRule:
         completing = np.zeros(n, bool)
         active = ~inp.completed
 
-        ok_l1, ok_f, _ = self.safe_after(inp, a_x, a_y, params)
-        proceed = active & ~inp.invalid & ok_l1 & ok_f
-        ok_l1_h, ok_f_h, _ = self.safe_after(inp, a_x, inp.a_y_hesitate, params)
-        hesitate = active & ~proceed & ok_l1_h & ok_f_h
+        ok_chain, ok_f, _ = self.safe_after(inp, a_x, a_y, params)
+        proceed = active & ~inp.invalid & ok_chain & ok_f
+        ok_chain_h, ok_f_h, _ = self.safe_after(inp, a_x, inp.a_y_hesitate, params)
+        hesitate = active & ~proceed & ok_chain_h & ok_f_h
         respond = active & ~proceed & ~hesitate
         behaviour[proceed], behaviour[hesitate], behaviour[respond] = PROCEED, HESITATE, ABORT
         a_y = np.where(hesitate, inp.a_y_hesitate, a_y)
 
         # The proper response: lateral return, braking laterally at lat_brake_min or more while still moving out;
-        # braking at brake_min or more where the distance to L1 ahead is (now) longitudinally unsafe.
+        # braking at brake_min or more where the distance to a vehicle ahead is longitudinally unsafe.
         back = np.clip(-0.8 * inp.ego_y - 1.6 * inp.ego_vy, -params.a_y_m, params.a_y_m)
         back = np.where(inp.ego_vy > 0.0, np.minimum(back, -min(rss.lat_brake_min, params.a_y_m)), back)
-        _, _, lon_l1_now = self.safe_after(inp, np.zeros(n), np.zeros(n), params)
         brake = -min(rss.brake_min, params.a_x_d)
         a_y = np.where(respond, back, a_y)
-        a_x = np.where(respond & ~lon_l1_now, np.minimum(a_x, brake), a_x)
-
-        # After completion: follow L1 by RSS, centred in the target lane.
-        done = inp.completed
-        if done.any():
-            _, _, lon_l1 = self.safe_after(inp, a_x, np.zeros(n), params)
-            a_x = np.where(done & ~lon_l1, np.minimum(a_x, brake), a_x)
-            centre = np.clip(0.8 * (params.lane_width - inp.ego_y) - 1.6 * inp.ego_vy, -params.a_y_m, params.a_y_m)
-            a_y = np.where(done, centre, a_y)
+        # After completion: follow the vehicles ahead by RSS, centred in the target lane.
+        centre = np.clip(0.8 * (params.lane_width - inp.ego_y) - 1.6 * inp.ego_vy, -params.a_y_m, params.a_y_m)
+        a_y = np.where(inp.completed, centre, a_y)
+        follow = respond | inp.completed
+        if follow.any():
+            _, _, lon_ok = self.safe_after(inp, np.where(respond, 0.0, a_x), a_y, params)
+            a_x = np.where(follow & ~lon_ok, np.minimum(a_x, brake), a_x)
 
         moving = proceed | hesitate
         ey_end = inp.ego_y + inp.ego_vy * dt + 0.5 * a_y * dt * dt

@@ -14,6 +14,7 @@ from pydantic import BaseModel, ConfigDict, Field
 
 from .grid import Cell
 from .paper_data import DECELS, PLANNERS
+from .rss_baseline import RssBaselineConfig, rss_cells, run_rss_baseline
 
 
 class ExperimentConfig(BaseModel):
@@ -76,6 +77,11 @@ class Experiment:
     cells: Callable[[BaseModel], list[Cell]] | None  # None: a traced single-scenario experiment
     quick: dict
     beyond_paper: bool = False
+    #: A runner of its own, ``run(config, *, preset, seed, workers, nominal, cache) -> (table, summary)``, for a grid
+    #: that is more than cells (``rss_baseline``: the cells under several follower behaviours).
+    run: Callable | None = None
+    #: Its cells count in the paper's claims (``claims.check_claims``); False for a baseline under other conditions.
+    feeds_claims: bool = True
 
     def default_config(self, quick: bool = False) -> BaseModel:
         return self.config_type(**(self.quick if quick else {}))
@@ -142,6 +148,18 @@ EXPERIMENTS: dict[str, Experiment] = {
             _n_grid,
             {"samples": 40, "n_leaders": (0, 1, 5, 10)},
             True,
+        ),
+        Experiment(
+            "rss_baseline",
+            "RSS (ad-rss's model) against the paper's shield, with and without V2X: Table 1's grid x follower "
+            "behaviour (collaborative, aggressive, ignoring the ego) x the paper's and the RSS variants (beyond the "
+            "paper; docs/rss.md).",
+            RssBaselineConfig,
+            rss_cells,
+            {"samples": 40},
+            True,
+            run_rss_baseline,
+            False,
         ),
     )
 }

@@ -52,6 +52,9 @@ def run_experiment(
     preset = preset or load_preset("paper")
     nominal = nominal or preset.nominal()
     start = time.perf_counter()
+    if exp.run is not None:
+        table, summary = exp.run(cfg, preset=preset, seed=seed, workers=workers, nominal=nominal, cache=cache)
+        return ExperimentResult(name, cfg, table, summary, None, time.perf_counter() - start)
     if exp.cells is None:
         trace = _trace_example(cfg, preset, seed, nominal)
         return ExperimentResult(name, cfg, None, None, trace, time.perf_counter() - start)

@@ -197,4 +197,11 @@ FIGURES: dict[str, Callable[[pd.DataFrame, Path, float], list[Path]]] = {
     "fig6_violation": lambda data, out, y_boundary: fig6(data, out),
     "penetration": lambda data, out, y_boundary: penetration(data, out),
     "leaders": lambda data, out, y_boundary: leaders(data, out),
+    "rss_baseline": lambda data, out, y_boundary: _rss_figure(data, out),
 }
+
+
+def _rss_figure(summary: pd.DataFrame, out_dir: Path) -> list[Path]:
+    from .rss import figure  # it draws with this module's helpers
+
+    return figure(summary, out_dir)

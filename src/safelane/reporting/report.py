@@ -178,6 +178,10 @@ def _experiments(doc: Document, r: RunRecord) -> None:
             _trace_table(doc, res.trace)
         if name in PIVOTS and res.summary is not None:
             _pivots(doc, res.summary, *PIVOTS[name])
+        if name == "rss_baseline" and res.summary is not None:
+            from .rss import section  # the RSS baseline's table and paragraph (docs/rss.md)
+
+            section(doc, res.summary)
 
 
 def _pivots(doc: Document, summary: pd.DataFrame, rows_key: str, cols_key: str, rates: tuple[str, ...]) -> None:

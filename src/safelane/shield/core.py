@@ -291,8 +291,8 @@ def step(
         ay_cmd[abort_rows] = np.where(knots[:, 1] > 0.0, (vy[:, 1] - vy[:, 0]) / span, 0.0)
     if cfg.enabled:  # the rows of another rule: its decision (an RSS response is an abort without a held plan)
         for rule, idx in ruled:
-            inputs = RuleInputs(*(arr[idx] for arr in (ex, ey, evx, evy, l1x, l1v, fx, fv, a_x, a_y, a_yh, invalid,
-                                                       l1_decel, uses_chain & ~unsafe, state.completed)))  # fmt: skip
+            inputs = RuleInputs(*(arr[idx] for arr in (ex, ey, evx, evy, s.chain_x, s.chain_v, fx, fv, a_x, a_y, a_yh,
+                                  invalid, l1_decel, uses_chain & ~unsafe, state.completed, bounds, s.n_connected)))
             behaviour[idx], ax_cmd[idx], ay_cmd[idx], completing[idx] = rule.decide(inputs, prm)
 
     new_plan = _set_rows(state.plan, accepted)

@@ -30,17 +30,19 @@ _RULE_OF = np.array([v.rule for v in VARIANTS.values()])
 
 @dataclass(frozen=True)
 class RuleInputs:
-    """What a rule sees for its rows (``(k,)`` arrays, shield frame): the ego, L1 and F, the checked and clipped
-    proposal (``invalid`` rows hold zeros), the lateral hesitation, L1's worst-case deceleration from the information
-    the variant uses (``uses_chain``: from the connected chain; otherwise ``a_x_d``), and whether the lane change was
-    complete before this period."""
+    """What a rule sees for its rows (``(k,)`` arrays unless noted, shield frame): the ego, the chain ``L1, L2, …``
+    (``(k, M)``) and F, the checked and clipped proposal (``invalid`` rows hold zeros), the lateral hesitation, L1's
+    worst-case deceleration from the information the variant uses (``uses_chain``: from the connected chain;
+    otherwise ``a_x_d``), every chain vehicle's bound from the chain analysis (``(k, M)``; meaningful where
+    ``uses_chain`` and for the ``n_connected`` connected leaders), and whether the lane change was complete before
+    this period."""
 
     ego_x: np.ndarray
     ego_y: np.ndarray
     ego_vx: np.ndarray
     ego_vy: np.ndarray
-    l1_x: np.ndarray
-    l1_v: np.ndarray
+    chain_x: np.ndarray
+    chain_v: np.ndarray
     f_x: np.ndarray
     f_v: np.ndarray
     a_x: np.ndarray
@@ -50,6 +52,8 @@ class RuleInputs:
     l1_decel: np.ndarray
     uses_chain: np.ndarray
     completed: np.ndarray
+    chain_bounds: np.ndarray
+    n_connected: np.ndarray
 
 
 def rule_rows(variant, n: int) -> list[tuple[object, np.ndarray]]:
