@@ -18,9 +18,11 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+import scenarios
 from reference import follow_gap_margin, ref_evasion_exists
 from safelane import Params
-from safelane.shield.decide import check_candidate, commit_guard
+from safelane.safety import plan_evasion
+from safelane.shield.decide import check_candidate, commit_guard, hesitate_lateral, plan_motion
 
 PRM = Params()
 #: Agreement band [m]: far above the library's tolerances (1 nm) and the reference's grid error (~1e-6 m).
@@ -232,3 +234,58 @@ def test_completion_guard_needs_both_followers_able_to_keep_p_m():
         assert commit_guard(z, np.array([20.0]), np.array([lx]), z, z, -far, z, PRM)[0] == expected
         fx = -(PRM.p_m + 56.25 + slack)
         assert commit_guard(z, z, far, z, z, np.array([fx]), np.array([30.0]), PRM)[0] == expected
+
+
+@pytest.mark.parametrize(
+    ("ego_vy", "expected"),
+    [(0.05, -0.5), (-0.05, 0.5), (0.0, 0.0), (0.5, -PRM.a_y_m), (-0.5, PRM.a_y_m)],
+)
+def test_hesitate_brings_the_lateral_speed_to_zero_as_far_as_a_y_m_allows(ego_vy, expected):
+    assert float(hesitate_lateral(ego_vy, PRM)) == pytest.approx(expected, abs=1e-12)
+
+
+def _plans_and_ages():
+    """Plans of the named scenarios whose longitudinal plan switches (accelerate → brake → follow L1 to rest, L1
+    never braking, a fast lateral return), each with periods starting just before each of its switch times, on a
+    ``(n_scenarios, n_ages)`` batch."""
+    states = [scenarios.follow_l1_to_stop(), scenarios.still_braking_at_horizon(), scenarios.follow_moving_l1(),
+              scenarios.past_lane_boundary_returning_fast(), scenarios.ego_stops_before_horizon(),
+              {**scenarios.open_gap_collaborative_follower(), "l1_decel": 0.0}]  # fmt: skip
+    cols = {k: np.array([s[k] for s in states]) for k in states[0]}
+    plan = plan_evasion(**cols, params=PRM)
+    l1_stop = np.where(cols["l1_decel"] > 0, cols["l1_v"] / np.maximum(cols["l1_decel"], 1e-300), np.inf)
+    switches = np.stack([plan.t_x1, plan.t_brake_end, l1_stop, plan.t_y_f, plan.t_y_switch, plan.t_y_end], -1)
+    ages = np.clip(np.nan_to_num(switches, posinf=0.0) - 0.04, 0.0, None)  # each switch 0.04 s into a period
+    batch = plan.take((slice(None), None))  # (n, 1) against ages (n, 6)
+    return plan, batch, np.broadcast_to(ages, ages.shape).copy(), l1_stop
+
+
+def test_plan_motion_knots_are_the_periods_ends_and_every_switch_inside_it():
+    plan, batch, ages, l1_stop = _plans_and_ages()
+    dt = PRM.dt
+    knots, *_ = plan_motion(batch, ages, dt)
+    assert knots.shape == (*ages.shape, 8)
+    assert (np.diff(knots, axis=-1) >= 0).all() and (knots[..., 0] == 0).all() and (knots[..., -1] == dt).all()
+    switches = [plan.t_x1, plan.t_brake_end, l1_stop, plan.t_y_f, plan.t_y_switch, plan.t_y_end]
+    inside = [np.clip(s[:, None] - ages, 0.0, dt) for s in switches]
+    expected = np.sort(np.stack([np.zeros_like(ages), *inside, np.full_like(ages, dt)], -1), -1)
+    np.testing.assert_allclose(knots, expected, rtol=0, atol=1e-12)
+    # At least one switch strictly inside a period for each kind of switch that the scenarios have.
+    assert ((knots[..., 1:-1] > 1e-6) & (knots[..., 1:-1] < dt - 1e-6)).any(-1).mean() > 0.5
+
+
+def test_plan_motion_is_the_plans_motion_with_constant_accelerations_between_knots():
+    _, batch, ages, _ = _plans_and_ages()
+    dt = PRM.dt
+    knots, px, vx, py, vy = plan_motion(batch, ages, dt)
+    ref = batch.take((..., None)).state(ages[..., None] + knots)
+    for got, want in zip((px, py, vx, vy), ref, strict=True):
+        np.testing.assert_allclose(got, want, rtol=0, atol=1e-9)
+    # Between knots each motion is one constant-acceleration segment: the midpoint is where the segment's
+    # quadratic (from its start and its speed change) puts it.
+    h = np.diff(knots, axis=-1)
+    mid_px, mid_py, _, _ = batch.take((..., None)).state(ages[..., None] + knots[..., :-1] + h / 2)
+    for p, v, mid in ((px, vx, mid_px), (py, vy, mid_py)):
+        a = np.where(h > 0, np.diff(v, axis=-1) / np.where(h > 0, h, 1.0), 0.0)
+        quad = p[..., :-1] + v[..., :-1] * h / 2 + 0.5 * a * (h / 2) ** 2
+        np.testing.assert_allclose(mid, quad, rtol=0, atol=1e-9)
