@@ -212,3 +212,35 @@ def test_rss_never_leaves_a_collaborative_world_in_collision():
                for v in RSS_VARIANTS for n, d in ((1, 4.0), (10, 6.0))]  # fmt: skip
     table = simulate_batch(concat(batches), seed=0).table
     assert not table["collision"].any()
+
+
+def test_ad_rss_full_check_agrees_on_one_lane():
+    # ad-rss's whole pipeline (RssCheck over a world model) against the NumPy verdict, ego in front and behind.
+    if not rss_adrss.available():
+        pytest.skip("ad-rss is not installed (the extra 'rss': pip install -e '.[rss]'); CI installs it")
+    import ad_rss
+
+    rng = np.random.default_rng(5)
+    checker = ad_rss.rss.core.RssCheck()
+    rss = RssParams()
+    for i in range(150):
+        ego_v, other_v, gap = rng.uniform(0, 40), rng.uniform(0, 40), rng.uniform(-200, 200)
+        x = gap + PRM.vehicle_length if gap >= 0 else gap - PRM.vehicle_length
+        ours = bool(pair_check(0.0, 0.0, ego_v, 0.0, x, 0.0, other_v, 0.0, rss, PRM)[0])
+        model = rss_adrss.same_lane_world(ego_v, other_v, gap, rss, PRM, object_id=i + 1, time_index=i + 1)
+        assert rss_adrss.full_check(checker, model) == ours, (ego_v, other_v, gap)
+
+
+def test_rss_baseline_experiment_table_and_paragraph():
+    from safelane.experiments.rss_baseline import RssBaselineConfig, overview
+    from safelane.experiments.runner import run_experiment
+    from safelane.reporting.rss import paragraph
+
+    cfg = RssBaselineConfig(samples=4, n_leaders=(3,), decels=(4.0,))
+    res = run_experiment("rss_baseline", cfg)
+    assert set(res.table["follower"]) == {"collaborative", "aggressive", "ignores_ego"}
+    assert len(res.table) == 3 * len(VARIANT_NAMES) * 4
+    view = overview(res.summary)
+    assert len(view) == 3 * len(VARIANT_NAMES) and (view["samples"] == 4).all()
+    text = paragraph(view)
+    assert "CV_all completes" in text and "ad-rss's default parameters" in text and "%" in text

@@ -133,3 +133,69 @@ def pair_check(ego_x, ego_y, ego_vx, ego_vy, x, y, vx, vy, rss: RssParams, param
     lat_safe_distance = safe_lateral_distance(left, right)
     lon_safe, lat_safe = is_safe(lon_distance, lon_safe_distance), is_safe(lat_distance, lat_safe_distance)
     return lon_safe or lat_safe, lon_safe, lat_safe, lon_distance, lon_safe_distance, lat_distance, lat_safe_distance
+
+
+def same_lane_world(ego_v: float, other_v: float, gap_m: float, rss: RssParams, params: Params, *, object_id: int = 1,
+                    time_index: int = 1, brake_max_other: float | None = None):  # fmt: skip
+    """An ``ad_rss.rss.world.WorldModel`` for ad-rss's full check (``RssCheck.calculateProperResponse``): the ego and
+    one other vehicle on one straight lane, the other ``gap_m`` (bumper to bumper) ahead (behind if negative); lateral
+    speeds 0. RssCheck keeps a history per object id: give each new situation a new id and a later time index."""
+    _, phys, world, _, _ = _modules()
+    road_m, lane_w = 10_000.0, params.lane_width
+
+    def vehicle(oid, kind, v, rear_m):
+        o = world.Object()
+        o.object_id, o.object_type = oid, kind
+        o.velocity.speed_lon_min = o.velocity.speed_lon_max = phys.Speed(v)
+        o.velocity.speed_lat_min = o.velocity.speed_lat_max = phys.Speed(0.0)
+        region = world.OccupiedRegion()
+        region.segment_id = 0
+        half = 0.5 * params.vehicle_width / lane_w
+        region.lat_range.minimum, region.lat_range.maximum = phys.ParametricValue(0.5 - half), phys.ParametricValue(
+            0.5 + half)  # fmt: skip
+        region.lon_range.minimum = phys.ParametricValue(rear_m / road_m)
+        region.lon_range.maximum = phys.ParametricValue((rear_m + params.vehicle_length) / road_m)
+        o.occupied_regions.append(region)
+        s = o.state
+        s.yaw, s.steering_angle, s.yaw_rate = phys.Angle(0.0), phys.Angle(0.0), phys.AngularVelocity(0.0)
+        s.dimension.length = phys.Distance(params.vehicle_length)
+        s.dimension.width = phys.Distance(params.vehicle_width)
+        s.center_point.x, s.center_point.y = phys.Distance(rear_m + 0.5 * params.vehicle_length), phys.Distance(0.0)
+        s.speed_range.minimum = s.speed_range.maximum = phys.Speed(v)
+        return o
+
+    ego_rear = 0.5 * road_m
+    other_rear = ego_rear + (params.vehicle_length + gap_m if gap_m >= 0 else gap_m - params.vehicle_length)
+    constellation = world.Constellation()
+    constellation.constellation_type = world.ConstellationType.SameDirection
+    constellation.ego_vehicle = vehicle(0, world.ObjectType.EgoVehicle, ego_v, ego_rear)
+    constellation.object = vehicle(object_id, world.ObjectType.OtherVehicle, other_v, other_rear)
+    lane = world.LaneSegment()
+    lane.id = 0
+    lane.length.minimum = lane.length.maximum = phys.Distance(road_m)
+    lane.width.minimum = lane.width.maximum = phys.Distance(lane_w)
+    lane.type = world.Normal
+    lane.driving_direction = world.LaneDrivingDirection.Positive
+    segment = world.RoadSegment()
+    segment.type = world.RoadSegmentType.Normal
+    segment.lane_segments.append(lane)
+    segment.minimum_length_after_intersecting_area = segment.minimum_length_before_intersecting_area = phys.Distance(0)
+    constellation.ego_vehicle_road.append(segment)
+    constellation.ego_vehicle_rss_dynamics = dynamics(rss, rss.response_time_ego)
+    constellation.object_rss_dynamics = dynamics(rss, rss.response_time_other,
+                                                 brake_max_other if gap_m >= 0 else None)  # fmt: skip
+    model = world.WorldModel()
+    model.time_index = time_index
+    model.default_ego_vehicle_rss_dynamics = dynamics(rss, rss.response_time_ego)
+    model.constellations.append(constellation)
+    return model
+
+
+def full_check(checker, model) -> bool:
+    """ad-rss's full check of ``model`` with ``checker`` (an ``ad_rss.rss.core.RssCheck``): the proper response's
+    ``is_safe``."""
+    ad_rss = _modules()[0]
+    response = ad_rss.rss.state.ProperResponse()
+    if not checker.calculateProperResponse(model, response):
+        raise ValueError("ad-rss's RssCheck rejected the world model (see its log)")
+    return bool(response.is_safe)
