@@ -22,6 +22,8 @@ import scenarios
 from reference import follow_gap_margin, ref_evasion_exists
 from safelane import Params
 from safelane.safety import plan_evasion
+from safelane.safety.lateral import LATERAL_TOL_M
+from safelane.safety.longitudinal import FEASIBILITY_TOL_M
 from safelane.shield.decide import check_candidate, commit_guard, hesitate_lateral, plan_motion
 
 PRM = Params()
@@ -212,6 +214,27 @@ def test_period_check_rejects_a_leader_gap_dipping_below_p_m_inside_the_period()
     assert _library(clear).ok[0] and ref_check_candidate(clear, 0.0, np.random.default_rng(0))[0]
 
 
+def test_period_check_tolerance_is_inclusive():
+    # A gap exactly FEASIBILITY_TOL_M (1 nm) inside p_m counts as kept, one ulp further does not. Exact only where
+    # positions are of the tolerance's magnitude: a nanometre-long car and p_m = 2^-29 m (all differences exact).
+    tiny = Params(vehicle_length=1e-9, p_m=2.0**-29, p_m_human=2.0**-29)
+    at_rest = dict(ego_vx=0.0, l1_v=0.0, l1_decel=0.0, f_v=0.0, l1_x=30.0, f_x=-30.0)
+    lead, follow = tiny.p_m - FEASIBILITY_TOL_M, -(tiny.p_m - FEASIBILITY_TOL_M)
+    assert lead - tiny.p_m == -FEASIBILITY_TOL_M and 0.0 - follow - tiny.p_m == -FEASIBILITY_TOL_M
+    for key, at_tol, beyond in (("l1_x", lead, np.nextafter(lead, -1)), ("f_x", follow, np.nextafter(follow, 1))):
+        for value, accepted in ((at_tol, True), (beyond, False)):
+            state = _dip_state(**{**at_rest, key: value})
+            assert check_candidate(*(state[k] for k in ORDER), tiny).ok[0] == accepted, (key, value)
+
+
+def test_conflict_zone_starts_strictly_beyond_y_safe_plus_tolerance():
+    # The dipping follower gap matters only if the ego is ever beyond y_safe + LATERAL_TOL_M in the period.
+    edge = PRM.y_safe + LATERAL_TOL_M
+    for y, accepted in ((PRM.y_safe, True), (edge, True), (np.nextafter(edge, 9.0), False)):
+        state = {**follower_gap_dips_inside_the_period(0.005), "ego_y": np.array([y])}
+        assert _library(state).ok[0] == accepted, y
+
+
 def test_period_check_applies_only_in_the_conflict_zone():
     # The same dipping follower gap with the ego wholly in its own lane all period: no conflict, accepted.
     in_lane = {**follower_gap_dips_inside_the_period(0.005), "ego_y": np.array([0.0])}
@@ -229,7 +252,7 @@ def test_completion_guard_needs_both_followers_able_to_keep_p_m():
     # The guard itself at the brink: the ego at 20 m/s needs 25 m to stop at a_x_d behind a stopped L1; F at
     # 30 m/s needs 56.25 m behind a stopped ego.
     z, far = np.array([0.0]), np.array([1e3])
-    for slack, expected in ((-1e-3, False), (1e-3, True)):
+    for slack, expected in ((-1e-3, False), (0.0, True), (1e-3, True)):  # at 0: exactly a_x_d, still enough
         lx = PRM.p_m + 25.0 + slack
         assert commit_guard(z, np.array([20.0]), np.array([lx]), z, z, -far, z, PRM)[0] == expected
         fx = -(PRM.p_m + 56.25 + slack)
