@@ -13,6 +13,7 @@ from typing import Literal
 from pydantic import BaseModel, ConfigDict, Field
 
 from .grid import Cell
+from .modes import ModesConfig, modes_cells, run_modes
 from .paper_data import DECELS, PLANNERS
 from .rss_baseline import RssBaselineConfig, rss_cells, run_rss_baseline
 
@@ -159,6 +160,17 @@ EXPERIMENTS: dict[str, Experiment] = {
             {"samples": 40},
             True,
             run_rss_baseline,
+            False,
+        ),
+        Experiment(
+            "table1_safe_mode",
+            "The published Table 1 cells in safe mode (commit guard, worst-case leaders, monitor on) beside the "
+            "paper-faithful preset's (issue 12; safelane.experiments.modes).",
+            ModesConfig,
+            modes_cells,
+            {"samples": 40},
+            True,
+            run_modes,
             False,
         ),
     )

@@ -182,6 +182,10 @@ def _experiments(doc: Document, r: RunRecord) -> None:
             from .rss import section  # the RSS baseline's table and paragraph (docs/rss.md)
 
             section(doc, res.summary)
+        if name == "table1_safe_mode" and res.summary is not None and "table1" in r.results:
+            from .modes import section as modes_section  # paper-faithful vs safe mode (issue 12)
+
+            modes_section(doc, r.results["table1"].summary, res.summary)
 
 
 def _pivots(doc: Document, summary: pd.DataFrame, rows_key: str, cols_key: str, rates: tuple[str, ...]) -> None:

@@ -32,6 +32,7 @@ from ..params import Params
 from ..planners.base import ExpertPlanner
 from ..planners.nn import HEADS, MLPPlanner, head_bounds
 from ..planners.teacher import OptimalControlTeacher, TeacherConfig
+from ..sim.preset import load_preset
 from .closed_loop import DaggerConfig, EvalConfig, collect_states, evaluate_closed_loop
 from .data import DataConfig, label, sample_observations
 
@@ -67,6 +68,11 @@ class TrainConfig(BaseModel):
     params: Params = Field(default_factory=Params, description="Mechanical limits and geometry.")
     data: DataConfig = Field(default_factory=DataConfig)
     teacher: TeacherConfig = Field(default_factory=TeacherConfig)
+    teacher_preset: str | None = Field(
+        None,
+        description="Distil this preset's calibrated nominal planner (and use its params) instead of the "
+        "optimal-control teacher (issue 12: the NN planner of the paper-faithful Table 1).",
+    )
     model: ModelConfig = Field(default_factory=ModelConfig)
     optim: OptimConfig = Field(default_factory=OptimConfig)
     dagger: DaggerConfig = Field(default_factory=DaggerConfig)
@@ -182,6 +188,9 @@ def _train(torch, cfg: TrainConfig, out_dir: Path | str, progress: bool) -> Trai
     out_dir.mkdir(parents=True, exist_ok=True)
     torch.set_num_threads(cfg.threads)
     prm, teacher = cfg.params, OptimalControlTeacher(cfg.teacher)
+    if cfg.teacher_preset:
+        preset = load_preset(cfg.teacher_preset)
+        prm, teacher = preset.params, preset.nominal()
     rng = np.random.default_rng(cfg.seed)
     t_start = time.perf_counter()
     timings: dict[str, float] = {}
