@@ -98,10 +98,11 @@ def paragraph(view: pd.DataFrame) -> str:
         f"30 m/s it asks {ahead:.0f} m behind L1 and {behind:.0f} m ahead of F (response times 1 s and 2 s, "
         "brake_min 4 m/s²), against gaps of 17–22 m. With this world's limits (RSS_matched) it changes lanes, but "
         "its lateral safe distance lets the ego straddle the lane line next to a vehicle, which the paper counts as a "
-        f"p_m violation. What connectivity buys: with F {base.replace('_', ' ')}, CV_all completes "
-        f"{r(base, 'CV_all') - max(r(base, p) for p in rss):+.1%} more than the best RSS variant; "
-        f"within RSS, V2X (L1's promised bound as its brake_max) adds "
-        f"{r(base, 'RSS_V2X_matched') - r(base, 'RSS_matched'):+.1%} (RSS_V2X_matched vs "
+        f"p_m violation (RSS's safe distances are not the paper's p_m, so success rates compare different "
+        f"margins). What connectivity buys: with F {base.replace('_', ' ')}, CV_all completes "
+        f"{100 * (r(base, 'CV_all') - max(r(base, p) for p in rss)):+.1f} percentage points more than the best RSS "
+        f"variant, without a p_m violation; within RSS, V2X (L1's promised bound as its brake_max) adds "
+        f"{100 * (r(base, 'RSS_V2X_matched') - r(base, 'RSS_matched')):+.1f} points (RSS_V2X_matched vs "
         "RSS_matched)."
     )
     return " ".join(parts)
