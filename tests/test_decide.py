@@ -15,6 +15,8 @@ acceptance, and the library's acceptance must imply the reference with ``p_m −
 
 from __future__ import annotations
 
+import warnings
+
 import numpy as np
 import pytest
 
@@ -169,6 +171,15 @@ def test_decision_matches_brute_force_reference(family, n, seed):
     assert np.array_equal(verdict.completing, s["ego_y"] + s["ego_vy"] * PRM.dt + 0.5 * s["a_y"] * PRM.dt**2 >= 1.75)
 
 
+def test_decision_raises_no_floating_point_warnings():
+    # Divisions by zero and infinities inside are expected and handled; none may reach the caller as a warning.
+    s = _states(500, np.random.default_rng(3))
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        _library(s)
+        _library(_follower_dip_states(200, np.random.default_rng(4)))
+
+
 def _dip_state(**overrides) -> dict:
     """One row: the ego at ``y = 1.2`` (in the conflict zone, not completing), 20 m/s, F and L1 far unless
     overridden."""
@@ -246,6 +257,8 @@ def test_completion_guard_needs_both_followers_able_to_keep_p_m():
     # brake for at a_x_d.
     ok = _library(_crossing())
     assert ok.completing[0] and ok.ok[0]
+    on_the_boundary = _library(_crossing(ego_y=PRM.y_boundary, ego_vy=0.0))  # reaching it counts as crossing
+    assert on_the_boundary.completing[0] and on_the_boundary.ok[0]
     for close in ({"l1_x": PRM.p_m + 0.5, "l1_v": 10.0}, {"f_x": -PRM.p_m - 0.5, "f_v": 30.0}):
         verdict = _library(_crossing(**close))
         assert verdict.completing[0] and not verdict.ok[0], close
