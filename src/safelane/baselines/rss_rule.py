@@ -80,15 +80,11 @@ class RssRule:
         return chain[0].all(1), to_f[0], (chain[1] | ~ahead).all(1)
 
     def decide(self, inp, params: Params):
-        """``(behaviour, a_x, a_y, completing)`` for the rule's rows (see the module docstring)."""
-        from ..shield.decide import ABORT, COMPLETED, HESITATE, PROCEED  # the shield imports this module
-
+        """``(proceed, hesitate, respond, a_x, a_y, completing)`` for the rule's rows (see the module docstring;
+        rows in none of the three are complete: following)."""
         rss = rss_params_for(self.parameter_set, params)
         dt = params.dt
-        n = inp.ego_x.shape[0]
         a_x, a_y = inp.a_x.copy(), inp.a_y.copy()
-        behaviour = np.full(n, COMPLETED)
-        completing = np.zeros(n, bool)
         active = ~inp.completed
 
         ok_chain, ok_f, _ = self.safe_after(inp, a_x, a_y, params)
@@ -96,7 +92,6 @@ class RssRule:
         ok_chain_h, ok_f_h, _ = self.safe_after(inp, a_x, inp.a_y_hesitate, params)
         hesitate = active & ~proceed & ok_chain_h & ok_f_h
         respond = active & ~proceed & ~hesitate
-        behaviour[proceed], behaviour[hesitate], behaviour[respond] = PROCEED, HESITATE, ABORT
         a_y = np.where(hesitate, inp.a_y_hesitate, a_y)
 
         # The proper response: lateral return, braking laterally at lat_brake_min or more while still moving out;
@@ -116,4 +111,4 @@ class RssRule:
         moving = proceed | hesitate
         ey_end = inp.ego_y + inp.ego_vy * dt + 0.5 * a_y * dt * dt
         completing = moving & (ey_end >= params.y_boundary)
-        return behaviour, a_x, a_y, completing
+        return proceed, hesitate, respond, a_x, a_y, completing

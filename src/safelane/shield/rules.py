@@ -10,8 +10,10 @@ their code path is the paper's, unchanged.
 * ``rss_matched`` — the same rule with this world's limits (``RssParams.matched``; ``RSS_matched``,
   ``RSS_V2X_matched``).
 
-A rule is an object with ``decide(inputs: RuleInputs, params) -> (behaviour, a_x, a_y, completing)`` (each ``(k,)``
-over the rule's rows); register it here and name it in a :class:`~safelane.planners.variants.Variant`.
+A rule is an object with ``decide(inputs: RuleInputs, params) -> (proceed, hesitate, respond, a_x, a_y, completing)``
+(each ``(k,)`` over the rule's rows; a row in none of the three masks was complete and follows); register it here
+(wrapped in :class:`Coded`, which turns the masks into the shield's behaviour codes; a responding row is an abort) and
+name it in a :class:`~safelane.planners.variants.Variant`.
 """
 
 from __future__ import annotations
@@ -22,8 +24,26 @@ import numpy as np
 
 from ..baselines.rss_rule import RssRule
 from ..planners.variants import VARIANT_NAMES, VARIANTS
+from .decide import ABORT, COMPLETED, HESITATE, PROCEED
 
-DECISION_RULES = {"rss": RssRule("ad_rss"), "rss_matched": RssRule("matched")}
+
+class Coded:
+    """A rule's masks as the shield's behaviour codes: ``decide(inputs, params) -> (behaviour, a_x, a_y,
+    completing)``."""
+
+    def __init__(self, rule):
+        self.rule = rule
+
+    def __repr__(self) -> str:
+        return repr(self.rule)
+
+    def decide(self, inputs, params):
+        proceed, hesitate, respond, a_x, a_y, completing = self.rule.decide(inputs, params)
+        behaviour = np.select([proceed, hesitate, respond], [PROCEED, HESITATE, ABORT], COMPLETED)
+        return behaviour, a_x, a_y, completing
+
+
+DECISION_RULES = {"rss": Coded(RssRule("ad_rss")), "rss_matched": Coded(RssRule("matched"))}
 
 _RULE_OF = np.array([v.rule for v in VARIANTS.values()])
 
