@@ -27,6 +27,7 @@ from safelane.safety import plan_evasion
 from safelane.safety.lateral import LATERAL_TOL_M
 from safelane.safety.longitudinal import FEASIBILITY_TOL_M
 from safelane.shield.decide import check_candidate, commit_guard, hesitate_lateral, plan_motion
+from safelane.shield.policies import COMPLETION_RULES
 
 PRM = Params()
 #: Agreement band [m]: far above the library's tolerances (1 nm) and the reference's grid error (~1e-6 m).
@@ -62,9 +63,11 @@ def _motions(x0, v0, worst, other, rng):
     return _roll(x0[:, None], v0[:, None], acc, PRM.dt / (N_T - 1))
 
 
-def ref_check_candidate(s: dict, margin_shift: float, rng) -> np.ndarray:
+def ref_check_candidate(s: dict, margin_shift: float, rng, rule: str = "commit_guard") -> np.ndarray:
     """The brute-force verdict on the states ``s`` (1-D arrays), with every margin ``p_m + margin_shift`` and the
-    conflict zone entered ``margin_shift`` beyond ``y_safe`` (so a positive shift is strictly more cautious)."""
+    conflict zone entered ``margin_shift`` beyond ``y_safe`` (so a positive shift is strictly more cautious).
+    ``rule``: the completion rule for a step crossing the lane boundary — ``commit_guard`` (both followers can
+    keep ``p_m`` braking at ``a_x_d``) or ``paper_evasion`` (the evasion check decides, as on every step)."""
     p_m = PRM.p_m + margin_shift
     b = s["ego_x"].shape[0]
     t = np.linspace(0.0, PRM.dt, N_T)
@@ -89,7 +92,23 @@ def ref_check_candidate(s: dict, margin_shift: float, rng) -> np.ndarray:
     keep_l = follow_gap_margin(np.full(b, PRM.a_x_d), ex, evx, lx, lv, s["l1_decel"], p_m)[0] >= 0.0
     keep_f = follow_gap_margin(np.full(b, PRM.a_x_d), fx, fv, ex, evx, np.full(b, PRM.a_x_d), p_m)[0] >= 0.0
     completing = ey >= PRM.y_boundary
-    return period_ok & np.where(completing, keep_l & keep_f, evasion.exists)
+    crossing_ok = keep_l & keep_f if rule == "commit_guard" else evasion.exists
+    return period_ok & np.where(completing, crossing_ok, evasion.exists)
+
+
+def predicted_state(s: dict) -> tuple:
+    """The state at the end of the period under the proposal and the worst case (plain kinematics, stopping)."""
+
+    def step(x, v, a):
+        t = np.where(a < 0, np.minimum(v / np.where(a < 0, -a, 1.0), PRM.dt), PRM.dt)
+        return x + v * t + 0.5 * a * t * t, np.maximum(v + a * t, 0.0)
+
+    ex, evx = step(s["ego_x"], s["ego_vx"], s["a_x"])
+    lx, lv = step(s["l1_x"], s["l1_v"], -s["l1_decel"])
+    fx, fv = step(s["f_x"], s["f_v"], np.where(s["f_aggressive"], PRM.a_x_a, -PRM.a_x_d))
+    ey = s["ego_y"] + s["ego_vy"] * PRM.dt + 0.5 * s["a_y"] * PRM.dt**2
+    evy = s["ego_vy"] + s["a_y"] * PRM.dt
+    return ex, ey, evx, evy, lx, lv, s["l1_decel"], fx, fv, s["f_aggressive"]
 
 
 def _states(n: int, rng) -> dict:
@@ -165,10 +184,31 @@ def test_decision_matches_brute_force_reference(family, n, seed):
     assert not (verdict.ok & ~loose).any(), np.flatnonzero(verdict.ok & ~loose)[:10]
     # Not vacuous: both verdicts occur clearly (outside the band).
     assert strict.sum() > n // 20 and (~loose).sum() > n // 20
-    # The plans cover exactly the accepted rows, and every one of them is a feasible evasion.
+    # The plans cover exactly the accepted rows, and each is the evasion plan from the predicted state.
     rows = np.sort(np.concatenate([r for r, _ in verdict.plans]))
     assert np.array_equal(rows, np.flatnonzero(verdict.ok))
     assert np.array_equal(verdict.completing, s["ego_y"] + s["ego_vy"] * PRM.dt + 0.5 * s["a_y"] * PRM.dt**2 >= 1.75)
+    predicted = predicted_state(s)
+    for r, plan in verdict.plans:
+        want = plan_evasion(*(a[r] for a in predicted), PRM)
+        assert plan.params == PRM and np.array_equal(plan.feasible, want.feasible)
+        for field in ("t_y_f", "t_x1", "t_brake_end", "t_y_end"):
+            np.testing.assert_allclose(getattr(plan, field), getattr(want, field), rtol=1e-9, atol=1e-9)
+
+
+def test_paper_completion_rule_decides_the_crossing_step_by_the_evasion_check():
+    rng = np.random.default_rng(5)
+    s = _states(3000, rng)
+    s["ego_y"], s["ego_vy"] = rng.uniform(1.5, 1.9, 3000), rng.uniform(0.0, 1.2, 3000)  # mostly crossing steps
+    verdict = check_candidate(*(s[k] for k in ORDER), PRM, completion=COMPLETION_RULES["paper_evasion"])
+    strict = ref_check_candidate(s, EPS, np.random.default_rng(6), rule="paper_evasion")
+    loose = ref_check_candidate(s, -EPS, np.random.default_rng(6), rule="paper_evasion")
+    assert not (strict & ~verdict.ok).any() and not (verdict.ok & ~loose).any()
+    # The two rules clearly differ on crossing steps, both ways.
+    guard_strict = ref_check_candidate(s, EPS, np.random.default_rng(6))
+    guard_loose = ref_check_candidate(s, -EPS, np.random.default_rng(6))
+    assert (verdict.completing & strict & ~guard_loose).sum() > 10
+    assert (verdict.completing & guard_strict & ~loose).sum() > 10
 
 
 def test_decision_raises_no_floating_point_warnings():
