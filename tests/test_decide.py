@@ -322,24 +322,30 @@ def test_hesitate_brings_the_lateral_speed_to_zero_as_far_as_a_y_m_allows(ego_vy
 
 def _plans_and_ages():
     """Plans of the named scenarios whose longitudinal plan switches (accelerate → brake → follow L1 to rest, L1
-    never braking, a fast lateral return), each with periods starting just before each of its switch times, on a
-    ``(n_scenarios, n_ages)`` batch."""
+    never braking, a fast lateral return; a slow L1 never braking, one stopping at 1 s at 0.5 m/s²), each with
+    periods starting just before each of its switch times and one around 1 s, on a ``(n_scenarios, n_ages)``
+    batch."""
     states = [scenarios.follow_l1_to_stop(), scenarios.still_braking_at_horizon(), scenarios.follow_moving_l1(),
               scenarios.past_lane_boundary_returning_fast(), scenarios.ego_stops_before_horizon(),
-              {**scenarios.open_gap_collaborative_follower(), "l1_decel": 0.0}]  # fmt: skip
+              {**scenarios.open_gap_collaborative_follower(), "l1_decel": 0.0},
+              {**scenarios.open_gap_collaborative_follower(), "l1_v": 1.0, "l1_decel": 0.0},
+              {**scenarios.open_gap_collaborative_follower(), "l1_v": 0.5, "l1_decel": 0.5}]  # fmt: skip
     cols = {k: np.array([s[k] for s in states]) for k in states[0]}
     plan = plan_evasion(**cols, params=PRM)
     l1_stop = np.where(cols["l1_decel"] > 0, cols["l1_v"] / np.maximum(cols["l1_decel"], 1e-300), np.inf)
     switches = np.stack([plan.t_x1, plan.t_brake_end, l1_stop, plan.t_y_f, plan.t_y_switch, plan.t_y_end], -1)
     ages = np.clip(np.nan_to_num(switches, posinf=0.0) - 0.04, 0.0, None)  # each switch 0.04 s into a period
-    batch = plan.take((slice(None), None))  # (n, 1) against ages (n, 6)
+    ages = np.concatenate([ages, np.full((len(states), 1), 0.96)], -1)  # and a period around t = 1 s
+    batch = plan.take((slice(None), None))  # (n, 1) against ages (n, 7)
     return plan, batch, np.broadcast_to(ages, ages.shape).copy(), l1_stop
 
 
 def test_plan_motion_knots_are_the_periods_ends_and_every_switch_inside_it():
     plan, batch, ages, l1_stop = _plans_and_ages()
     dt = PRM.dt
-    knots, *_ = plan_motion(batch, ages, dt)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # L1 never braking: no division by zero on the way to "never stops"
+        knots, *_ = plan_motion(batch, ages, dt)
     assert knots.shape == (*ages.shape, 8)
     assert (np.diff(knots, axis=-1) >= 0).all() and (knots[..., 0] == 0).all() and (knots[..., -1] == dt).all()
     switches = [plan.t_x1, plan.t_brake_end, l1_stop, plan.t_y_f, plan.t_y_switch, plan.t_y_end]
