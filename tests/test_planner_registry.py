@@ -23,11 +23,12 @@ def test_every_registered_nominal_planner_runs_a_tiny_simulation(name):
 
 
 def test_registry_names_and_types():
-    assert NOMINAL_NAMES == ("expert", "mlp", "teacher")
+    assert NOMINAL_NAMES == ("expert", "mlp", "teacher", "mlp_paper")
     assert tuple(NOMINAL_PLANNERS) == NOMINAL_NAMES
     assert isinstance(get_nominal("expert"), planners.ExpertPlanner)
     assert isinstance(get_nominal("mlp"), planners.MLPPlanner)
     assert isinstance(get_nominal("teacher"), planners.OptimalControlTeacher)
+    assert isinstance(get_nominal("mlp_paper"), planners.MLPPlanner)
 
 
 def test_every_planner_class_the_package_exports_is_registered():

@@ -90,7 +90,10 @@ def _illustrative_example(cfg: Fig5Config, preset: Preset, seed: int, nominal) -
     others = [p for p in cfg.planners if p != "CV_all"]
     if "CV_all" not in success or not others:
         return None
-    wanted = success["CV_all"] & ((~success[others]).any(axis=1) | (aborts[others] > 0).any(axis=1))
+    # The paper's own example: CV_all completes and every other planner turns back; else any other one does.
+    wanted = success["CV_all"] & (~success[others]).all(axis=1)
+    if not wanted.any():
+        wanted = success["CV_all"] & ((~success[others]).any(axis=1) | (aborts[others] > 0).any(axis=1))
     if not wanted.any():
         return None
     row = int(np.flatnonzero(wanted.to_numpy())[0])

@@ -11,6 +11,7 @@ from collections.abc import Callable
 from dataclasses import dataclass
 
 from .base import ExpertPlanner, NominalPlanner
+from .distilled import load_distilled_planner
 from .nn import load_default_planner
 from .teacher import OptimalControlTeacher
 
@@ -30,6 +31,11 @@ NOMINAL_PLANNERS: dict[str, NominalEntry] = {
         NominalEntry("expert", ExpertPlanner, "Rule-based PD planner (gap middle at L1's speed, smooth lateral)."),
         NominalEntry("mlp", load_default_planner, "The shipped neural planner (two MLPs; see models/MODEL_CARD.md)."),
         NominalEntry("teacher", OptimalControlTeacher, "Receding-horizon optimal-control teacher of the networks."),
+        NominalEntry(
+            "mlp_paper",
+            load_distilled_planner,
+            "The network distilled from the paper preset's calibrated rule-based planner (models/distill_paper.yaml).",
+        ),
     )
 }
 

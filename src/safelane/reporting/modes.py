@@ -34,3 +34,31 @@ def section(doc: Document, table1: pd.DataFrame, safe: pd.DataFrame) -> None:
                 row.append("—")
         rows.append(row)
     doc.table(["N", "a [m/s²]", *PLANNERS], rows)
+
+
+def nn_section(doc: Document, rules: pd.DataFrame, nn: pd.DataFrame) -> None:
+    """Table 1 with the distilled network (``mlp_paper``) beside the rule-based planner it imitates."""
+    from ..experiments.nn_table import nn_beside_rules
+
+    frame = nn_beside_rules(rules, nn)
+    published = frame.dropna(subset=["paper_success"])
+    gap = frame["nn_minus_rules"].abs()
+    doc.paragraph(
+        f"Success per cell, NN / rule-based (/ paper where published). NN vs rule-based: mean absolute difference "
+        f"**{gap.mean():.3f}**, largest **{gap.max():.3f}**; NN vs the paper's published cells: mean absolute "
+        f"difference **{(published['nn'] - published['paper_success']).abs().mean():.3f}** (rule-based: "
+        f"{(published['rule_based'] - published['paper_success']).abs().mean():.3f})."
+    )
+    cell = frame.set_index(["n_leaders", "decel", "planner"])
+    rows = []
+    for (n, d), _ in frame.groupby(["n_leaders", "decel"], sort=True):
+        row = [n, f"{d:g}"]
+        for p in PLANNERS:
+            if (n, d, p) not in cell.index:
+                row.append("—")
+                continue
+            c = cell.loc[(n, d, p)]
+            paper = "" if pd.isna(c["paper_success"]) else f" / {c['paper_success']:g}"
+            row.append(f"{c['nn']:.3f} / {c['rule_based']:.3f}{paper}")
+        rows.append(row)
+    doc.table(["N", "a [m/s²]", *PLANNERS], rows)

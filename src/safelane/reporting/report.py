@@ -186,6 +186,10 @@ def _experiments(doc: Document, r: RunRecord) -> None:
             from .modes import section as modes_section  # paper-faithful vs safe mode (issue 12)
 
             modes_section(doc, r.results["table1"].summary, res.summary)
+        if name == "table1_nn" and res.summary is not None and "table1" in r.results:
+            from .modes import nn_section  # the NN planner's Table 1 beside the rule-based one (issue 12)
+
+            nn_section(doc, r.results["table1"].summary, res.summary)
 
 
 def _pivots(doc: Document, summary: pd.DataFrame, rows_key: str, cols_key: str, rates: tuple[str, ...]) -> None:
