@@ -1,0 +1,74 @@
+"""The public evasion API's contract beyond its values: keyword defaults, NumPy scalars for scalar inputs, large
+batches (evaluated in chunks) equal to small ones, and no floating-point warnings reaching the caller."""
+
+from __future__ import annotations
+
+import warnings
+
+import numpy as np
+import pytest
+
+import scenarios
+from safelane import Params
+from safelane.safety import evasion_exists, follower_position, plan_evasion
+from safelane.safety.evasion import CHUNK
+
+PRM = Params()
+
+
+def _margin_matters() -> dict:
+    """L1 8.5 m ahead and F 8.5 m behind, everyone at 25 m/s, nobody braking: enough for p_m = 7, not for the
+    human-driven p_m_human = 10."""
+    return {**scenarios.open_gap_collaborative_follower(), "l1_p": 8.5, "l1_decel": 0.0, "f_p": -8.5}
+
+
+@pytest.mark.parametrize("flag", ["leader_human", "follower_human"])
+def test_neighbours_are_automated_unless_said_otherwise(flag):
+    s = _margin_matters()
+    assert bool(evasion_exists(**s, params=PRM)) is True
+    assert bool(evasion_exists(**s, params=PRM, **{flag: False})) is True
+    assert bool(evasion_exists(**s, params=PRM, **{flag: True})) is False
+    assert bool(plan_evasion(**s, params=PRM).feasible) is True
+    assert bool(plan_evasion(**s, params=PRM, **{flag: True}).feasible) is False
+
+
+def test_scalar_inputs_give_numpy_scalars():
+    exists = evasion_exists(**scenarios.open_gap_collaborative_follower(), params=PRM)
+    assert type(exists) is np.bool_
+    for aggressive in (True, False):
+        pos = follower_position(-20.0, 25.0, aggressive, 1.0, PRM)
+        assert type(pos) is np.float64
+
+
+def _random_states(shape, rng) -> dict:
+    """Random states of batch ``shape`` (2-D), with arguments of several broadcastable shapes."""
+    u = rng.uniform
+    return dict(ego_px=u(-1, 1, (shape[0], 1)), ego_py=u(-0.2, 2.5, shape), ego_vx=u(0, 30, shape),
+                ego_vy=u(-1, 1, shape), l1_p=u(5, 40, shape), l1_v=u(0, 30, shape[-1:]), l1_decel=u(0, 8, shape),
+                f_p=u(-40, -5, shape), f_v=u(0, 30, shape),
+                follower_aggressive=rng.uniform(0, 1, shape) < 0.5)  # fmt: skip
+
+
+def test_a_batch_larger_than_a_chunk_equals_its_rows_evaluated_apart():
+    shape = (3, CHUNK // 2 + 7)  # 3 rows of fewer than CHUNK scenarios, together more: the chunked path
+    s = _random_states(shape, np.random.default_rng(0))
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        big = evasion_exists(**s, params=PRM)
+    assert big.dtype == np.bool_ and big.shape == shape
+    rows = [evasion_exists(**{k: np.broadcast_to(v, shape)[i] for k, v in s.items()}, params=PRM) for i in range(3)]
+    assert np.array_equal(big, np.stack(rows))
+    assert big.any() and not big.all()
+
+
+def test_no_floating_point_warnings_at_the_edges():
+    edges = dict(ego_px=0.0, ego_py=np.array([0.0, 0.85, 1.75, 3.5]), ego_vx=np.array([0.0, 0.0, 30.0, 0.0]),
+                 ego_vy=np.array([0.0, 0.0, -2.0, 0.0]), l1_p=np.array([7.0, 7.0, 100.0, 7.0]), l1_v=0.0,
+                 l1_decel=np.array([0.0, 8.0, 8.0, 0.0]), f_p=-7.0, f_v=0.0,
+                 follower_aggressive=np.array([False, True, False, True]))  # fmt: skip
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        evasion_exists(**edges, params=PRM)
+        plan_evasion(**edges, params=PRM)
+        follower_position(np.zeros(3), np.array([0.0, 5.0, 30.0]), np.array([False, False, True]), 0.0, PRM)
+        follower_position(0.0, np.array([0.0, 5.0, 30.0]), False, np.array([0.0, 1.0, 100.0]), PRM)
