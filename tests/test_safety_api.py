@@ -72,3 +72,9 @@ def test_no_floating_point_warnings_at_the_edges():
         plan_evasion(**edges, params=PRM)
         follower_position(np.zeros(3), np.array([0.0, 5.0, 30.0]), np.array([False, False, True]), 0.0, PRM)
         follower_position(0.0, np.array([0.0, 5.0, 30.0]), False, np.array([0.0, 1.0, 100.0]), PRM)
+
+
+def test_a_chain_unsafe_flag_that_does_not_broadcast_is_named():
+    batch = {**scenarios.open_gap_collaborative_follower(), "ego_px": np.zeros(4)}
+    with pytest.raises(ValueError, match=r"\bchain_unsafe\b"):
+        plan_evasion(**batch, params=PRM, chain_unsafe=np.zeros(3, dtype=bool))
