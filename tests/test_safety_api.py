@@ -78,3 +78,18 @@ def test_a_chain_unsafe_flag_that_does_not_broadcast_is_named():
     batch = {**scenarios.open_gap_collaborative_follower(), "ego_px": np.zeros(4)}
     with pytest.raises(ValueError, match=r"\bchain_unsafe\b"):
         plan_evasion(**batch, params=PRM, chain_unsafe=np.zeros(3, dtype=bool))
+
+
+def test_evasion_cores_tolerance_reaches_the_leader_check():
+    # evasion_core's tol is the feasibility tolerance of both checks: a leader gap 5 mm inside p_m (L1 stopped, the
+    # ego and F stopped) passes with tol = 1 cm and fails with the default 1 nm.
+    from safelane.safety._backend import ARRAY
+    from safelane.safety.evasion import evasion_core
+
+    s = {**scenarios.open_gap_collaborative_follower(), "ego_vx": 0.0, "l1_v": 0.0, "l1_p": PRM.p_m - 0.005, "f_v": 0.0}
+    args = [np.atleast_1d(np.asarray(s[k], dtype=float)) for k in
+            ("ego_px", "ego_py", "ego_vx", "ego_vy", "l1_p", "l1_v", "l1_decel", "f_p", "f_v")]  # fmt: skip
+    aggressive = np.atleast_1d(s["follower_aggressive"])
+    loose, _ = evasion_core(ARRAY, *args, aggressive, PRM.p_m, PRM.p_m, PRM, tol=0.01)
+    tight, _ = evasion_core(ARRAY, *args, aggressive, PRM.p_m, PRM.p_m, PRM)
+    assert loose[0] and not tight[0]
