@@ -91,7 +91,7 @@ class ClosedLoop:
         self.uses_chain = np.array([VARIANTS[name].uses_chain for name in VARIANT_NAMES])[batch.variant]
         self.shield_config = ShieldConfig(
             assessment=cfg.assessment, assess_window=cfg.assess_window, assess_threshold=cfg.assess_threshold,
-            monitor=cfg.monitor, enabled=cfg.supervised,
+            monitor=cfg.monitor, enabled=cfg.supervised, completion=cfg.completion,
             assess_delay_s=cfg.assess_delay_s, assess_miss=cfg.assess_miss,
         )  # fmt: skip
         self.planner_name = getattr(nominal, "__name__", type(nominal).__name__)
