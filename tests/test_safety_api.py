@@ -93,3 +93,14 @@ def test_evasion_cores_tolerance_reaches_the_leader_check():
     loose, _ = evasion_core(ARRAY, *args, aggressive, PRM.p_m, PRM.p_m, PRM, tol=0.01)
     tight, _ = evasion_core(ARRAY, *args, aggressive, PRM.p_m, PRM.p_m, PRM)
     assert loose[0] and not tight[0]
+
+
+def test_follower_check_spans_a_return_of_exactly_one_second():
+    # Returning at 2 m/s from 1.25 m beyond y_s, braking the return at a_y_m: t_y_f = 1 s exactly. An aggressive F
+    # 0.5 m outside p_m and 10 m/s faster is fine at t = 0 and too close within the second: no evasion.
+    state = dict(ego_px=0.0, ego_py=2.1, ego_vx=20.0, ego_vy=-2.0, l1_p=100.0, l1_v=20.0, l1_decel=0.0,
+                 f_p=-(PRM.p_m + 0.5), f_v=30.0, follower_aggressive=True)  # fmt: skip
+    batch = {k: np.array([v]) for k, v in state.items()}
+    plan = plan_evasion(**batch, params=PRM)
+    assert plan.t_y_f[0] == 1.0 and not plan.feasible[0]
+    assert not evasion_exists(**batch, params=PRM)[0]
