@@ -104,3 +104,16 @@ def test_follower_check_spans_a_return_of_exactly_one_second():
     plan = plan_evasion(**batch, params=PRM)
     assert plan.t_y_f[0] == 1.0 and not plan.feasible[0]
     assert not evasion_exists(**batch, params=PRM)[0]
+
+
+def test_every_scenario_of_a_chunked_batch_is_evaluated():
+    # Egos in the middle of their own lane have nothing to evade (an evasion exists); the first scenario of the
+    # second batch is one without an evasion (an aggressive F 9 m behind, closing): both verdicts, first and last.
+    n = 2 * CHUNK + 3
+    inside = {k: np.full(n, v) for k, v in scenarios.open_gap_collaborative_follower().items()}
+    inside["ego_py"][:], inside["ego_vy"][:] = 0.0, 0.0
+    assert evasion_exists(**inside, params=PRM).all()
+    for k, v in scenarios.tight_gap_aggressive_follower().items():
+        inside[k][0] = v
+    got = evasion_exists(**inside, params=PRM)
+    assert not got[0] and got[1:].all()
