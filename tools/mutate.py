@@ -36,6 +36,7 @@ WORK = ROOT / "mutants"
 EQUIVALENT_FILE = ROOT / "tools" / "mutation_equivalent.txt"
 
 SAFETY_TESTS = ("tests/test_safety_golden.py", "tests/test_safety_reference.py", "tests/test_safety_optimality.py",
+                "tests/test_safety_api.py",
                 "tests/test_safety_shapes.py", "tests/test_safety_errors.py")  # fmt: skip
 #: group: (modules under src/safelane, test files)
 GROUPS = {
@@ -170,6 +171,10 @@ def table(strict: bool) -> int:
     print("|---|---:|---:|---:|---:|---:|---:|")
     failing = False
     for module, n, killed, n_eq, survived, unchecked in rows:
+        if n == 0:
+            print(f"| `{module}` | – | – | – | – | – | not run (`tools/mutate.py run GROUP`) |")
+            failing = True
+            continue
         score = killed / max(n - n_eq, 1)
         print(f"| `{module}` | {n} | {killed} | {n_eq} | {len(survived)} | {unchecked} | {100 * score:.1f} % |")
         core = module.startswith(("safety/", "shield/"))
