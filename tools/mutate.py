@@ -49,7 +49,7 @@ GROUPS = {
                ("tests/test_shield.py", "tests/test_sim_assessment.py", "tests/test_sim_variants.py",
                 "tests/test_guarantee.py")),
     "sim": (("sim/checks.py", "sim/kinematics.py"), ("tests/test_sim_kinematics.py", "tests/test_sim_safety.py")),
-    "v2x": (("v2x.py",), ("tests/test_v2x.py", "tests/test_shield.py")),
+    "v2x": (("v2x.py",), ("tests/test_v2x.py", "tests/test_shield.py", "tests/test_guarantee.py")),
     "claims": (("experiments/claims.py",), ("tests/test_claims.py", "tests/test_experiments.py")),
 }  # fmt: skip
 KILLED = {1, 3, 36, 24, -24, 152, 255, 37}  # tests failed (or pytest errored), timed out, or type check caught it
