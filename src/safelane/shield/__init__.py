@@ -7,8 +7,9 @@ completed, the accelerations to apply, the verified plan, the worst case used, a
 See docs/architecture.md.
 """
 
-from .core import Decision, Shield, ShieldConfig, ShieldState, chain_analysis, init, step
+from .core import Shield, ShieldConfig, ShieldState, chain_analysis, init, step
 from .decide import ABORT, COMPLETED, HESITATE, PROCEED
+from .decision import Decision
 from .monitor import BREACH_KINDS, Breach
 from .policies import ASSESSMENTS, COMPLETION_RULES
 from .situation import LaneFrame, Situation

@@ -24,16 +24,16 @@ from dataclasses import dataclass
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field, field_validator
 
-from .._motion import advance
 from ..params import Params
 from ..safety._backend import ARRAY
-from ..safety.chain import braked_position, propagate_chain
+from ..safety.chain import propagate_chain
 from ..safety.evasion import plan_evasion
 from ..safety.plan import EvasionPlan
 from ..safety.responsible import responsible_accel, responsible_bound
 from . import assessment as assess
 from .decide import ABORT, COMPLETED, HESITATE, PROCEED, check_candidate, hesitate_lateral, plan_motion
-from .monitor import Breach, observe_breaches
+from .decision import Decision
+from .monitor import Breach, Snapshot, observe_breaches
 from .policies import ASSESSMENTS, COMPLETION_RULES, check_policy, variant_flags
 from .proposals import check_proposal
 from .rules import RuleInputs, rule_rows
@@ -67,23 +67,6 @@ class ShieldConfig(BaseModel):
 
 
 @dataclass(frozen=True)
-class Snapshot:
-    """What the monitor needs from the previous period: the chain, F and the ego, the chain's bounds and what the
-    held plan assumed (``(B,)`` or ``(B, M)``)."""
-
-    chain_x: np.ndarray
-    chain_v: np.ndarray
-    bounds: np.ndarray
-    n_connected: np.ndarray
-    f_x: np.ndarray
-    f_v: np.ndarray
-    f_limit: np.ndarray  # the largest acceleration a responsible follower of the ego could apply
-    plan_l1_decel: np.ndarray
-    plan_f_aggr: np.ndarray
-    active: np.ndarray
-
-
-@dataclass(frozen=True)
 class ShieldState:
     """Everything the shield carries from one period to the next (the batch on the leading axis)."""
 
@@ -95,64 +78,6 @@ class ShieldState:
     breach: Breach
     completed: np.ndarray
     last: Snapshot | None  # the previous period, for the monitor
-
-
-@dataclass(frozen=True)
-class Decision:
-    """The shield's answer for one period (``(B,)`` arrays unless noted).
-
-    Attributes:
-        behaviour: :data:`PROCEED`, :data:`HESITATE`, :data:`ABORT` or :data:`COMPLETED` (the lane change is done;
-            the ego follows L1 responsibly).
-        a_x, a_y: the accelerations to apply for the period [m/s²] (shield frame). For an aborting row they are the
-            held plan's at the period's start; the plan switches inside the period, so apply :meth:`abort_motion`
-            where the simulator can (exact), or re-ask the shield every period.
-        completing: this period's motion takes the ego's centre across the lane boundary.
-        invalid: the proposal was invalid (non-finite or out of range) and never executed.
-        plan, plan_t0: the held plan after this decision (verified from the predicted state at the period's end).
-        l1_decel: L1's worst-case deceleration used; f_aggressive: F's assumed type.
-        breach: the assumption monitor's record (which assumption broke, and when).
-        nominal_x, nominal_y: the proposal as given (after the type and shape checks).
-    """
-
-    behaviour: np.ndarray
-    a_x: np.ndarray
-    a_y: np.ndarray
-    completing: np.ndarray
-    invalid: np.ndarray
-    plan: EvasionPlan
-    plan_t0: np.ndarray
-    l1_decel: np.ndarray
-    f_aggressive: np.ndarray
-    breach: Breach
-    nominal_x: np.ndarray
-    nominal_y: np.ndarray
-    _abort: tuple  # (rows, knots, px, vx, py, vy) of the aborting rows' exact motion over the period
-
-    @property
-    def intervened(self) -> np.ndarray:
-        """The executed command differs from the proposal (hesitate, abort, or an invalid proposal)."""
-        return (self.behaviour == HESITATE) | (self.behaviour == ABORT) | self.invalid
-
-    def abort_motion(self):
-        """``(rows, knots, px, vx, py, vy)``: the exact motion of the aborting rows over the period (knots relative
-        to its start, shield frame)."""
-        return self._abort
-
-    def reasons(self) -> list[str]:
-        """A readable reason per row."""
-        names = {PROCEED: "proceed: the proposal keeps a safe evasion", COMPLETED: "completed: following L1"}
-        out = []
-        for i, code in enumerate(self.behaviour.tolist()):
-            why = names.get(code)
-            if code == HESITATE:
-                why = "hesitate: " + ("invalid proposal" if self.invalid[i] else "the proposal leaves no safe evasion")
-            elif code == ABORT:
-                why = "abort: neither the proposal nor hesitating keeps a safe evasion; executing the held plan"
-            if self.breach.flags[i].any():
-                why += " (assumptions breached: most conservative worst case)"
-            out.append(why)
-        return out
 
 
 def chain_analysis(situation: Situation, prm: Params):
@@ -403,11 +328,3 @@ class Shield:
                              f"{len(self.state.completed)}")  # fmt: skip
         self.state, decision = step(self.state, situation, proposal, self.params, self.config, self.variant)
         return decision
-
-
-def predicted_positions(snapshot: Snapshot, dt: float):
-    """Where the monitor expects the chain and F at the end of the period at the latest/earliest: the chain
-    braking at its bounds (lowest positions), F at its responsible limit (highest position)."""
-    tx = braked_position(ARRAY, snapshot.chain_x, snapshot.chain_v, snapshot.bounds, dt)
-    fx, _ = advance(snapshot.f_x, snapshot.f_v, np.where(np.isinf(snapshot.f_limit), 0.0, snapshot.f_limit), dt)
-    return tx, fx

@@ -25,6 +25,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .._motion import advance
 from ..params import Params
 from ..safety._backend import ARRAY
 from ..safety.chain import braked_position
@@ -51,6 +52,23 @@ class Breach:
         return self.flags.any(1)
 
 
+@dataclass(frozen=True)
+class Snapshot:
+    """What the monitor needs from the previous period: the chain, F and the ego, the chain's bounds and what the
+    held plan assumed (``(B,)`` or ``(B, M)``)."""
+
+    chain_x: np.ndarray
+    chain_v: np.ndarray
+    bounds: np.ndarray
+    n_connected: np.ndarray
+    f_x: np.ndarray
+    f_v: np.ndarray
+    f_limit: np.ndarray  # the largest acceleration a responsible follower of the ego could apply
+    plan_l1_decel: np.ndarray
+    plan_f_aggr: np.ndarray
+    active: np.ndarray
+
+
 def observe_breaches(prev: Breach, last, situation, prm: Params, t_now: float) -> Breach:
     """The record after one period: ``last`` (:class:`~safelane.shield.core.Snapshot`) is what the shield knew and
     assumed at the period's start, ``situation`` what it sees at its end. A vehicle that braked no harder than
@@ -58,8 +76,6 @@ def observe_breaches(prev: Breach, last, situation, prm: Params, t_now: float) -
     stopping); an F no more pushy than a responsible follower of the ego is at or behind the position its
     responsible limit would give it. Positions are compared to ``TOL_M``. Where the chain changed length (a
     vehicle left or joined it) the leader comparisons are skipped for that period."""
-    from .core import predicted_positions
-
     bsz = len(prev.first_s)
     flags = np.zeros((bsz, len(BREACH_KINDS)), bool)
     lowest, f_highest = predicted_positions(last, prm.dt)
@@ -75,3 +91,11 @@ def observe_breaches(prev: Breach, last, situation, prm: Params, t_now: float) -
     new = flags & ~prev.flags
     first = np.where(np.isnan(prev.first_s) & new.any(1), t_now, prev.first_s)
     return Breach(flags=prev.flags | flags, first_s=first)
+
+
+def predicted_positions(snapshot: Snapshot, dt: float):
+    """Where the monitor expects the chain and F at the end of the period at the latest/earliest: the chain
+    braking at its bounds (lowest positions), F at its responsible limit (highest position)."""
+    tx = braked_position(ARRAY, snapshot.chain_x, snapshot.chain_v, snapshot.bounds, dt)
+    fx, _ = advance(snapshot.f_x, snapshot.f_v, np.where(np.isinf(snapshot.f_limit), 0.0, snapshot.f_limit), dt)
+    return tx, fx
