@@ -12,14 +12,12 @@ are fresh, then the first non-connected (or stale) leader ``L(N+1)``; vehicles b
 
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass
 
 import numpy as np
 
 from ..params import Params
-
-_PAD_GAP_M = 1e6
-
 
 @dataclass(frozen=True)
 class LaneFrame:
@@ -180,11 +178,10 @@ class Situation:
         stale = bool(chain.stale_ids) or (isinstance(follower, v2x.V2XMessage) and not connected)
         situation = cls.from_arrays(
             t=t, ego=ego, follower=(fx, fv), leaders=(chain.p[None, :], chain.v[None, :]), n_connected=n,
-            promise_decel=np.concatenate([chain.promise_decel, np.zeros(0)])[None, :] if n else np.zeros((1, 0)),
-            human_driven=chain.human_driven[None, :] if n else np.zeros((1, 0), bool),
+            promise_decel=chain.promise_decel[None, :], human_driven=chain.human_driven[None, :],
             f_connected=connected, f_collaborative=collaborative, frame=frame, params=prm,
         )  # fmt: skip
-        return _replace(situation, v2x_stale=np.array([stale]))
+        return dataclasses.replace(situation, v2x_stale=np.array([stale]))
 
     def validate(self, params: Params) -> None:
         """Raise a ``ValueError`` naming the field for shapes that disagree or values the analysis cannot take."""
@@ -216,21 +213,3 @@ class Situation:
         """``(B, M−1)`` promises of the connected leaders, ``a_x_d`` beyond ``L_N`` (they are not connected)."""
         slots = np.arange(self.chain_promise.shape[1])[None, :]
         return np.where(slots < self.n_connected[:, None], self.chain_promise, a_x_d)
-
-
-def _replace(situation: Situation, **changes) -> Situation:
-    import dataclasses
-
-    return dataclasses.replace(situation, **changes)
-
-
-def pad_chain(x, v, n_connected):
-    """Neutral padding beyond ``L(N+1)`` (``1e6`` m apart ahead of it, at its speed) for ragged chains."""
-    rows = np.arange(len(x))
-    slots = np.arange(x.shape[1])[None, :]
-    beyond = slots > n_connected[:, None]
-    head_x, head_v = x[rows, n_connected], v[rows, n_connected]
-    return (
-        np.where(beyond, head_x[:, None] + _PAD_GAP_M * (slots - n_connected[:, None]), x),
-        np.where(beyond, head_v[:, None], v),
-    )
