@@ -19,6 +19,7 @@ import numpy as np
 
 from ..params import Params
 
+
 @dataclass(frozen=True)
 class LaneFrame:
     """Maps a simulator's lateral coordinate into the shield's: ``y = sign · (y_sim − origin_y)``.
