@@ -12,7 +12,7 @@ from .decide import ABORT, COMPLETED, HESITATE, PROCEED
 from .decision import Decision
 from .monitor import BREACH_KINDS, Breach
 from .policies import ASSESSMENTS, COMPLETION_RULES
-from .situation import LaneFrame, Situation
+from .situation import LaneFrame, SensingBounds, Situation
 
 __all__ = [
     "ABORT",
@@ -25,6 +25,7 @@ __all__ = [
     "Breach",
     "Decision",
     "LaneFrame",
+    "SensingBounds",
     "Shield",
     "ShieldConfig",
     "ShieldState",

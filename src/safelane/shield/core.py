@@ -54,6 +54,13 @@ class ShieldConfig(BaseModel):
     assess_delay_s: float = Field(1.5, ge=0.0, description="'slow' assessment: mean extra delay of a verdict [s].")
     assess_miss: float = Field(0.0, ge=0.0, le=1.0, description="'slow' assessment: P(a collaborative F is missed).")
     enabled: bool = Field(True, description="False passes the (clipped, checked) proposal through unfiltered.")
+    actuation_delay_s: float = Field(0.0, ge=0.0, le=1.0, description="Actuation delay δ [s]: a command acts δ after "
+                                     "it is issued, the ones issued before keep acting meanwhile; a whole number of "
+                                     "control periods (0 = the paper).")  # fmt: skip
+    own_lane: bool = Field(True, description="Keep p_m to the own-lane leaders (L0) the situation carries; False "
+                           "ignores them (the paper's shield, which assumes an empty original lane).")  # fmt: skip
+    sensing: bool = Field(True, description="Take the worst case over the situation's sensing-error bounds; False "
+                          "takes the measurements as exact (the paper's shield).")  # fmt: skip
 
     @field_validator("assessment")
     @classmethod

@@ -8,6 +8,15 @@ them in one place with :class:`LaneFrame` (e.g. highway-env: ``y`` grows to the 
 The leader chain is as the ego sees it: ``L1`` (sensed) and, ahead of it, the connected leaders whose V2X messages
 are fresh, then the first non-connected (or stale) leader ``L(N+1)``; vehicles beyond it are padding far ahead
 (see :func:`safelane.v2x.received_chain`, which builds exactly these arrays from messages).
+
+Beyond the paper's world (all optional; absent, the shield is exactly the paper's):
+
+* the ego's **own lane**: ``own_x``/``own_v`` are ``L0`` (the nearest vehicle ahead of the ego in its original lane)
+  and, where ``L0`` is connected, the chain ahead of it, in the same layout as the target lane's chain; a position of
+  ``+inf`` marks "no vehicle" (a row without ``L0``);
+* **bounded sensing error**: ``err_f (B, 2)``, ``err_chain (B, M, 2)``, ``err_own (B, K, 2)`` — the bound on the
+  position error [m] and the speed error [m/s] of each measured state (the ego's own state is exact; relative
+  measurement errors belong to the others' bounds). :class:`SensingBounds` fills them from connectivity.
 """
 
 from __future__ import annotations
@@ -66,6 +75,12 @@ class Situation:
         f_aggressive_truth: ``(B,)`` F's true type, or ``None``; only the ``truth`` assessment (a study of the
             paper's guarantee, which assumes an exact assessment) reads it.
         v2x_stale: ``(B,)`` some sender's latest message is stale (the chain and F above already fall back).
+        own_x, own_v: ``(B, K)`` ``L0`` and the vehicles ahead of it in the ego's own lane (``+inf`` position: none),
+            or ``None`` (the paper's empty original lane).
+        own_promise: ``(B, K−1)`` promised maximum deceleration of the connected own-lane leaders.
+        own_n_connected: ``(B,)`` how many own-lane leaders from ``L0`` on are connected (``0``: ``L0`` brakes at
+            ``a_x_d`` in the worst case).
+        err_f, err_chain, err_own: sensing-error bounds ``[..., (position m, speed m/s)]`` or ``None`` (exact).
     """
 
     t: float
@@ -85,6 +100,13 @@ class Situation:
     f_speed_observed: np.ndarray | None = None
     f_aggressive_truth: np.ndarray | None = None
     v2x_stale: np.ndarray | None = None
+    own_x: np.ndarray | None = None
+    own_v: np.ndarray | None = None
+    own_promise: np.ndarray | None = None
+    own_n_connected: np.ndarray | None = None
+    err_f: np.ndarray | None = None
+    err_chain: np.ndarray | None = None
+    err_own: np.ndarray | None = None
 
     def __len__(self) -> int:
         return len(self.ego_x)
@@ -108,6 +130,10 @@ class Situation:
         f_collaborative=False,
         frame: LaneFrame | None = None,
         params: Params | None = None,
+        own_leaders: tuple | None = None,
+        own_n_connected=0,
+        own_promise=0.5,
+        sensing: SensingBounds | None = None,
     ) -> Situation:
         """A validated batch from plain arrays (any batch size; scalars give ``B = 1``).
 
@@ -118,6 +144,10 @@ class Situation:
             n_connected: ``(B,)`` or scalar N (``<= M − 1``).
             promise_decel, human_driven: scalars or ``(B, M−1)``.
             f_connected, f_collaborative: scalars or ``(B,)``.
+            own_leaders: ``(x, v)``, each ``(B, K)`` (or ``(K,)``): ``L0`` first, ``+inf`` position where none; or
+                ``None`` (the original lane is empty).
+            own_n_connected, own_promise: as ``n_connected`` and ``promise_decel`` for the own lane.
+            sensing: error bounds filled per vehicle by connectivity, or ``None`` (exact states).
         """
         prm = params or Params()
         frame = frame or LaneFrame()
@@ -138,6 +168,17 @@ class Situation:
             t=float(t), ego_x=ex, ego_y=ey, ego_vx=evx, ego_vy=evy, f_x=fx, f_v=fv, f_connected=f_conn,
             f_collaborative=f_coll, chain_x=lx, chain_v=lv, chain_promise=promise, chain_human=human, n_connected=n,
         )  # fmt: skip
+        if own_leaders is not None:
+            ox, ov = (np.atleast_2d(np.asarray(a, float)) for a in own_leaders)
+            ox, ov = (np.broadcast_to(a, (b, a.shape[-1])).copy() for a in (ox, ov))
+            k = ox.shape[1]
+            situation = dataclasses.replace(
+                situation, own_x=ox, own_v=ov,
+                own_promise=np.broadcast_to(np.asarray(own_promise, float), (b, k - 1)).copy(),
+                own_n_connected=np.broadcast_to(np.asarray(own_n_connected), (b,)).astype(np.int64),
+            )  # fmt: skip
+        if sensing is not None:
+            situation = sensing.apply(situation)
         situation.validate(prm)
         return situation
 
@@ -209,8 +250,98 @@ class Situation:
             raise ValueError(f"Situation.chain_promise must lie in [0, a_x_d={params.a_x_d}]")
         if ((self.n_connected < 0) | (self.n_connected > m - 1)).any():
             raise ValueError(f"Situation.n_connected must lie in [0, M-1={m - 1}]")
+        self._validate_own(params, b)
+        self._validate_errors(b, m)
+
+    def _validate_own(self, params: Params, b: int) -> None:
+        own = (self.own_x, self.own_v, self.own_promise, self.own_n_connected)
+        if all(a is None for a in own):
+            return
+        if any(a is None for a in own):
+            raise ValueError("Situation.own_x, own_v, own_promise and own_n_connected go together (all or none)")
+        if self.own_x.ndim != 2 or self.own_x.shape[0] != b or self.own_x.shape[1] < 1:
+            raise ValueError(f"Situation.own_x must have shape ({b}, K >= 1); got {self.own_x.shape}")
+        k = self.own_x.shape[1]
+        if self.own_v.shape != self.own_x.shape:
+            raise ValueError(f"Situation.own_v must have shape {self.own_x.shape}; got {self.own_v.shape}")
+        if self.own_promise.shape != (b, k - 1):
+            raise ValueError(f"Situation.own_promise must have shape ({b}, {k - 1}); got {self.own_promise.shape}")
+        if np.shape(self.own_n_connected) != (b,):
+            raise ValueError(f"Situation.own_n_connected must have shape ({b},); got {np.shape(self.own_n_connected)}")
+        if np.isnan(self.own_x).any() or np.isneginf(self.own_x).any():
+            raise ValueError("Situation.own_x must be finite, or +inf for 'no vehicle'")
+        if not np.isfinite(self.own_v).all() or (self.own_v < 0).any():
+            raise ValueError("Situation.own_v must be finite and >= 0 (vehicles do not reverse)")
+        promise = self.own_promise
+        if not np.isfinite(promise).all() or ((promise < 0) | (promise > params.a_x_d)).any():
+            raise ValueError(f"Situation.own_promise must lie in [0, a_x_d={params.a_x_d}]")
+        if ((self.own_n_connected < 0) | (self.own_n_connected > k - 1)).any():
+            raise ValueError(f"Situation.own_n_connected must lie in [0, K-1={k - 1}]")
+        present = np.isfinite(self.own_x)
+        if (present[:, 1:] & ~present[:, :-1]).any():
+            raise ValueError("Situation.own_x: a vehicle (finite position) behind an empty slot (+inf)")
+
+    def _validate_errors(self, b: int, m: int) -> None:
+        k = None if self.own_x is None else self.own_x.shape[1]
+        for name, shape in (("err_f", (b, 2)), ("err_chain", (b, m, 2)), ("err_own", (b, k, 2))):
+            arr = getattr(self, name)
+            if arr is None:
+                continue
+            if k is None and name == "err_own":
+                raise ValueError("Situation.err_own needs own_x (the own-lane leaders it bounds)")
+            if np.shape(arr) != shape:
+                raise ValueError(f"Situation.{name} must have shape {shape}; got {np.shape(arr)}")
+            if not np.isfinite(arr).all() or (arr < 0).any():
+                raise ValueError(f"Situation.{name} must be finite and >= 0 (error bounds)")
+
+    @property
+    def has_own_lane(self) -> bool:
+        """Some row has a vehicle ahead of the ego in its own lane."""
+        return self.own_x is not None and bool(np.isfinite(self.own_x[:, 0]).any())
+
+    @property
+    def has_errors(self) -> bool:
+        return any(getattr(self, n) is not None for n in ("err_f", "err_chain", "err_own"))
 
     def chain_promise_used(self, a_x_d: float) -> np.ndarray:
         """``(B, M−1)`` promises of the connected leaders, ``a_x_d`` beyond ``L_N`` (they are not connected)."""
         slots = np.arange(self.chain_promise.shape[1])[None, :]
         return np.where(slots < self.n_connected[:, None], self.chain_promise, a_x_d)
+
+
+@dataclass(frozen=True)
+class SensingBounds:
+    """Bounds on the measurement error of the others' states, by how the state reaches the ego.
+
+    Defaults (documented in ``docs/real_roads.md``): a connected vehicle's state comes from its own V2X message,
+    fused with the ego's sensors (position ±0.5 m, speed ±0.2 m/s); a non-connected vehicle is sensed only (radar or
+    lidar at up to ~100 m: position ±1.0 m, speed ±0.5 m/s). Zero bounds give the paper's exact states.
+    """
+
+    connected_pos_m: float = 0.5
+    connected_speed_mps: float = 0.2
+    sensed_pos_m: float = 1.0
+    sensed_speed_mps: float = 0.5
+
+    def __post_init__(self):
+        for name in ("connected_pos_m", "connected_speed_mps", "sensed_pos_m", "sensed_speed_mps"):
+            value = getattr(self, name)
+            if not np.isfinite(value) or value < 0:
+                raise ValueError(f"SensingBounds.{name} must be finite and >= 0; got {value!r}")
+
+    def _pair(self, connected) -> np.ndarray:
+        connected = np.asarray(connected, bool)
+        pos = np.where(connected, self.connected_pos_m, self.sensed_pos_m)
+        speed = np.where(connected, self.connected_speed_mps, self.sensed_speed_mps)
+        return np.stack([pos, speed], -1)
+
+    def apply(self, situation: Situation) -> Situation:
+        """``situation`` with ``err_*`` filled: F by ``f_connected``; the chain's first ``n_connected`` connected;
+        the own lane's first ``own_n_connected``."""
+        m = situation.chain_x.shape[1]
+        chain_conn = np.arange(m)[None, :] < situation.n_connected[:, None]
+        out = dict(err_f=self._pair(situation.f_connected), err_chain=self._pair(chain_conn))
+        if situation.own_x is not None:
+            k = situation.own_x.shape[1]
+            out["err_own"] = self._pair(np.arange(k)[None, :] < situation.own_n_connected[:, None])
+        return dataclasses.replace(situation, **out)
