@@ -40,7 +40,9 @@ class EvasionPlan:
 
     Times are measured from the state the plan was computed for. Evaluate the ego's planned motion with
     :meth:`position` / :meth:`velocity`; after ``t_y_f`` the plan holds the longitudinal speed reached (the
-    ego is back in its own lane, whose road ahead is free).
+    ego is back in its own lane, whose road ahead is free) — except where the own lane has a leader ``L0``
+    (:mod:`.own_lane`): there (``continues``) the longitudinal profile goes on after ``t_y_f`` (brake, or follow),
+    and where ``follows_own`` the vehicle it follows is ``L0`` (``own_*``), not ``L1``.
     """
 
     feasible: np.ndarray
@@ -66,6 +68,29 @@ class EvasionPlan:
     y_acc_2: np.ndarray
     t_y_end: np.ndarray
     params: Params
+    own_p: np.ndarray | None = None
+    own_v: np.ndarray | None = None
+    own_decel: np.ndarray | None = None
+    follows_own: np.ndarray | None = None
+    continues: np.ndarray | None = None
+    min_gap_own: np.ndarray | None = None
+
+    def __post_init__(self):  # plans without L0 carry the paper's defaults, so rows of any two plans mix
+        shape = np.shape(self.feasible)
+        defaults = dict(own_p=np.inf, own_v=0.0, own_decel=0.0, follows_own=False, continues=False, min_gap_own=np.inf)
+        for name, value in defaults.items():
+            if getattr(self, name) is None:
+                dtype = bool if isinstance(value, bool) else np.float64
+                object.__setattr__(self, name, np.full(shape, value, dtype=dtype))
+
+    @property
+    def lead(self):
+        """``(p, v, decel)`` of the vehicle the profile follows: ``L0`` where ``follows_own``, else ``L1``."""
+        if not self.follows_own.any():
+            return self.l1_p, self.l1_v, self.l1_decel
+        own = self.follows_own
+        return (np.where(own, self.own_p, self.l1_p), np.where(own, self.own_v, self.l1_v),
+                np.where(own, self.own_decel, self.l1_decel))  # fmt: skip
 
     def state(self, t):
         """Planned ego ``(p_x, p_y, v_x, v_y)`` at time ``t >= 0`` after the plan's state (exact).
@@ -79,12 +104,12 @@ class EvasionPlan:
         check_broadcasts("t", t.shape, np.shape(T))
         lon = (self.ego_px, self.ego_vx, self.t_x1, self.v_switch, self.t_brake_end, self.follows_leader)
         p, v, u, V, t2, match = lon
-        lead = (self.l1_p, self.l1_v, self.l1_decel)
+        lead = self.lead
         with np.errstate(all="ignore"):
-            tt = np.minimum(t, T)
+            tt = np.where(self.continues, t, np.minimum(t, T))
             px = ego_position(ARRAY, tt, p, v, u, V, t2, match, *lead, self.params)
-            vx = ego_speed(ARRAY, tt, v, u, V, t2, match, self.l1_v, self.l1_decel, self.params)
-            px = px + vx * np.maximum(t - T, 0.0)
+            vx = ego_speed(ARRAY, tt, v, u, V, t2, match, lead[1], lead[2], self.params)
+            px = px + vx * np.maximum(t - tt, 0.0)
             lat = (self.t_y_switch, self.y_acc_1, self.y_acc_2, self.t_y_end)
             py, vy = lateral_state(ARRAY, t, self.ego_py, self.ego_vy, *lat)
         return px, py, vx, vy
@@ -121,9 +146,11 @@ def check_broadcasts(name: str, shape, batch_shape) -> tuple[int, ...]:
         raise ValueError(f"{name} of shape {shape} does not broadcast with the batch shape {batch_shape}") from exc
 
 
-def plan_from_core(xp, shape, args, exists, parts, lead_margin, follow_margin, params: Params, chain_unsafe=False):
+def plan_from_core(xp, shape, args, exists, parts, lead_margin, follow_margin, params: Params, chain_unsafe=False,
+                   own=None):  # fmt: skip
     """Assemble an :class:`EvasionPlan` from :func:`evasion_core`'s inputs and outputs (used by the simulator,
-    which calls the unchecked core on states it built itself)."""
+    which calls the unchecked core on states it built itself). ``own``: ``(l0_p, l0_v, l0_decel, margin)`` where the
+    parts come from :func:`~.own_lane.own_lane_core`."""
     with np.errstate(all="ignore"):
         reason = (
             xp.where(parts["lead_ok"], 0, int(Reason.LEADER_INFEASIBLE))
@@ -159,4 +186,8 @@ def plan_from_core(xp, shape, args, exists, parts, lead_margin, follow_margin, p
         y_acc_2=f(parts["y_acc_2"]),
         t_y_end=f(parts["t_y_end"]),
         params=params,
-    )
+        **({} if own is None else dict(
+            own_p=f(own[0]), own_v=f(own[1]), own_decel=f(own[2]), follows_own=f(parts["follows_own"], np.bool_),
+            continues=f(np.ones(np.shape(exists), bool), np.bool_), min_gap_own=f(parts["own_gap"] + own[3]),
+        )),
+    )  # fmt: skip

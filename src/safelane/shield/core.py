@@ -36,6 +36,7 @@ from .decision import Decision
 from .monitor import Breach, Snapshot, observe_breaches
 from .policies import ASSESSMENTS, COMPLETION_RULES, check_policy, variant_flags
 from .proposals import check_proposal
+from .realworld import Pending, carry_worst, chain_bounds, knots_piece, own_lane_decel, worst_corners
 from .rules import RuleInputs, rule_rows
 from .situation import Situation
 
@@ -85,6 +86,7 @@ class ShieldState:
     breach: Breach
     completed: np.ndarray
     last: Snapshot | None  # the previous period, for the monitor
+    pending: Pending | None = None  # the commands in flight (actuation delay), oldest first
 
 
 def chain_analysis(situation: Situation, prm: Params):
@@ -92,6 +94,9 @@ def chain_analysis(situation: Situation, prm: Params):
     what the ego knows."""
     n = len(situation)
     m = situation.chain_x.shape[1]
+    if situation.err_chain is not None:  # each link at its own worst corner (sensing error)
+        s = situation
+        return chain_bounds(s.chain_x, s.chain_v, s.chain_promise, s.n_connected, s.chain_human, s.err_chain, prm)
     in_chain = np.arange(m - 1)[None, :] < situation.n_connected[:, None]
     promise = np.where(in_chain, situation.chain_promise, prm.a_x_d)
     margin = np.where(situation.chain_human & in_chain, prm.p_m_human, prm.p_m)
@@ -108,19 +113,71 @@ def init(situation: Situation, params: Params, config: ShieldConfig | None = Non
     the most conservative assumptions (L1 at ``a_x_d``, F aggressive)."""
     cfg = config or ShieldConfig()
     n = len(situation)
-    s = situation
-    plan = plan_evasion(s.ego_x, s.ego_y, s.ego_vx, s.ego_vy, s.chain_x[:, 0], s.chain_v[:, 0], params.a_x_d, s.f_x,
-                        s.f_v, True, params)  # fmt: skip
+    delay = delay_periods(cfg, params) * params.dt
+    pending = Pending.idle(n, delay_periods(cfg, params), params.dt) if delay > 0.0 else None
+    s = situation if cfg.sensing else _exact(situation)
+    s = worst_corners(s)[0]
+    ex, ey, evx, evy = s.ego_x, s.ego_y, s.ego_vx, s.ego_vy
+    l1x, l1v, fx, fv = s.chain_x[:, 0], s.chain_v[:, 0], s.f_x, s.f_v
+    if pending is not None:  # the plan starts once the commands in flight have acted
+        ex, ey, evx, evy = pending.carry(ex, ey, evx, evy)
+        l1x, l1v = carry_worst(l1x, l1v, params.a_x_d, delay)
+        fx, fv = carry_worst(fx, fv, -params.a_x_a, delay)
+    own = _own(s, cfg, params, np.zeros(n, bool), np.ones(n, bool))
+    if own is not None and pending is not None:
+        own = (*carry_worst(own[0], own[1], own[2], delay), own[2])
+    # The plan held at the start: one candidate check of "cruise laterally as now" would also verify the period;
+    # the plan alone is what init needs (the first step verifies every proposal).
+    plan = plan_evasion(ex, ey, evx, evy, l1x, l1v, params.a_x_d, fx, fv, True, params)
+    if own is not None and np.isfinite(own[0]).any():
+        plan = _own_plan(plan, (ex, ey, evx, evy, l1x, l1v, np.full(n, params.a_x_d), fx, fv, np.ones(n, bool)),
+                         own, params)  # fmt: skip
     return ShieldState(
-        t=s.t,
+        t=situation.t,
         plan=plan,
-        plan_t0=np.full(n, s.t),
+        plan_t0=np.full(n, situation.t + delay),
         plan_f_aggr=np.ones(n, bool),
         belief=ASSESSMENTS[cfg.assessment].start(n, cfg),
         breach=Breach.none(n),
         completed=np.zeros(n, bool),
         last=None,
+        pending=pending,
     )
+
+
+def delay_periods(cfg: ShieldConfig, prm: Params) -> int:
+    """The actuation delay in control periods; a delay that is not a whole number of periods is refused."""
+    d = round(cfg.actuation_delay_s / prm.dt)
+    if abs(d * prm.dt - cfg.actuation_delay_s) > 1e-9:
+        raise ValueError(f"ShieldConfig.actuation_delay_s={cfg.actuation_delay_s} must be a whole number of control "
+                         f"periods (dt={prm.dt} s)")  # fmt: skip
+    return d
+
+
+def _exact(s: Situation) -> Situation:
+    return dataclasses.replace(s, err_f=None, err_chain=None, err_own=None)
+
+
+def _own(s: Situation, cfg: ShieldConfig, prm: Params, informed, broken):
+    """``(l0_x, l0_v, l0_decel)`` for the check, or ``None`` (no own-lane leader, or the paper's shield)."""
+    if not cfg.own_lane or not s.has_own_lane:
+        return None
+    return s.own_x[:, 0], s.own_v[:, 0], own_lane_decel(s, prm, informed, broken)
+
+
+def _own_plan(plan: EvasionPlan, args, own, prm: Params) -> EvasionPlan:
+    """``plan`` with the rows that have an own-lane leader replanned with it (:mod:`safelane.safety.own_lane`)."""
+    from ..safety.own_lane import own_lane_core
+    from ..safety.plan import plan_from_core
+
+    rows = np.flatnonzero(np.isfinite(own[0]))
+    sub = tuple(np.broadcast_to(a, plan.feasible.shape)[rows] for a in args)
+    own_r = tuple(np.broadcast_to(a, plan.feasible.shape)[rows] for a in own)
+    with np.errstate(all="ignore"):
+        exists, parts = own_lane_core(*sub, *own_r, prm.p_m, prm.p_m, prm.p_m, prm)
+        piece = plan_from_core(ARRAY, rows.shape, (*sub, prm.p_m, prm.p_m), exists, parts, prm.p_m, prm.p_m, prm,
+                               own=(*own_r, prm.p_m))  # fmt: skip
+    return _set_rows(plan, [(rows, piece)])
 
 
 def step(
@@ -154,20 +211,26 @@ def step(
     # 1. What happened last period: the assessment's new observation, the monitor's comparison.
     assessment = ASSESSMENTS[cfg.assessment]
     belief = assessment.update(state.belief, s, dt, cfg)
+    if not cfg.sensing:
+        s = _exact(s)
+    s_eval, s_obs = worst_corners(s)  # the analysis' corners of the sensing-error box, and the monitor's
     bounds, unsafe = chain_analysis(s, prm) if chain is None else chain
     breach = state.breach
     if state.last is not None:
-        breach = observe_breaches(state.breach, state.last, s, prm, s.t)
+        breach = observe_breaches(state.breach, state.last, s_obs, prm, s.t)
 
     # 2. The worst case from the information the variant uses; the most conservative one after a breach.
     l1_decel = np.where(uses_chain & ~unsafe, bounds[:, 0], prm.a_x_d)
     assessed = assessment.aggressive(belief, s)
     trusted = uses_f_v2x & s.f_connected & s.f_collaborative
     f_aggr = np.where(trusted, False, np.where(uses_assessment, assessed, True))
+    broken = breach.any if cfg.monitor else np.zeros(n, bool)
     if cfg.monitor:
-        broken = breach.any
         l1_decel = np.where(broken, prm.a_x_d, l1_decel)
         f_aggr = f_aggr | broken
+    own = _own(s, cfg, prm, uses_chain, broken)
+    if own is not None:
+        own = (s_eval.own_x[:, 0], s_eval.own_v[:, 0], own[2])
 
     # 3. The proposal, checked; then proceed / hesitate / abort where the lane change is under way.
     a_x, a_y, invalid = check_proposal(planner_name, proposal, n, prm)
@@ -175,7 +238,15 @@ def step(
     a_x = np.clip(a_x, -prm.a_x_d, prm.a_x_a)
     a_y = np.clip(a_y, -prm.a_y_m, prm.a_y_m)
     ex, ey, evx, evy = s.ego_x, s.ego_y, s.ego_vx, s.ego_vy
-    l1x, l1v, fx, fv = s.chain_x[:, 0], s.chain_v[:, 0], s.f_x, s.f_v
+    l1x, l1v, fx, fv = s_eval.chain_x[:, 0], s_eval.chain_v[:, 0], s_eval.f_x, s_eval.f_v
+    snap_f = (fx, fv, ex)
+    delay = delay_periods(cfg, prm) * dt
+    if delay > 0.0:  # decide for the period that starts once the commands in flight have acted (realworld.py)
+        ex, ey, evx, evy = state.pending.carry(ex, ey, evx, evy)
+        l1x, l1v = carry_worst(l1x, l1v, l1_decel, delay)
+        fx, fv = carry_worst(fx, fv, np.where(f_aggr, -prm.a_x_a, prm.a_x_d), delay)
+        if own is not None:
+            own = (*carry_worst(own[0], own[1], own[2], delay), own[2])
     active = ~state.completed
     behaviour = np.where(active, PROCEED, COMPLETED)
     completing = np.zeros(n, bool)
@@ -193,7 +264,7 @@ def step(
                 continue
             verdict = check_candidate(
                 *(arr[rows] for arr in (ex, ey, evx, evy, a_x, lateral, l1x, l1v, l1_decel, fx, fv, f_aggr)), prm,
-                completion=COMPLETION_RULES[cfg.completion],
+                completion=COMPLETION_RULES[cfg.completion], own=None if own is None else tuple(a[rows] for a in own),
             )  # fmt: skip
             ok_rows = rows[verdict.ok]
             behaviour[ok_rows] = code
@@ -216,7 +287,8 @@ def step(
     abort_rows = np.flatnonzero(behaviour == ABORT)
     abort = (abort_rows, None, None, None, None, None)
     if abort_rows.size:  # only the aborting rows follow their plan: evaluate it there alone
-        knots, px, vx, py, vy = plan_motion(state.plan.take(abort_rows), s.t - state.plan_t0[abort_rows], dt)
+        age = s.t + delay - state.plan_t0[abort_rows]
+        knots, px, vx, py, vy = plan_motion(state.plan.take(abort_rows), age, dt)
         abort = (abort_rows, knots, px, vx, py, vy)
         span = np.maximum(knots[:, 1] - knots[:, 0], 1e-300)
         ax_cmd[abort_rows] = np.where(knots[:, 1] > 0.0, (vx[:, 1] - vx[:, 0]) / span, 0.0)
@@ -234,14 +306,15 @@ def step(
         plan_f_aggr[rows_acc] = f_aggr[rows_acc]
     # For the monitor at the next period: what a responsible follower of the ego could do this period.
     f_limit = np.full(n, np.inf)  # only an F the held plan takes for collaborative, with the ego ahead, is watched
-    watch = np.flatnonzero(active & ~plan_f_aggr & (ex - fx > 0.0))
+    sfx, sfv, sex = snap_f  # the monitor compares states at the period's start, not carried over the delay
+    watch = np.flatnonzero(active & ~plan_f_aggr & (sex - sfx > 0.0))
     if watch.size:
         with np.errstate(all="ignore"):
-            gap = (ex - fx - prm.p_m)[watch]
-            limit = responsible_bound(gap, fv[watch], evx[watch], np.full(watch.size, prm.a_x_d), prm)
+            gap = (sex - sfx - prm.p_m)[watch]
+            limit = responsible_bound(gap, sfv[watch], s.ego_vx[watch], np.full(watch.size, prm.a_x_d), prm)
         f_limit[watch] = np.maximum(limit, -prm.a_x_d)
     last = Snapshot(
-        chain_x=s.chain_x, chain_v=s.chain_v, bounds=bounds, n_connected=s.n_connected, f_x=fx, f_v=fv,
+        chain_x=s_eval.chain_x, chain_v=s_eval.chain_v, bounds=bounds, n_connected=s.n_connected, f_x=sfx, f_v=sfv,
         f_limit=f_limit, plan_l1_decel=new_plan.l1_decel,
         plan_f_aggr=plan_f_aggr, active=active,
     )  # fmt: skip
@@ -250,12 +323,13 @@ def step(
     new_state = ShieldState(
         t=s.t + dt,
         plan=new_plan,
-        plan_t0=np.where(replanned, s.t + dt, state.plan_t0),
+        plan_t0=np.where(replanned, s.t + delay + dt, state.plan_t0),
         plan_f_aggr=plan_f_aggr,
         belief=belief,
         breach=breach,
         completed=state.completed | completing,
         last=last,
+        pending=None if state.pending is None else state.pending.push(_issued(ax_cmd, ay_cmd, abort, dt)),
     )
     decision = Decision(
         behaviour=behaviour, a_x=ax_cmd, a_y=ay_cmd, completing=completing & active, invalid=invalid & active,
@@ -263,6 +337,18 @@ def step(
         nominal_x=nominal_x, nominal_y=nominal_y, _abort=abort,
     )  # fmt: skip
     return new_state, decision
+
+
+def _issued(ax_cmd, ay_cmd, abort, dt: float):
+    """The command issued this period as a piecewise-constant acceleration (7 segments: an abort's knots)."""
+    n = len(ax_cmd)
+    dur = np.zeros((n, 7))
+    dur[:, 0] = dt
+    ax, ay = np.repeat(ax_cmd[:, None], 7, 1), np.repeat(ay_cmd[:, None], 7, 1)
+    rows, knots, _, vx, _, vy = abort
+    if rows.size:
+        dur[rows], ax[rows], ay[rows] = knots_piece(knots, vx, vy)
+    return dur, ax, ay
 
 
 def observe(state: ShieldState, situation: Situation, params: Params) -> ShieldState:

@@ -31,6 +31,7 @@ from ..safety.chain import min_follow_decel
 from ..safety.evasion import evasion_core
 from ..safety.lateral import LATERAL_TOL_M, lateral_core
 from ..safety.longitudinal import FEASIBILITY_TOL_M
+from ..safety.own_lane import own_lane_core
 from ..safety.plan import EvasionPlan, plan_from_core
 from ..safety.responsible import pair_min_gap
 
@@ -57,14 +58,23 @@ def commit_guard(ex, evx, lx, lv, l1_decel, fx, fv, prm: Params):
     return (z_l <= prm.a_x_d) & (z_f <= prm.a_x_d)
 
 
+def own_completion_level(prm: Params) -> float:
+    """With a leader ``L0`` in the own lane, the lane change completes (and ``L0`` stops counting) when the ego's
+    centre is past the lane boundary *and* its body can no longer overlap ``L0``'s laterally (``y >= w_v``)."""
+    return max(prm.y_boundary, prm.vehicle_width)
+
+
 def check_candidate(
     ego_x, ego_y, ego_vx, ego_vy, a_x, a_y, l1_x, l1_v, l1_decel, f_x, f_v, f_aggressive, prm: Params,
-    completion=commit_guard,
+    completion=commit_guard, own=None,
 ) -> Verdict:  # fmt: skip
     """Is applying ``(a_x, a_y)`` for one period safe under the worst case? Returns the verdict and, for the rows
     it accepts, the plan verified from the predicted state (time origin at the end of the period). ``completion``:
     the completion rule for rows whose step crosses the lane boundary (a registered one, see
-    :mod:`safelane.shield.policies`)."""
+    :mod:`safelane.shield.policies`). ``own``: ``(l0_x, l0_v, l0_decel)`` of the own-lane leader ``L0`` per row
+    (``+inf`` position where there is none), or ``None``: where there is one, the ego must keep ``p_m`` behind its
+    worst case during the period and on the evasion (:mod:`safelane.safety.own_lane`), and the step completes
+    only at :func:`own_completion_level`."""
     dt, tol = prm.dt, FEASIBILITY_TOL_M
     ex, evx = advance(ego_x, ego_vx, a_x, dt)
     ey = ego_y + ego_vy * dt + 0.5 * a_y * dt * dt
@@ -84,8 +94,21 @@ def check_candidate(
         dt,
     )
     period_ok = ~conflict | ((gap_l >= -tol) & (gap_f >= -tol))
+    has_own = None
+    if own is not None:
+        o_x, o_v, o_decel = own
+        has_own = np.isfinite(o_x)
+        if not has_own.any():
+            has_own = None
+    level = prm.y_boundary
+    if has_own is not None:
+        o_slack = np.where(has_own, o_x - ego_x - prm.p_m, 0.0)
+        gap_o = pair_min_gap(o_slack, ego_vx, a_x, np.where(has_own, o_v, 0.0), -o_decel, dt)
+        period_ok &= ~has_own | (gap_o >= -tol)
+        level = np.where(has_own, own_completion_level(prm), prm.y_boundary)
+        ox, ov = advance(np.where(has_own, o_x, 0.0), o_v, -o_decel, dt)
 
-    completing = ey >= prm.y_boundary
+    completing = ey >= level
     n = np.shape(ex)
     ok = np.zeros(n, bool)
     plans = []
@@ -98,10 +121,21 @@ def check_candidate(
         # Rows with nothing to evade (in the own lane, not moving out: t_y_f = 0) go through the evasion core
         # apart: with t_y_f = 0 throughout it takes its short path (same results).
         idle = lateral_core(ARRAY, ey, evy, prm)[0] == 0.0
+        if has_own is not None:  # rows with L0 go through the own-lane check (the others as before, bit for bit)
+            idle = idle & ~has_own
         groups = [np.arange(n[0])] if idle.all() or not idle.any() else [np.flatnonzero(idle), np.flatnonzero(~idle)]
+        if has_own is not None:
+            groups = [g[~has_own[g]] for g in groups] + [np.flatnonzero(has_own)]
         for rows in groups:
+            if rows.size == 0:
+                continue
             sub_args = tuple(a[rows] for a in args)
-            exists, parts = evasion_core(ARRAY, *sub_args, prm.p_m, prm.p_m, prm)
+            own_rows = has_own is not None and bool(has_own[rows[0]])
+            if own_rows:
+                own_args = (ox[rows], ov[rows], o_decel[rows])
+                exists, parts = own_lane_core(*sub_args, *own_args, prm.p_m, prm.p_m, prm.p_m, prm)
+            else:
+                exists, parts = evasion_core(ARRAY, *sub_args, prm.p_m, prm.p_m, prm)
             # A rule with ``needs_evasion`` (the paper's) keeps the evasion check at the crossing step as well.
             cross_ok = guard[rows] & (exists | (not getattr(completion, "needs_evasion", False)))
             keep = np.flatnonzero(period_ok[rows] & np.where(completing[rows], cross_ok, exists))
@@ -115,6 +149,7 @@ def check_candidate(
                 prm.p_m,
                 prm.p_m,
                 prm,
+                own=(*(a[keep] for a in own_args), prm.p_m) if own_rows else None,
             )
             plans.append((rows[keep], plan))
     return Verdict(ok=ok, completing=completing, plans=plans)
@@ -132,7 +167,8 @@ def plan_motion(plan: EvasionPlan, age, dt: float):
     Knots: the period's ends and every switch of the plan inside it (``t_x1``, end of braking, L1's stop,
     ``t_y_f``, the lateral switch and end), so each segment has constant accelerations.
     """
-    l1_stop = np.where(plan.l1_decel > 0.0, plan.l1_v / np.where(plan.l1_decel > 0.0, plan.l1_decel, 1.0), np.inf)
+    _, lead_v, lead_decel = plan.lead
+    l1_stop = np.where(lead_decel > 0.0, lead_v / np.where(lead_decel > 0.0, lead_decel, 1.0), np.inf)
     switches = [plan.t_x1, plan.t_brake_end, l1_stop, plan.t_y_f, plan.t_y_switch, plan.t_y_end]
     rel = [np.clip(s - age, 0.0, dt) for s in switches]
     knots = np.sort(np.stack([np.zeros_like(age), *rel, np.full_like(age, dt)], -1), -1)

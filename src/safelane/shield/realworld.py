@@ -1,0 +1,132 @@
+"""What the shield does beyond the paper's world (issue 17): sensing error, the own lane's chain, actuation delay.
+
+* **Sensing error** (:func:`worst_corners`): every measured state lies within its bound of the truth. The analysis is
+  monotone in each vehicle's state, with a known direction: a leader (``L1``, ``L0``) lower and slower is worse for
+  the ego, ``F`` higher and faster is worse. So the analysis runs on those corners. The chain analysis is not
+  monotone per vehicle (``L_i`` is the follower of one link and the leader of the next), so each *link* takes its
+  own worst corner — its slack shrunk by both bounds, the follower faster, the leader slower
+  (:func:`chain_bounds`): a bound at least as large as the largest over all consistent corners (sound, possibly
+  conservative; ``tests/test_realworld.py`` samples the box).
+* **The own lane** (:func:`own_lane_decel`): ``L0``'s worst-case deceleration is its chain's bound where ``L0`` is
+  connected (the same analysis, Eqs. 1–3, on the own lane's chain), else ``a_x_d``.
+* **Actuation delay** δ = d periods (:class:`Pending`): a command acts d periods after it is issued. The shield keeps
+  the commands in flight; the ego's state when the new command starts acting is its measured state carried through
+  them, exactly, and the others' worst cases are carried over δ along their worst-case trajectories. The candidate
+  is then checked from there — the first δ of every evasion trajectory is the commands already issued.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass
+
+import numpy as np
+
+from .._motion import advance
+from ..params import Params
+from ..safety._backend import ARRAY
+from ..safety.chain import min_follow_decel
+from .situation import Situation
+
+
+def _err(arr, shape):
+    return np.zeros((*shape, 2)) if arr is None else arr
+
+
+def worst_corners(s: Situation) -> tuple[Situation, Situation]:
+    """``(analysis, observed)``: the situation at the corners the analysis must assume (leaders low and slow, F
+    high and fast) and at the opposite corners (what the monitor compares a new observation with, so that a
+    measurement error is never taken for a breach). Without error bounds both are ``s``."""
+    if not s.has_errors:
+        return s, s
+    b, m = s.chain_x.shape
+    ef, ec = _err(s.err_f, (b,)), _err(s.err_chain, (b, m))
+    low = dict(
+        chain_x=s.chain_x - ec[..., 0], chain_v=np.maximum(s.chain_v - ec[..., 1], 0.0),
+        f_x=s.f_x + ef[:, 0], f_v=s.f_v + ef[:, 1],
+    )  # fmt: skip
+    high = dict(
+        chain_x=s.chain_x + ec[..., 0], chain_v=s.chain_v + ec[..., 1],
+        f_x=s.f_x - ef[:, 0], f_v=np.maximum(s.f_v - ef[:, 1], 0.0),
+    )  # fmt: skip
+    if s.own_x is not None:
+        eo = _err(s.err_own, s.own_x.shape)
+        low.update(own_x=s.own_x - eo[..., 0], own_v=np.maximum(s.own_v - eo[..., 1], 0.0))
+        high.update(own_x=s.own_x + eo[..., 0], own_v=s.own_v + eo[..., 1])
+    return dataclasses.replace(s, **low), dataclasses.replace(s, **high)
+
+
+def chain_bounds(x, v, promise, n_connected, human, err, prm: Params):
+    """``(bounds (B, M), unsafe (B,))`` of a chain ``x, v (B, M)`` (``L1`` or ``L0`` first) whose states are known to
+    ``err (B, M, 2)``, each link at its own worst corner (see the module docstring); ``+inf`` positions (no vehicle)
+    leave the links ahead of them free."""
+    b, m = x.shape
+    in_chain = np.arange(m - 1)[None, :] < n_connected[:, None]
+    promise = np.where(in_chain, promise, prm.a_x_d)
+    margin = np.where(human & in_chain, prm.p_m_human, prm.p_m)
+    e = np.zeros((b, m, 2)) if err is None else err
+    decel = [np.full(b, prm.a_x_d)]
+    unsafe = np.zeros(b, bool)
+    a_ahead = decel[0]
+    with np.errstate(all="ignore"):
+        for i in range(m - 2, -1, -1):
+            slack = x[:, i + 1] - x[:, i] - margin[:, i] - (e[:, i, 0] + e[:, i + 1, 0])
+            slack = np.where(np.isnan(slack), np.inf, slack)  # both slots empty
+            v_f = v[:, i] + e[:, i, 1]
+            v_l = np.maximum(v[:, i + 1] - e[:, i + 1, 1], 0.0)
+            z = min_follow_decel(ARRAY, slack, v_f, v_l, a_ahead)
+            unsafe |= z > prm.a_x_d
+            a_ahead = np.minimum(np.maximum(promise[:, i], z), prm.a_x_d)
+            decel.insert(0, a_ahead)
+    return np.column_stack(decel), unsafe
+
+
+def own_lane_decel(s: Situation, prm: Params, informed, broken) -> np.ndarray:
+    """``(B,)`` ``L0``'s worst-case deceleration: its own chain's bound where the variant uses chain information
+    (``informed``) and no assumption broke (``broken``), else ``a_x_d``."""
+    bounds, unsafe = chain_bounds(s.own_x, s.own_v, s.own_promise, s.own_n_connected,
+                                  np.zeros(s.own_promise.shape, bool), s.err_own, prm)  # fmt: skip
+    return np.where(informed & ~unsafe & ~broken, bounds[:, 0], prm.a_x_d)
+
+
+@dataclass(frozen=True)
+class Pending:
+    """The commands in flight, oldest first: each a piecewise-constant acceleration ``(dur, a_x, a_y)``, arrays
+    ``(B, S)`` (S segments summing to one period)."""
+
+    pieces: tuple
+
+    @classmethod
+    def idle(cls, batch: int, periods: int, dt: float) -> Pending:
+        """``periods`` commands of zero acceleration (the ego cruising when the shield starts)."""
+        one = (np.full((batch, 1), dt), np.zeros((batch, 1)), np.zeros((batch, 1)))
+        return cls(pieces=(one,) * periods)
+
+    def carry(self, ex, ey, evx, evy):
+        """The ego's state after all commands in flight have acted (exact; it stops rather than reverses)."""
+        for dur, ax, ay in self.pieces:
+            for k in range(dur.shape[1]):
+                h = dur[:, k]
+                ey = ey + evy * h + 0.5 * ay[:, k] * h * h
+                evy = evy + ay[:, k] * h
+                ex, evx = advance(ex, evx, ax[:, k], h)
+        return ex, ey, evx, evy
+
+    def push(self, piece) -> Pending:
+        """Issue ``piece``: the oldest command has started acting and leaves the queue."""
+        return Pending(pieces=(*self.pieces[1:], piece))
+
+
+def knots_piece(knots, vx, vy):
+    """The piecewise-constant accelerations of exact knots ``(t, v_x, v_y)`` (an aborting row's period)."""
+    dur = np.diff(knots, axis=-1)
+    safe = np.where(dur > 0.0, dur, 1.0)
+    ax = np.where(dur > 0.0, np.diff(vx, axis=-1) / safe, 0.0)
+    ay = np.where(dur > 0.0, np.diff(vy, axis=-1) / safe, 0.0)
+    return dur, ax, ay
+
+
+def carry_worst(x, v, decel, horizon: float):
+    """A vehicle's state after ``horizon`` along its worst-case trajectory: constant acceleration ``-decel``
+    (``decel`` may be negative: an aggressive F accelerates), stopping at rest."""
+    return advance(x, v, -np.asarray(decel, float), horizon)
