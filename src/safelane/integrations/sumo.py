@@ -1,0 +1,394 @@
+"""The shield in SUMO (libsumo; extra ``sumo``): lane changes on a shipped straight two-lane road, SUMO's own
+collision list as the referee.
+
+    from safelane.integrations.sumo import SumoRunner, sumo_scenarios
+    with SumoRunner() as runner:                      # one per process: libsumo is a process-wide singleton
+        table = runner.run_many(sumo_scenarios(n_leaders=3, decel=6.0, samples=50, seed=0), shielded=True)
+
+Each episode (:meth:`SumoRunner.run`) reloads SUMO (step 0.1 s = ``Params.dt``, ballistic integration, collision
+action ``warn`` with min-gap factor 0 — physical contact counts —, the sublane model on) with a route file holding
+the scenario's vehicles at their exact initial states, then every period:
+
+1. reads the vehicles **per lane** from SUMO (front bumpers → centres): in the target lane F (the nearest behind the
+   ego) and ``L1, L2, …`` (ahead, nearest first); in the ego's own lane ``L0`` (the nearest ahead,
+   :func:`own_lane_leaders`);
+2. builds the :class:`~safelane.shield.Situation` from :mod:`safelane.v2x` messages of the connected vehicles
+   (emulated with loss and latency, :class:`~.sumo_traffic.V2XLink`) and sensed states of the others — the chain
+   stops at the first non-connected or stale leader ``L(N+1)``;
+3. asks the nominal policy (default: :func:`reckless`, always merging at full authority) and the
+   :class:`~safelane.shield.Shield` (or, unshielded, ``ShieldConfig(enabled=False)``: the proposal passes, and the
+   ego follows L1 responsibly once across — the built-in simulator's ``supervised=False``);
+4. moves the ego as an exact point mass (constant accelerations over the period, the held plan's exact motion when
+   aborting; ``moveToXY`` plus speed) and the other vehicles by speed commands (:mod:`.sumo_traffic`: the paper's
+   models or SUMO's drivers; ``L(N+1)``'s and ``L0``'s braking injected);
+5. steps SUMO and reads its collision list (and our geometric cross-check, :func:`.sumo_world.overlaps`).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import itertools
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from .. import v2x
+from .._motion import advance
+from ..params import Params
+from ..shield import ABORT, HESITATE, Shield, ShieldConfig, Situation
+from .sumo_traffic import TRAFFIC_MODES, TargetLaneTraffic, V2XLink, profile_accel
+from .sumo_world import SumoWorld, VehicleSpec, libsumo_available, net_file, overlaps
+
+__all__ = [
+    "TRAFFIC_MODES",
+    "EpisodeResult",
+    "SumoRunner",
+    "SumoScenario",
+    "libsumo_available",
+    "net_file",
+    "own_lane_leaders",
+    "reckless",
+    "scenarios_from_batch",
+    "sumo_scenarios",
+]
+
+ROAD_X0 = 300.0  # the scenario's x = 0 (the ego's start) on the 3 km road
+FAR_M = 1e4  # a missing F / leader is replaced by a harmless one this far away
+
+
+@dataclass(frozen=True)
+class SumoScenario:
+    """One lane change (shield frame: ``x`` along the road, the ego's centre at ``ego_x``; lanes by index).
+
+    Target lane: F at ``f_x`` and ``L1..L(N+1)`` at ``leaders_x`` (centres, increasing), ``L1..LN`` connected with
+    promise ``promise_decel``; ``L(N+1)`` brakes at ``decel_last`` from ``brake_start_s`` until it stops. Own lane:
+    ``L0`` at ``own_x`` (``None``: none), braking at ``own_decel`` from ``own_brake_start_s`` (not connected)."""
+
+    ego_x: float
+    ego_v: float
+    f_x: float
+    f_v: float
+    leaders_x: tuple[float, ...]
+    leaders_v: tuple[float, ...]
+    n_connected: int
+    decel_last: float
+    f_connected: bool = True
+    f_aggressive: bool = False
+    promise_decel: float = 0.5
+    promise_accel: float = 0.5
+    brake_start_s: float = 0.0
+    own_x: float | None = None
+    own_v: float = 30.0
+    own_decel: float = 0.0
+    own_brake_start_s: float = 0.0
+    scenario_id: int = 0
+
+    def __post_init__(self):
+        if len(self.leaders_x) != len(self.leaders_v) or not self.leaders_x:
+            raise ValueError("leaders_x and leaders_v must hold the same number (>= 1) of leaders")
+        if not 0 <= self.n_connected <= len(self.leaders_x) - 1:
+            raise ValueError(f"n_connected must lie in [0, {len(self.leaders_x) - 1}]; got {self.n_connected}")
+        if np.any(np.diff(self.leaders_x) <= 0) or self.f_x >= self.leaders_x[0]:
+            raise ValueError("leaders must be ordered along the road, F behind L1")
+        if self.own_x is not None and self.own_x <= self.ego_x:
+            raise ValueError("L0 must be ahead of the ego")
+
+
+def scenarios_from_batch(batch, *, brake_start_s: float = 0.0) -> list[SumoScenario]:
+    """The rows of a :class:`safelane.sim.ScenarioBatch` (e.g. ``paper_scenarios``) as SUMO scenarios (a straight
+    ego start, ``y = 0``; the lateral start of the batch is not used)."""
+    out = []
+    for b in range(len(batch.ego_x)):
+        k = int(batch.n_connected[b]) + 2
+        out.append(SumoScenario(
+            ego_x=float(batch.ego_x[b]), ego_v=float(batch.ego_vx[b]), f_x=float(batch.x[b, 0]),
+            f_v=float(batch.v[b, 0]), leaders_x=tuple(batch.x[b, 1:k].tolist()),
+            leaders_v=tuple(batch.v[b, 1:k].tolist()), n_connected=int(batch.n_connected[b]),
+            decel_last=float(batch.decel_last[b]), f_connected=bool(batch.connected[b, 0]),
+            f_aggressive=bool(batch.follower_aggressive[b]), promise_decel=float(batch.promise_decel[b, 1]),
+            promise_accel=float(batch.promise_accel[b, 1]), brake_start_s=brake_start_s,
+            scenario_id=int(batch.scenario_id[b]),
+        ))  # fmt: skip
+    return out
+
+
+def sumo_scenarios(
+    n_leaders: int,
+    decel: float,
+    samples: int,
+    seed: int = 0,
+    *,
+    own_share: float = 0.0,
+    own_gap: tuple[float, float] = (25.0, 45.0),
+    own_decel: tuple[float, float] = (0.0, 8.0),
+    own_brake_start_s: tuple[float, float] = (0.0, 3.0),
+    first_id: int = 0,
+) -> list[SumoScenario]:
+    """The paper's sampler (``safelane.sim.paper_scenarios``, variant CV_all) and, in a share ``own_share`` of them,
+    an ``L0`` in the ego's lane ``U[own_gap]`` m ahead at the traffic's speed that brakes at ``U[own_decel]`` from
+    ``U[own_brake_start_s]``."""
+    from ..sim.scenario import paper_scenarios
+
+    rng = np.random.default_rng(seed)
+    batch = paper_scenarios("CV_all", n_leaders, decel, samples, rng, first_id=first_id)
+    out = scenarios_from_batch(batch)
+    own = rng.uniform(size=samples) < own_share
+    gap, a0, t0 = (rng.uniform(*r, size=samples) for r in (own_gap, own_decel, own_brake_start_s))
+    for i in np.flatnonzero(own):
+        out[i] = dataclasses.replace(out[i], own_x=out[i].ego_x + float(gap[i]), own_v=float(batch.v[i, 1]),
+                                     own_decel=float(a0[i]), own_brake_start_s=float(t0[i]))  # fmt: skip
+    return out
+
+
+def reckless(situation: Situation, params: Params):
+    """The reckless nominal policy: always merge at full authority — ``a_x = a_x_a`` and ``a_y = ±a_y_m`` toward the
+    target lane's centre (no damping)."""
+    n = len(situation)
+    a_y = params.a_y_m * np.sign(params.lane_width - situation.ego_y)
+    return np.full(n, params.a_x_a), a_y
+
+
+def own_lane_leaders(ego_x: float, lane_x, lane_v):
+    """``L0`` from the ego's own lane as read from SUMO (centres, sorted): ``((1, 1) x, (1, 1) v)`` — the nearest
+    vehicle ahead of the ego's centre, ``+inf`` position (speed 0) where there is none. The one place the own lane
+    is filled (``Situation.from_arrays(own_leaders=...)``; ``L0`` not connected: worst case ``a_x_d``)."""
+    ahead = np.flatnonzero(np.asarray(lane_x) > ego_x)
+    if ahead.size == 0:
+        return np.array([[np.inf]]), np.array([[0.0]])
+    i = ahead[0]
+    return np.array([[float(lane_x[i])]]), np.array([[float(lane_v[i])]])
+
+
+@dataclass
+class EpisodeResult:
+    """One episode: what happened by SUMO's list (``collided``, ``collisions``), our geometric cross-check
+    (``overlaps``), and what the shield did."""
+
+    scenario_id: int
+    n_leaders: int
+    decel: float
+    has_l0: bool
+    own_decel: float
+    traffic: str
+    shielded: bool
+    steps: int = 0
+    completed: bool = False
+    collided: bool = False
+    collisions: list = field(default_factory=list)
+    overlaps: list = field(default_factory=list)
+    n_hesitate: int = 0
+    n_abort: int = 0
+    breach: bool = False
+    promise_violations: int = 0
+    v2x_sent: int = 0
+    v2x_lost: int = 0
+    wall_s: float = 0.0
+
+    @property
+    def success(self) -> bool:
+        return self.completed and not self.collided
+
+    def row(self) -> dict:
+        first = self.collisions[0] if self.collisions else {}
+        return {
+            "scenario_id": self.scenario_id, "n_leaders": self.n_leaders, "decel": self.decel, "has_l0": self.has_l0,
+            "own_decel": self.own_decel, "traffic": self.traffic, "shielded": self.shielded, "steps": self.steps,
+            "completed": self.completed, "success": self.success, "collided": self.collided,
+            "collider": first.get("collider", ""), "victim": first.get("victim", ""), "lane": first.get("lane", ""),
+            "phase": first.get("phase", ""), "t_collision_s": first.get("t", np.nan),
+            "geometric_overlap": bool(self.overlaps), "n_hesitate": self.n_hesitate, "n_abort": self.n_abort,
+            "breach": self.breach, "promise_violations": self.promise_violations, "wall_s": self.wall_s,
+        }  # fmt: skip
+
+
+class SumoRunner:
+    """Runs episodes in one SUMO simulation (one per process: libsumo is a singleton; use processes for parallel
+    episodes). ``traci=True`` runs SUMO as a separate process through TraCI (needs a SUMO binary), ``gui=True``
+    in sumo-gui; ``fcd``: SUMO's floating-car-data output file (the last episode's)."""
+
+    def __init__(self, params: Params | None = None, *, variant: str = "CV_all", config: ShieldConfig | None = None,
+                 traffic: str = "paper", v2x_loss: float = 0.0, v2x_latency_periods: int = 0,
+                 v2x_max_age_s: float = v2x.MAX_AGE_S, horizon_s: float = 10.0, policy=reckless,
+                 stop_on_collision: bool = True, traci: bool = False, gui: bool = False, fcd: str | None = None,
+                 seed: int = 0):  # fmt: skip
+        if traffic not in TRAFFIC_MODES:
+            raise ValueError(f"traffic must be one of {TRAFFIC_MODES}; got {traffic!r}")
+        self.params = params or Params()
+        self.variant, self.config = variant, config or ShieldConfig()
+        self.traffic, self.policy, self.horizon_s = traffic, policy, float(horizon_s)
+        self.v2x = dict(loss=float(v2x_loss), latency_periods=int(v2x_latency_periods), max_age_s=float(v2x_max_age_s))
+        self.stop_on_collision, self.seed = stop_on_collision, int(seed)
+        self.world = SumoWorld(self.params, traci=traci, gui=gui, fcd=fcd, seed=seed)
+
+    def close(self) -> None:
+        self.world.close()
+
+    def __enter__(self) -> SumoRunner:
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
+
+    def settings(self) -> dict:
+        """The settings as SUMO reports them (after the first episode has started SUMO)."""
+        return self.world.settings()
+
+    def run_many(self, scenarios, *, shielded: bool = True):
+        """A ``pandas.DataFrame`` with one :meth:`EpisodeResult.row` per scenario."""
+        import pandas as pd
+
+        return pd.DataFrame([self.run(sc, shielded=shielded).row() for sc in scenarios])
+
+    def run(self, sc: SumoScenario, *, shielded: bool = True) -> EpisodeResult:
+        prm, world = self.params, self.world
+        dt = prm.dt
+        t_wall = time.perf_counter()
+        k_lead = len(sc.leaders_x)
+        slot_ids = ["F", *(f"L{i}" for i in range(1, k_lead + 1))]
+        traffic = TargetLaneTraffic(
+            params=prm, mode=self.traffic, n_connected=sc.n_connected, promise_decel=sc.promise_decel,
+            promise_accel=sc.promise_accel, f_aggressive=sc.f_aggressive, decel_last=sc.decel_last,
+            brake_start_s=sc.brake_start_s, v_desired=np.array([sc.f_v, *sc.leaders_v]), gap0=sc.ego_x - sc.f_x,
+        )  # fmt: skip
+        connected = {slot_ids[i] for i in range(1, sc.n_connected + 1)} | ({"F"} if sc.f_connected else set())
+        vehicles = [VehicleSpec("ego", 0, ROAD_X0 + sc.ego_x, sc.ego_v), VehicleSpec("F", 1, ROAD_X0 + sc.f_x, sc.f_v)]
+        vehicles += [VehicleSpec(slot_ids[i + 1], 1, ROAD_X0 + x, v)
+                     for i, (x, v) in enumerate(zip(sc.leaders_x, sc.leaders_v, strict=True))]  # fmt: skip
+        if sc.own_x is not None:
+            vehicles.append(VehicleSpec("L0", 0, ROAD_X0 + sc.own_x, sc.own_v))
+        world.load(vehicles, frozenset(slot_ids[i] for i in traffic.sumo_driven))
+        origin, sign = world.lane_y[0], (1.0 if world.lane_y[1] > world.lane_y[0] else -1.0)
+        link = V2XLink(prm, seed=self.seed * 1_000_003 + sc.scenario_id, **self.v2x)
+        config = self.config if shielded else self.config.model_copy(update={"enabled": False})
+        shield = Shield(prm, variant=self.variant, config=config)
+        res = EpisodeResult(sc.scenario_id, sc.n_connected, sc.decel_last, sc.own_x is not None, sc.own_decel,
+                            self.traffic, shielded)  # fmt: skip
+
+        ex, ey, evx, evy = ROAD_X0 + sc.ego_x, 0.0, sc.ego_v, 0.0  # the ego: road x, shield-frame y (exact state)
+        completed = False
+        last_acc = {vid: 0.0 for vid in slot_ids}
+        steps = round(self.horizon_s / dt)
+        t = 0.0
+        for k in range(steps):
+            if k:  # accumulated as the shield does (its held plans start at t + dt): k * dt may differ by an ulp
+                t = t + dt
+            tgt, own = world.lane(1, exclude="ego"), world.lane(0, exclude="ego")
+            state = {vid: (x, v) for lane in (tgt, own) for vid, x, v in zip(lane.ids, lane.x, lane.v, strict=True)}
+            link.broadcast(k, [self._message(vid, t, *state[vid], last_acc.get(vid, 0.0), sc)
+                               for vid in sorted(connected) if vid in state])  # fmt: skip
+            link.receive(k)
+            situation = self._situation(t, (ex, ey, evx, evy), tgt, own, connected, link)
+            proposal = self.policy(situation, prm)
+            if k == 0:
+                shield.reset(situation)
+            d = shield.step(situation, proposal)
+            res.n_hesitate += int(d.behaviour[0] == HESITATE)
+            res.n_abort += int(d.behaviour[0] == ABORT)
+            rows, _, px, vx, py, vy = d.abort_motion()
+            if rows.size:  # the held plan's exact motion over the period
+                ex, evx, ey, evy = float(px[0, -1]), float(vx[0, -1]), float(py[0, -1]), float(vy[0, -1])
+            else:
+                nx, nv = advance(np.float64(ex), np.float64(evx), np.float64(d.a_x[0]), dt)
+                ey, evy = ey + evy * dt + 0.5 * d.a_y[0] * dt * dt, evy + d.a_y[0] * dt
+                ex, evx = float(nx), float(nv)
+
+            # The others: this period's accelerations from the states at its start.
+            xs = np.array([state[vid][0] for vid in slot_ids])
+            vs = np.array([state[vid][1] for vid in slot_ids])
+            acc = traffic.step(t, xs, vs, situation.ego_x[0], situation.ego_vx[0], completed)
+            for i, vid in enumerate(slot_ids):
+                if np.isfinite(acc[i]):
+                    world.set_speed(vid, vs[i] + acc[i] * dt)
+                    last_acc[vid] = float(acc[i])
+            if "L0" in state:
+                a0 = profile_accel(t, sc.own_brake_start_s, sc.own_decel)
+                world.set_speed("L0", state["L0"][1] + a0 * dt)
+            completed = completed or bool(d.completing[0])
+            world.place("ego", ex, origin + sign * ey, evx)
+            world.step()
+            res.steps = k + 1
+
+            v_new = np.array([world.api.vehicle.getSpeed(vid) for vid in slot_ids])
+            for i, vid in enumerate(slot_ids):
+                if not np.isfinite(acc[i]):
+                    last_acc[vid] = float((v_new[i] - vs[i]) / dt)
+            traffic.observe(vs, v_new)
+            self._referee(res, t + dt, ey, origin, sign, vehicles)
+            if res.collided and self.stop_on_collision:
+                break
+        res.completed = completed
+        res.breach = bool(shield.state.breach.any[0])
+        res.promise_violations = traffic.violations
+        res.v2x_sent, res.v2x_lost = link.sent, link.lost
+        res.wall_s = time.perf_counter() - t_wall
+        return res
+
+    # -- pieces of a period -------------------------------------------------------------------------------------
+    def _message(self, vid, t, x, v, a, sc: SumoScenario) -> v2x.V2XMessage:
+        prm = self.params
+        intent = None
+        if vid == "F":
+            intent = "aggressive" if sc.f_aggressive else "collaborative"
+        return v2x.V2XMessage(
+            vehicle_id=vid, timestamp_s=t, position_m=float(x), speed_mps=float(v),
+            accel_mps2=float(np.clip(a, -prm.a_x_d, prm.a_x_a)), promise_decel=sc.promise_decel,
+            promise_accel=sc.promise_accel, human_driven=False, intent=intent,
+        )  # fmt: skip
+
+    def _situation(self, t, ego, tgt, own, connected, link) -> Situation:
+        """The Situation from the lanes as read: F and the chain from messages (fresh) or sensed states."""
+        prm = self.params
+        ex, ey, evx, evy = ego
+        behind = np.flatnonzero(tgt.x <= ex)
+        ahead = np.flatnonzero(tgt.x > ex)
+
+        def item(i):
+            vid = tgt.ids[i]
+            msg = link.message(vid) if vid in connected else None
+            if msg is not None:
+                return msg
+            return v2x.SensedVehicle(vehicle_id=vid, timestamp_s=t, position_m=float(tgt.x[i]),
+                                     speed_mps=float(tgt.v[i]))  # fmt: skip
+
+        leaders = [item(i) for i in ahead]
+        if not leaders:
+            leaders = [v2x.SensedVehicle(vehicle_id="none-ahead", timestamp_s=t, position_m=ex + FAR_M, speed_mps=evx)]
+        max_age = self.v2x["max_age_s"]
+        chain = v2x.leader_arrays(leaders, t, prm, max_age_s=max_age)
+        if behind.size:
+            f = item(behind[-1])
+        else:
+            f = v2x.SensedVehicle(vehicle_id="none-behind", timestamp_s=t, position_m=ex - FAR_M, speed_mps=0.0)
+        if isinstance(f, v2x.V2XMessage):
+            status = v2x.follower_status(f, t, prm, max_age_s=max_age)
+            f_conn, f_coll = status.connected, status.collaborative
+            a_f = f.accel_mps2 if f_conn else -prm.a_x_d
+        else:
+            f_conn = f_coll = False
+            a_f = -prm.a_x_d
+        fx, fv = v2x.extrapolate(f.position_m, f.speed_mps, a_f, max(t - f.timestamp_s, 0.0))
+        situation = Situation.from_arrays(
+            t=t, ego=(ex, ey, evx, evy), follower=(fx, fv), leaders=(chain.p[None, :], chain.v[None, :]),
+            n_connected=chain.n_connected, promise_decel=chain.promise_decel[None, :],
+            human_driven=chain.human_driven[None, :], f_connected=f_conn, f_collaborative=f_coll, params=prm,
+            own_leaders=own_lane_leaders(ex, own.x, own.v), own_n_connected=0,
+        )  # fmt: skip
+        stale = bool(chain.stale_ids) or (isinstance(f, v2x.V2XMessage) and not f_conn)
+        return dataclasses.replace(situation, v2x_stale=np.array([stale]))
+
+    def _referee(self, res: EpisodeResult, t, ey, origin, sign, vehicles) -> None:
+        prm = self.params
+        phase = "original lane" if ey <= prm.y_safe else ("straddling" if ey < prm.lane_width - prm.y_safe
+                                                          else "target lane")  # fmt: skip
+        for c in self.world.collisions():
+            res.collided = True
+            res.collisions.append({**c, "t": round(t, 3), "phase": phase, "ego_y": ey})
+        ids = [veh.vid for veh in vehicles]
+        pos = [self.world.position(vid) for vid in ids]
+        x, y = [p[0] for p in pos], [p[1] for p in pos]
+        pairs = [(0, j) for j in range(1, len(ids))]
+        same_lane = sorted(range(1, len(ids)), key=lambda i: (vehicles[i].lane, x[i]))
+        pairs += [(i, j) for i, j in itertools.pairwise(same_lane) if vehicles[i].lane == vehicles[j].lane]
+        for i, j, gx, gy in overlaps(x, y, prm, pairs):
+            res.overlaps.append({"a": ids[i], "b": ids[j], "t": round(t, 3), "gap_x": gx, "gap_y": gy, "phase": phase})
