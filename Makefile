@@ -12,8 +12,12 @@ $(STAMP): pyproject.toml
 	# The pinned CPU build of PyTorch first: an unpinned torch would pull several GB of CUDA wheels.
 	$(PY) -m pip install --quiet torch==2.13.0
 	$(PY) -m pip install --quiet -e ".[dev,train,gym,rl]"
+	# Ray (extra ray; a 79 MB wheel, about 10 s): the Ray backend's tests run in CI (docs/scale.md).
+	$(PY) -m pip install --quiet -e ".[ray]"
 	# ad-rss (extra rss; wheels for Linux x86_64): the RSS parity tests need it and skip, saying so, where it is absent.
 	$(PY) -m pip install --quiet -e ".[rss]" || echo "ad-rss could not be installed here: the RSS parity tests will skip"
+	# libsumo (extra sumo; manylinux wheels): CI runs the SUMO integration's tests with it (they skip only without it).
+	$(PY) -m pip install --quiet -e ".[sumo]"
 	touch $(STAMP)
 
 install: $(STAMP)
