@@ -1,0 +1,333 @@
+"""The shield in highway-env (extra ``highway``): :class:`SafeLaneShield`, a Gymnasium wrapper.
+
+``SafeLaneShield(env)`` takes physical continuous actions ``(a_x, a_y)`` [m/s²] (``a_y > 0`` toward the target
+lane), reads the vehicles from ``env.unwrapped.road`` (not from the observation), finds F and L1 in the target lane
+(and L0 ahead of the ego in its own lane), builds a :class:`~safelane.shield.Situation` (a
+:class:`~safelane.shield.LaneFrame` maps highway-env's ``y``-to-the-right, lane-0-leftmost frame), asks
+:meth:`Shield.step <safelane.shield.Shield.step>` and moves the ego — replaced at every reset by a
+:class:`~.highway_vehicles.PointMassVehicle`, an exact point mass — by the decision. highway-env's own collision
+check (``info["crashed"]``) is the referee. See docs/integrations.md.
+
+Importing this module imports gymnasium and highway-env (``pip install "safelane[highway]"``) and registers the
+lane-change scene ``safelane/HighwayScene-v0`` (:mod:`.highway_scene`).
+"""
+
+from __future__ import annotations
+
+import inspect
+
+import numpy as np
+
+INSTALL_HINT = 'pip install "safelane[highway]"  (gymnasium >= 1.0, highway-env >= 1.12)'
+
+try:
+    import gymnasium as gym
+    import highway_env  # noqa: F401  (registers highway-v0 & co.)
+    from highway_env.road.lane import StraightLane
+except ImportError as exc:  # pragma: no cover - exercised only without the extra
+    raise ImportError(f"safelane.integrations.highway needs gymnasium and highway-env: {INSTALL_HINT}") from exc
+
+from ..params import Params  # noqa: E402
+from ..shield import ABORT, COMPLETED, HESITATE, PROCEED, LaneFrame, Shield, ShieldConfig, Situation  # noqa: E402
+from .highway_vehicles import PointMassVehicle, SuddenBrakeVehicle  # noqa: E402
+
+SCENE_ENV_ID = "safelane/HighwayScene-v0"
+#: What a highway-env environment needs for the wrapper: the shield's period at both frequencies, continuous actions
+#: (the wrapper drives the ego itself; any action type works, this one keeps the host's action space a box).
+HIGHWAY_CONFIG = {"simulation_frequency": 10, "policy_frequency": 10, "action": {"type": "ContinuousAction"}}
+BEHAVIOUR = {PROCEED: "proceed", HESITATE: "hesitate", ABORT: "abort", COMPLETED: "completed"}
+FAR_M = 1000.0  # where a missing F or L1 is put (behind / ahead of the ego)
+#: The Situation takes the ego's own-lane leaders (issue 17) where its ``from_arrays`` has ``own_leaders``.
+OWN_LANE_SUPPORTED = "own_leaders" in inspect.signature(Situation.from_arrays).parameters
+
+__all__ = [
+    "HIGHWAY_CONFIG",
+    "INSTALL_HINT",
+    "SCENE_ENV_ID",
+    "PointMassVehicle",
+    "SafeLaneShield",
+    "SuddenBrakeVehicle",
+    "check_frequencies",
+    "classify_crash",
+    "highway_params",
+    "own_lane_leaders",
+    "register_highway_envs",
+]
+
+
+def highway_params(**overrides) -> Params:
+    """:class:`Params` for highway-env's geometry and traffic: 4 m lanes, 5 × 2 m vehicles, and ``a_x_a = 3`` m/s²
+    (IDM's largest acceleration, ``COMFORT_ACC_MAX``: an aggressive F accelerates at most at it). ``a_x_d`` stays 8
+    m/s² (IDM brakes at up to 6; the scene's L(N+1) at up to 8)."""
+    values = {"lane_width": 4.0, "vehicle_width": 2.0, "vehicle_length": 5.0, "a_x_a": 3.0}
+    values.update(overrides)
+    return Params(**values)
+
+
+def register_highway_envs() -> None:
+    """Register ``safelane/HighwayScene-v0`` (idempotent)."""
+    if SCENE_ENV_ID not in gym.registry:
+        gym.register(id=SCENE_ENV_ID, entry_point="safelane.integrations.highway_scene:LaneChangeScene")
+
+
+def check_frequencies(env, params: Params) -> None:
+    """Raise a ``ValueError`` naming the config keys unless the host simulates and decides every ``params.dt``."""
+    config = env.unwrapped.config
+    hz = 1.0 / params.dt
+    sim, pol = config.get("simulation_frequency"), config.get("policy_frequency")
+    if not (np.isclose(sim, hz) and np.isclose(pol, hz)):
+        raise ValueError(
+            f"SafeLaneShield needs a {hz:g} Hz simulation and a {hz:g} Hz policy (the shield's period Params.dt = "
+            f"{params.dt:g} s); this env has config['simulation_frequency'] = {sim!r} and config['policy_frequency'] "
+            f"= {pol!r}. Make it with config={{'simulation_frequency': {hz:g}, 'policy_frequency': {hz:g}}}, e.g. "
+            f"gymnasium.make('highway-v0', config=safelane.integrations.highway.HIGHWAY_CONFIG)"
+        )
+
+
+def _check_road(road, params: Params) -> None:
+    for _from, to in road.network.graph.items():
+        for _to, lanes in to.items():
+            for i, lane in enumerate(lanes):
+                heading = getattr(lane, "heading", np.nan)
+                if not (isinstance(lane, StraightLane) and abs(np.sin(heading)) < 1e-9 and np.cos(heading) > 0):
+                    name = type(lane).__name__
+                    raise ValueError(f"SafeLaneShield supports straight roads along +x (highway-v0's); lane "
+                                     f"{(_from, _to, i)} is a {name} (heading {heading:.3f})")  # fmt: skip
+                if not np.isclose(lane.width, params.lane_width):
+                    raise ValueError(f"lane {(_from, _to, i)} is {lane.width} m wide but Params.lane_width = "
+                                     f"{params.lane_width}: use highway_params(lane_width={lane.width})")  # fmt: skip
+
+
+def _longitudinal(vehicle) -> tuple[float, float]:
+    """``(x, v_x)`` of a host vehicle; a negative speed (highway-env lets IDM vehicles reverse) reads as 0."""
+    speed = getattr(vehicle, "speed", 0.0) * np.cos(getattr(vehicle, "heading", 0.0))
+    return float(vehicle.position[0]), max(float(speed), 0.0)
+
+
+def own_lane_leaders(road, ego, lane_index, k: int = 1) -> tuple[np.ndarray, np.ndarray, list]:
+    """The ego's own-lane leaders ``L0, …`` (nearest first, ``k`` of them): ``(x (k,), v (k,), vehicles)``, with
+    ``np.inf`` positions (and speed 0) where there is none. The one place the own lane is read (issue 17)."""
+    x, v, found = np.full(k, np.inf), np.zeros(k), []
+    current = ego
+    for i in range(k):
+        front, _ = road.neighbour_vehicles(current, lane_index)
+        if front is None:
+            break
+        x[i], v[i] = _longitudinal(front)
+        found.append(front)
+        current = front
+    return x, v, found
+
+
+def classify_crash(ego, road, roles: dict, frame: LaneFrame, params: Params, original_lane, target_lane) -> dict:
+    """Who hit whom, where: the ego's collision partner (the nearest crashed vehicle), its role (``F``, ``L1``,
+    ``L0``, … from ``roles``: vehicle id → name, else ``other``), its lane (``target``, ``original``, ``other``),
+    the ego's lateral phase (``original lane``, ``straddling``, ``target lane``) and the kind of contact."""
+    y, _ = frame.y(ego.position[1], 0.0)
+    y = float(y)
+    phase = "original lane" if y <= params.y_safe else ("target lane" if y >= params.lane_width - params.y_safe
+                                                          else "straddling")  # fmt: skip
+    others = [v for v in road.vehicles if v is not ego and getattr(v, "crashed", False)]
+    if not others:
+        return {"partner": "none", "lane": "-", "ego_phase": phase, "kind": "unknown"}
+    partner = min(others, key=lambda v: float(np.linalg.norm(v.position - ego.position)))
+    lane_id = partner.lane_index[2] if partner.lane_index else None
+    lane = "target" if lane_id == target_lane[2] else ("original" if lane_id == original_lane[2] else "other")
+    dx = float(partner.position[0] - ego.position[0])
+    length = 0.5 * (ego.LENGTH + partner.LENGTH)
+    if abs(dx) < 0.8 * length:
+        kind = "side contact"
+    elif dx > 0:
+        kind = "ego ran into it (ahead)"
+    else:
+        kind = "it ran into the ego (behind)"
+    return {"partner": roles.get(id(partner), "other"), "lane": lane, "ego_phase": phase, "kind": kind,
+            "dx_m": round(dx, 2), "partner_speed": round(float(partner.speed), 2),
+            "ego_speed": round(float(ego.speed), 2)}  # fmt: skip
+
+
+class SafeLaneShield(gym.Wrapper, gym.utils.RecordConstructorArgs):
+    """The shield between a policy and a highway-env environment (see the module docstring).
+
+    Args:
+        env: a highway-env environment on a straight road, at 10 Hz simulation and 10 Hz policy (else a
+            ``ValueError`` naming ``simulation_frequency`` / ``policy_frequency``; see :data:`HIGHWAY_CONFIG`).
+        shield: ``False`` executes the (clipped) action unfiltered — the same ego, frame and info keys.
+        variant: the shield's information use; default ``"No_agg_assess"`` (L1 at ``a_x_d``, F always assumed
+            aggressive: highway-env's traffic is not connected, and IDM's F is no responsible yielder braking at
+            ``a_x_d``), ``"CV_all"`` where ``connected`` vehicles are marked.
+        params: default :func:`highway_params`.
+        config: the :class:`~safelane.shield.ShieldConfig`.
+        target: ``"left"`` (lane id − 1), ``"right"`` or ``"auto"`` (left unless the ego is in lane 0).
+        connected: treat vehicles with a true ``safelane_connected`` attribute as connected leaders (their promise
+            in ``safelane_promise`` [m/s²], default ``promise``); their states are read exactly (an ideal V2X link).
+        own_leaders: how many own-lane leaders to read (used once the Situation takes them, issue 17).
+
+    Actions: ``Box([-a_x_d, -a_y_m], [a_x_a, a_y_m])``; ``a_y > 0`` points to the target lane. ``info`` adds
+    ``shield`` (``proceed``/``hesitate``/``abort``/``completed``, ``off`` without the shield), ``intervened``,
+    ``nominal_action``, ``executed_action`` (``Δv/dt`` over the period, shield frame), ``reason``, ``cost`` (1.0 in the
+    period the ego crashes or first comes closer than ``p_m`` to F or L1 while out of its lane, at period ends),
+    ``completed`` (the ego's centre has crossed into the target lane) and, on a crash, ``crash``
+    (:func:`classify_crash`); highway-env's ``crashed`` is kept.
+    """
+
+    def __init__(self, env, shield: bool = True, variant: str | None = None, params: Params | None = None,
+                 config: ShieldConfig | None = None, target: str = "auto", connected: bool = False,
+                 promise: float = 0.5, own_leaders: int = 1):  # fmt: skip
+        gym.utils.RecordConstructorArgs.__init__(self, shield=shield, variant=variant, params=params, config=config,
+                                                 target=target, connected=connected, promise=promise,
+                                                 own_leaders=own_leaders)  # fmt: skip
+        gym.Wrapper.__init__(self, env)
+        if target not in ("left", "right", "auto"):
+            raise ValueError(f"target must be 'left', 'right' or 'auto'; got {target!r}")
+        self.params = params or highway_params()
+        check_frequencies(env, self.params)
+        prm = self.params
+        if prm.p_m < PointMassVehicle.LENGTH or prm.vehicle_width < PointMassVehicle.WIDTH:
+            raise ValueError(f"Params must cover highway-env's {PointMassVehicle.LENGTH} x {PointMassVehicle.WIDTH} m "
+                             f"vehicles (p_m >= length, vehicle_width >= width): use highway_params()")  # fmt: skip
+        self.shield_on = bool(shield)
+        self.variant = variant or ("CV_all" if connected else "No_agg_assess")
+        self.shield = Shield(prm, variant=self.variant, config=config)
+        self.target = target
+        self.connected = bool(connected)
+        self.promise = float(promise)
+        self.n_own = int(own_leaders)
+        self.action_space = gym.spaces.Box(np.array([-prm.a_x_d, -prm.a_y_m], np.float32),
+                                           np.array([prm.a_x_a, prm.a_y_m], np.float32), dtype=np.float32)  # fmt: skip
+        self.ego: PointMassVehicle | None = None
+        self.frame = LaneFrame()
+        self.roles: dict = {}
+
+    # --- the host's state ---------------------------------------------------------------------------------------
+    def _host_action(self):
+        space = self.env.unwrapped.action_space
+        if isinstance(space, gym.spaces.Discrete):
+            return 1  # DiscreteMetaAction's IDLE (the point-mass ego ignores it)
+        return np.zeros(space.shape, space.dtype)
+
+    def _chain(self, road):
+        """L1, L2, … in the target lane: L1 and, while connected, the next ones (the last one non-connected)."""
+        chain, current = [], self.ego
+        while True:
+            front, _ = road.neighbour_vehicles(current, self.target_lane)
+            if front is None:
+                break
+            chain.append(front)
+            if not (self.connected and getattr(front, "safelane_connected", False)) or len(chain) > 50:
+                break
+            current = front
+        return chain
+
+    def situation(self) -> Situation:
+        """What the ego knows now, read from the road."""
+        ego, road, prm = self.ego, self.env.unwrapped.road, self.params
+        ex = float(ego.position[0])
+        _, f = road.neighbour_vehicles(ego, self.target_lane)
+        chain = self._chain(road)
+        roles = {}
+        if f is not None:
+            fx, fv = _longitudinal(f)
+            roles[id(f)] = "F"
+        else:
+            fx, fv = ex - FAR_M, 0.0
+        if chain:
+            lx, lv = np.array([_longitudinal(v) for v in chain]).T
+            roles.update({id(v): f"L{i + 1}" for i, v in enumerate(chain)})
+        else:
+            lx, lv = np.array([ex + FAR_M]), np.array([ego.speed])
+        n = len(chain) - 1 if chain and self.connected else 0
+        promise = np.array([float(getattr(v, "safelane_promise", self.promise)) for v in chain[:-1]]) if n else \
+            np.zeros(len(lx) - 1)  # fmt: skip
+        ox, ov, own = own_lane_leaders(road, ego, self.original_lane, self.n_own)
+        roles.update({id(v): f"L0{'' if i == 0 else f'+{i}'}" for i, v in enumerate(own)})
+        scene_roles = getattr(self.env.unwrapped, "scene", {}).get("roles", {})
+        self.roles = {**scene_roles, **roles}
+        kwargs = {}
+        if OWN_LANE_SUPPORTED:
+            kwargs = {"own_leaders": (ox[None, :], ov[None, :]), "own_n_connected": 0, "own_promise": self.promise}
+        return Situation.from_arrays(
+            t=self.t, ego=(ex, ego.position[1], ego.speed, ego.lateral_speed), follower=(fx, fv),
+            leaders=(lx[None, :], lv[None, :]), n_connected=n, promise_decel=promise[None, :] if promise.size else
+            np.zeros((1, len(lx) - 1)), f_connected=bool(self.connected and getattr(f, "safelane_connected", False)),
+            frame=self.frame, params=prm, **kwargs,
+        )  # fmt: skip
+
+    # --- Gymnasium ------------------------------------------------------------------------------------------------
+    def reset(self, *, seed=None, options=None):
+        obs, info = self.env.reset(seed=seed, options=options)
+        u = self.env.unwrapped
+        check_frequencies(self.env, self.params)
+        _check_road(u.road, self.params)
+        old = u.vehicle
+        self.ego = PointMassVehicle.replacing(old)
+        u.road.vehicles[u.road.vehicles.index(old)] = self.ego
+        u.controlled_vehicles[0] = self.ego
+        lane = self.ego.lane_index
+        lanes = u.road.network.graph[lane[0]][lane[1]]
+        side = self.target if self.target != "auto" else ("left" if lane[2] > 0 else "right")
+        tid = lane[2] - 1 if side == "left" else lane[2] + 1
+        if not 0 <= tid < len(lanes):
+            raise ValueError(f"the ego starts in lane {lane[2]} of {len(lanes)}: there is no lane to its {side}")
+        self.original_lane, self.target_lane = lane, (lane[0], lane[1], tid)
+        y0, y1 = lanes[lane[2]].position(0.0, 0.0)[1], lanes[tid].position(0.0, 0.0)[1]
+        self.frame = LaneFrame(origin_y=float(y0), sign=1.0 if y1 > y0 else -1.0)
+        self.t = 0.0
+        self.completed = False
+        self.costed = False
+        self.shield.reset(self.situation())
+        obs = u.observation_type.observe()
+        info.update(original_lane=lane[2], target_lane=tid, crashed=bool(self.ego.crashed))
+        return obs, info
+
+    def step(self, action):
+        if self.ego is None:
+            raise RuntimeError("SafeLaneShield.step before reset()")
+        prm, ego, frame = self.params, self.ego, self.frame
+        a = np.asarray(action, dtype=float).reshape(-1)
+        if a.shape != (2,):
+            raise ValueError(f"SafeLaneShield takes actions (a_x, a_y); got shape {np.shape(action)}")
+        vx0, vy0 = ego.speed, float(frame.y(0.0, ego.lateral_speed)[1])
+        situation = self.situation()  # also names the vehicles around the ego (F, L1, L0) for the crash report
+        if self.shield_on:
+            decision = self.shield.step(situation, (a[:1], a[1:]))
+            code = int(decision.behaviour[0])
+            if code == ABORT:
+                _, _, px, vx, py, vy = decision.abort_motion()
+                ysim = frame.origin_y + frame.sign * float(py[0, -1])
+                ego.command = ("state", float(px[0, -1]), float(vx[0, -1]), ysim, frame.sign * float(vy[0, -1]))
+            else:
+                ego.command = ("accel", float(decision.a_x[0]), float(frame.y_back(decision.a_y[0])))
+            name, intervened, reason = BEHAVIOUR[code], bool(decision.intervened[0]), decision.reasons()[0]
+        else:
+            ok = np.isfinite(a).all()
+            ax = float(np.clip(a[0], -prm.a_x_d, prm.a_x_a)) if ok else 0.0
+            ay = float(np.clip(a[1], -prm.a_y_m, prm.a_y_m)) if ok else 0.0
+            ego.command = ("accel", ax, float(frame.y_back(ay)))
+            name, intervened, reason = "off", False, "shield off: the action as given (clipped)"
+        obs, reward, terminated, truncated, info = self.env.step(self._host_action())
+        self.t += prm.dt
+        y, vy1 = (float(z) for z in frame.y(ego.position[1], ego.lateral_speed))
+        self.completed = self.completed or y >= prm.y_boundary
+        cost = 0.0
+        if ego.crashed:
+            cost = 1.0
+        elif not self.costed and y > prm.y_safe:
+            road = self.env.unwrapped.road
+            front, rear = road.neighbour_vehicles(ego, self.target_lane)
+            close = (front is not None and front.position[0] - ego.position[0] < prm.p_m) or (
+                rear is not None and ego.position[0] - rear.position[0] < prm.p_m)  # fmt: skip
+            if close:
+                cost, self.costed = 1.0, True
+        info.update(
+            shield=name, intervened=intervened, nominal_action=a.copy(),
+            executed_action=np.array([(ego.speed - vx0) / prm.dt, (vy1 - vy0) / prm.dt]), reason=reason, cost=cost,
+            completed=self.completed, crashed=bool(ego.crashed),
+        )  # fmt: skip
+        if ego.crashed:
+            info["crash"] = classify_crash(ego, self.env.unwrapped.road, self.roles, frame, prm, self.original_lane,
+                                           self.target_lane)  # fmt: skip
+        return obs, reward, terminated, truncated, info
+
+
+register_highway_envs()
