@@ -205,13 +205,14 @@ class EpisodeResult:
 class SumoRunner:
     """Runs episodes in one SUMO simulation (one per process: libsumo is a singleton; use processes for parallel
     episodes). ``traci=True`` runs SUMO as a separate process through TraCI (needs a SUMO binary), ``gui=True``
-    in sumo-gui; ``fcd``: SUMO's floating-car-data output file (the last episode's)."""
+    in sumo-gui; ``fcd``: SUMO's floating-car-data output file (the last episode's). ``world``: share an open
+    :class:`~.sumo_world.SumoWorld` between runners of other settings (it stays open when this runner closes)."""
 
     def __init__(self, params: Params | None = None, *, variant: str = "CV_all", config: ShieldConfig | None = None,
                  traffic: str = "paper", v2x_loss: float = 0.0, v2x_latency_periods: int = 0,
                  v2x_max_age_s: float = v2x.MAX_AGE_S, horizon_s: float = 10.0, policy=reckless,
                  stop_on_collision: bool = True, traci: bool = False, gui: bool = False, fcd: str | None = None,
-                 seed: int = 0):  # fmt: skip
+                 seed: int = 0, world: SumoWorld | None = None):  # fmt: skip
         if traffic not in TRAFFIC_MODES:
             raise ValueError(f"traffic must be one of {TRAFFIC_MODES}; got {traffic!r}")
         self.params = params or Params()
@@ -219,10 +220,12 @@ class SumoRunner:
         self.traffic, self.policy, self.horizon_s = traffic, policy, float(horizon_s)
         self.v2x = dict(loss=float(v2x_loss), latency_periods=int(v2x_latency_periods), max_age_s=float(v2x_max_age_s))
         self.stop_on_collision, self.seed = stop_on_collision, int(seed)
-        self.world = SumoWorld(self.params, traci=traci, gui=gui, fcd=fcd, seed=seed)
+        self._owns_world = world is None
+        self.world = SumoWorld(self.params, traci=traci, gui=gui, fcd=fcd, seed=seed) if world is None else world
 
     def close(self) -> None:
-        self.world.close()
+        if self._owns_world:
+            self.world.close()
 
     def __enter__(self) -> SumoRunner:
         return self

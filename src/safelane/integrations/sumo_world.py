@@ -295,3 +295,32 @@ def overlaps(x, y, params: Params, pairs) -> list[tuple[int, int, float, float]]
         if gx < 0.0 and gy < 0.0:
             out.append((i, j, float(gx), float(gy)))
     return out
+
+
+def braking_parity(world: SumoWorld, v0: float = 30.0, decel: float = 8.0, seconds: float = 6.0) -> dict:
+    """Our point-mass kinematics against SUMO's for the trivial scenario: one vehicle braking at a constant ``decel``
+    from ``v0`` until it stops (speed commands per step, ballistic integration). Returns the largest position and
+    speed differences before the stop, at and after it, and the bound SUMO's stop step allows (``decel·dt²/8``)."""
+    from .._motion import advance
+
+    prm = world.params
+    dt = prm.dt
+    x0 = 100.0
+    world.load([VehicleSpec("probe", 0, x0, v0)])
+    t_stop = v0 / decel
+    err_moving = err_stopped = err_v = 0.0
+    for k in range(1, round(seconds / dt) + 1):
+        v = world.api.vehicle.getSpeed("probe")
+        world.set_speed("probe", max(v - decel * dt, 0.0))
+        world.step()
+        x_ref, v_ref = advance(np.float64(x0), np.float64(v0), np.float64(-decel), k * dt)
+        x_sumo = float(front_to_centre(world.api.vehicle.getLanePosition("probe"), prm.vehicle_length))
+        err = abs(x_sumo - float(x_ref))
+        err_v = max(err_v, abs(world.api.vehicle.getSpeed("probe") - float(v_ref)))
+        if k * dt < t_stop - 1e-9:
+            err_moving = max(err_moving, err)
+        else:
+            err_stopped = max(err_stopped, err)
+    return {"v0_mps": v0, "decel_mps2": decel, "max_pos_err_moving_m": err_moving,
+            "max_pos_err_stopped_m": err_stopped, "max_speed_err_mps": err_v,
+            "stop_bound_m": decel * dt * dt / 8.0}  # fmt: skip
