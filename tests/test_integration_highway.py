@@ -1,0 +1,153 @@
+"""The shield in highway-env (safelane.integrations.highway, issue 11): the wrapper's interface, the refusal of
+other frequencies, the exact point-mass ego, and crashes by highway-env's own flag with and without the shield."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+REASON = "the highway-env integration needs the highway extra: pip install -e '.[highway]'"
+pytest.importorskip("gymnasium", reason=REASON)
+pytest.importorskip("highway_env", reason=REASON)
+
+import gymnasium as gym  # noqa: E402
+
+from safelane.integrations.highway import (  # noqa: E402
+    HIGHWAY_CONFIG,
+    SCENE_ENV_ID,
+    PointMassVehicle,
+    SafeLaneShield,
+    highway_params,
+    own_lane_leaders,
+)
+
+INFO_KEYS = {"shield", "intervened", "nominal_action", "executed_action", "reason", "cost", "crashed"}
+FAST = {"observation": {"type": "LidarObservation"}}  # the default Kinematics observation is slow (pandas)
+
+
+def reckless(env) -> np.ndarray:
+    """Full authority: a_x_a and the lateral acceleration saturated toward the target-lane centre."""
+    prm, ego = env.params, env.ego
+    y, vy = (float(z) for z in env.frame.y(ego.position[1], ego.lateral_speed))
+    return np.array([prm.a_x_a, np.clip(2.0 * (prm.lane_width - y) - 2.5 * vy, -prm.a_y_m, prm.a_y_m)])
+
+
+def run(env, seed: int):
+    env.reset(seed=seed)
+    done, info = False, {}
+    while not done:
+        _, _, terminated, truncated, info = env.step(reckless(env))
+        done = terminated or truncated
+    return info
+
+
+def scene(shield=True, duration=8, **config):
+    return SafeLaneShield(gym.make(SCENE_ENV_ID, config={**FAST, "duration": duration, **config}), shield=shield)
+
+
+def test_info_keys_and_spaces():
+    env = scene()
+    obs, info = env.reset(seed=0)
+    assert env.observation_space.contains(obs)
+    assert info["target_lane"] == 0 and info["original_lane"] == 1
+    prm = env.params
+    assert np.allclose(env.action_space.low, [-prm.a_x_d, -prm.a_y_m])
+    assert np.allclose(env.action_space.high, [prm.a_x_a, prm.a_y_m])
+    _, _, _, _, info = env.step(np.array([0.0, 1.0]))
+    assert INFO_KEYS <= set(info)
+    assert info["shield"] in {"proceed", "hesitate", "abort", "completed"}
+    assert isinstance(info["intervened"], bool) and isinstance(info["reason"], str)
+    assert np.allclose(info["nominal_action"], [0.0, 1.0])
+    assert info["executed_action"].shape == (2,) and info["cost"] in (0.0, 1.0)
+    off = scene(shield=False)
+    off.reset(seed=0)
+    info = off.step(np.array([0.5, 1.0]))[4]
+    assert info["shield"] == "off" and not info["intervened"]
+    assert np.allclose(info["executed_action"], [0.5, 1.0])  # exact: Δv/dt is the command
+
+
+def test_refuses_other_frequencies():
+    with pytest.raises(ValueError, match=r"simulation_frequency.*policy_frequency"):
+        SafeLaneShield(gym.make("highway-v0"))  # highway-env's defaults: 15 Hz simulation, 1 Hz policy
+    with pytest.raises(ValueError, match="policy_frequency"):
+        SafeLaneShield(gym.make("highway-v0", config={"simulation_frequency": 10, "policy_frequency": 5}))
+    SafeLaneShield(gym.make("highway-v0", config={**HIGHWAY_CONFIG, **FAST}))  # 10 Hz / 10 Hz is accepted
+
+
+def test_point_mass_ego_is_exact():
+    """Braking at 8 m/s² from 25 m/s: the ego stops exactly at v²/(2a) and never reverses (highway-env's own
+    Vehicle overshoots by 1.2 m and goes negative); the lateral motion is the exact parabola."""
+    env = scene(shield=False)
+    env.reset(seed=1)
+    ego = env.ego
+    assert isinstance(ego, PointMassVehicle) and env.unwrapped.vehicle is ego
+    x0, y0, v0 = float(ego.position[0]), float(ego.position[1]), float(ego.speed)
+    dt, a_y = env.params.dt, 0.7
+    for k in range(1, 41):
+        ego.command = ("accel", -8.0, -a_y)  # set directly: the host steps it exactly as given
+        ego.step(dt)
+        t = k * dt
+        ts = min(t, v0 / 8.0)
+        assert ego.speed == pytest.approx(max(v0 - 8.0 * t, 0.0), abs=1e-9)
+        assert ego.position[0] == pytest.approx(x0 + v0 * ts - 4.0 * ts * ts, abs=1e-9)
+        assert ego.position[1] == pytest.approx(y0 - 0.5 * a_y * t * t, abs=1e-9)
+    assert ego.speed == 0.0
+    # highway-env's own integration (old speed for the position) for comparison: the unsafe side
+    from highway_env.vehicle.kinematics import Vehicle
+
+    host = Vehicle(env.unwrapped.road, [x0, y0], 0.0, 25.0)
+    host.action = {"steering": 0.0, "acceleration": -8.0}
+    for _ in range(30):
+        host.step(dt)
+    assert host.position[0] - x0 > 25.0**2 / 16.0 + 1.0  # 3 s of braking: 1.1 m further than the exact stop
+    for _ in range(2):
+        host.step(dt)
+    assert host.speed < 0.0
+
+
+def test_wrapper_moves_the_ego_exactly_toward_the_target_lane():
+    env = scene(shield=False, own_leader=None)
+    env.reset(seed=2)
+    ego, prm = env.ego, env.params
+    x0, y0, v0 = float(ego.position[0]), float(ego.position[1]), float(ego.speed)
+    for _ in range(5):
+        env.step(np.array([1.0, 1.0]))
+    t = 5 * prm.dt
+    assert ego.position[0] == pytest.approx(x0 + v0 * t + 0.5 * t * t, abs=1e-9)
+    assert ego.position[1] == pytest.approx(y0 - 0.5 * t * t, abs=1e-9)  # the target lane 0 lies at smaller y
+
+
+def test_own_lane_leaders_fill():
+    env = scene(own_leader="cruise")
+    env.reset(seed=3)
+    x, _, found = own_lane_leaders(env.unwrapped.road, env.ego, env.original_lane, 2)
+    assert len(found) == 1 and np.isfinite(x[0]) and x[0] > env.ego.position[0] and np.isinf(x[1])
+    env_empty = scene()
+    env_empty.reset(seed=3)
+    x, _, found = own_lane_leaders(env_empty.unwrapped.road, env_empty.ego, env_empty.original_lane, 1)
+    assert found == [] and np.isinf(x[0])
+
+
+def test_highway_params_match_the_host():
+    prm = highway_params()
+    assert (prm.lane_width, prm.vehicle_width, prm.vehicle_length) == (4.0, 2.0, 5.0)
+    assert prm.dt == pytest.approx(0.1)
+
+
+@pytest.mark.parametrize("decel", [4.0, 6.0, 8.0])
+def test_shielded_reckless_policy_never_crashes_unshielded_does(decel):
+    """8 episodes per deceleration (24 in all) with the shield: 0 crashes by highway-env's flag; the same policy
+    unshielded crashes (so this test can fail)."""
+    shielded = scene(decel=[decel])
+    crashes = [run(shielded, seed)["crashed"] for seed in range(8)]
+    assert sum(crashes) == 0
+    unshielded = scene(shield=False, decel=[decel])
+    infos = [run(unshielded, seed) for seed in range(4)]
+    assert sum(i["crashed"] for i in infos) > 0
+    assert all("crash" in i and i["crash"]["partner"] != "none" for i in infos if i["crashed"])
+
+
+def test_import_hint_names_the_extra():
+    from safelane.integrations import highway
+
+    assert "safelane[highway]" in highway.INSTALL_HINT
