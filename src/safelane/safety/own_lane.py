@@ -154,7 +154,7 @@ def own_lane_core(
                 mid = 0.5 * (lo + hi)
                 g0 = leader_gap(mid, *args, lead_r, l0_r, om_r, INF, prm)
                 g1 = np.where(nothing_r, INF, leader_gap(mid, *args, lead_r, l1_r, lm_r, T_r, prm))
-                ok = np.minimum(g0, g1) >= -tol
+                ok = np.minimum(g0, g1) >= -0.5 * tol  # half the tolerance: room for the executor's round-off
                 lo, hi = np.where(ok, mid, lo), np.where(ok, hi, mid)
             u[rows] = lo
         u = np.where(g_lo >= -tol, u, 0.0)

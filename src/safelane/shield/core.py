@@ -31,7 +31,7 @@ from ..safety.evasion import plan_evasion
 from ..safety.plan import EvasionPlan
 from ..safety.responsible import responsible_accel, responsible_bound
 from . import assessment as assess
-from .decide import ABORT, COMPLETED, HESITATE, PROCEED, check_candidate, hesitate_lateral, plan_motion
+from .decide import ABORT, COMPLETED, HESITATE, PROCEED, check_candidate, hesitate_lateral, own_margin, plan_motion
 from .decision import Decision
 from .monitor import Breach, Snapshot, observe_breaches
 from .policies import ASSESSMENTS, COMPLETION_RULES, check_policy, variant_flags
@@ -174,9 +174,10 @@ def _own_plan(plan: EvasionPlan, args, own, prm: Params) -> EvasionPlan:
     sub = tuple(np.broadcast_to(a, plan.feasible.shape)[rows] for a in args)
     own_r = tuple(np.broadcast_to(a, plan.feasible.shape)[rows] for a in own)
     with np.errstate(all="ignore"):
-        exists, parts = own_lane_core(*sub, *own_r, prm.p_m, prm.p_m, prm.p_m, prm)
+        margin = own_margin(prm)
+        exists, parts = own_lane_core(*sub, *own_r, prm.p_m, prm.p_m, margin, prm)
         piece = plan_from_core(ARRAY, rows.shape, (*sub, prm.p_m, prm.p_m), exists, parts, prm.p_m, prm.p_m, prm,
-                               own=(*own_r, prm.p_m))  # fmt: skip
+                               own=(*own_r, margin))  # fmt: skip
     return _set_rows(plan, [(rows, piece)])
 
 
@@ -287,7 +288,7 @@ def step(
     abort_rows = np.flatnonzero(behaviour == ABORT)
     abort = (abort_rows, None, None, None, None, None)
     if abort_rows.size:  # only the aborting rows follow their plan: evaluate it there alone
-        age = s.t + delay - state.plan_t0[abort_rows]
+        age = np.maximum(s.t + delay - state.plan_t0[abort_rows], 0.0)  # (round-off of the summed periods)
         knots, px, vx, py, vy = plan_motion(state.plan.take(abort_rows), age, dt)
         abort = (abort_rows, knots, px, vx, py, vy)
         span = np.maximum(knots[:, 1] - knots[:, 0], 1e-300)

@@ -64,6 +64,11 @@ def own_completion_level(prm: Params) -> float:
     return max(prm.y_boundary, prm.vehicle_width)
 
 
+def own_margin(prm: Params) -> float:
+    """The margin the evasion keeps to ``L0``: ``p_m`` plus half the feasibility tolerance (see check_candidate)."""
+    return prm.p_m + 0.5 * FEASIBILITY_TOL_M
+
+
 def check_candidate(
     ego_x, ego_y, ego_vx, ego_vy, a_x, a_y, l1_x, l1_v, l1_decel, f_x, f_v, f_aggressive, prm: Params,
     completion=commit_guard, own=None,
@@ -104,7 +109,9 @@ def check_candidate(
     if has_own is not None:
         o_slack = np.where(has_own, o_x - ego_x - prm.p_m, 0.0)
         gap_o = pair_min_gap(o_slack, ego_vx, a_x, np.where(has_own, o_v, 0.0), -o_decel, dt)
-        period_ok &= ~has_own | (gap_o >= -tol)
+        # Half the tolerance for L0, here and in the evasion (OWN_MARGIN_M): a follower of L0 settles exactly at the
+        # margin, and the executor's round-off must stay inside the tolerance.
+        period_ok &= ~has_own | (gap_o >= -0.5 * tol)
         level = np.where(has_own, own_completion_level(prm), prm.y_boundary)
         ox, ov = advance(np.where(has_own, o_x, 0.0), o_v, -o_decel, dt)
 
@@ -133,7 +140,7 @@ def check_candidate(
             own_rows = has_own is not None and bool(has_own[rows[0]])
             if own_rows:
                 own_args = (ox[rows], ov[rows], o_decel[rows])
-                exists, parts = own_lane_core(*sub_args, *own_args, prm.p_m, prm.p_m, prm.p_m, prm)
+                exists, parts = own_lane_core(*sub_args, *own_args, prm.p_m, prm.p_m, own_margin(prm), prm)
             else:
                 exists, parts = evasion_core(ARRAY, *sub_args, prm.p_m, prm.p_m, prm)
             # A rule with ``needs_evasion`` (the paper's) keeps the evasion check at the crossing step as well.
@@ -149,7 +156,7 @@ def check_candidate(
                 prm.p_m,
                 prm.p_m,
                 prm,
-                own=(*(a[keep] for a in own_args), prm.p_m) if own_rows else None,
+                own=(*(a[keep] for a in own_args), own_margin(prm)) if own_rows else None,
             )
             plans.append((rows[keep], plan))
     return Verdict(ok=ok, completing=completing, plans=plans)

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from typing import Literal
 
-from pydantic import BaseModel, ConfigDict, Field
+from pydantic import BaseModel, ConfigDict, Field, model_validator
 
 
 class SimConfig(BaseModel):
@@ -56,3 +56,33 @@ class SimConfig(BaseModel):
         description="After a breach of the assumptions (safelane.shield.monitor) use the most conservative ones "
         "(L1 at a_x_d, F aggressive). False only records breaches.",
     )
+    # --- Beyond the paper's world (issue 17, docs/real_roads.md): all off by default (the paper's world) ---
+    own_lane: bool = Field(False, description="Put a leader L0 ahead of the ego in its own lane (non-connected).")
+    l0_gap_min_m: float = Field(15.0, gt=0.0, description="L0's initial gap to the ego: smallest [m].")
+    l0_gap_max_m: float = Field(60.0, gt=0.0, description="L0's initial gap to the ego: largest [m].")
+    l0_speed_spread_mps: float = Field(3.0, ge=0.0, description="L0's initial speed: the ego's + up to this [m/s].")
+    l0_decel_mps2: float | None = Field(None, gt=0.0, description="L0's sudden braking [m/s²] (default a_x_d).")
+    l0_brake_window_s: float = Field(4.0, ge=0.0, description="L0 starts braking at a uniform instant in [0, this].")
+    sensing_error: bool = Field(False, description="The ego measures the others with errors inside SensingBounds.")
+    sense_connected_pos_m: float = Field(0.5, ge=0.0, description="Position error bound, connected vehicles [m].")
+    sense_connected_speed_mps: float = Field(0.2, ge=0.0, description="Speed error bound, connected [m/s].")
+    sense_sensed_pos_m: float = Field(1.0, ge=0.0, description="Position error bound, non-connected vehicles [m].")
+    sense_sensed_speed_mps: float = Field(0.5, ge=0.0, description="Speed error bound, non-connected [m/s].")
+    actuation_delay_s: float = Field(0.0, ge=0.0, le=1.0, description="Actuation delay [s], whole control periods.")
+    shield_own_lane: bool = Field(True, description="The shield keeps p_m to L0 (False: the paper's shield).")
+    shield_sensing: bool = Field(True, description="The shield takes the worst case over the error bounds (False: "
+                                 "it trusts measurements, as the paper's).")  # fmt: skip
+    shield_delay: bool = Field(True, description="The shield accounts for the actuation delay (False: the paper's).")
+
+    @model_validator(mode="after")
+    def _check_l0(self) -> SimConfig:
+        if self.l0_gap_max_m < self.l0_gap_min_m:
+            raise ValueError(f"l0_gap_max_m={self.l0_gap_max_m} must be >= l0_gap_min_m={self.l0_gap_min_m}")
+        return self
+
+    def sensing_bounds(self):
+        from ..shield.situation import SensingBounds
+
+        return SensingBounds(self.sense_connected_pos_m, self.sense_connected_speed_mps, self.sense_sensed_pos_m,
+                             self.sense_sensed_speed_mps)  # fmt: skip
+

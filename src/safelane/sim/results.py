@@ -60,8 +60,20 @@ def results_table(b: ScenarioBatch, s) -> pd.DataFrame:
             "assumption_breach": s.breach.any,
             "breach_time_s": s.breach.first_s,
             **{f"breach_{kind}": s.breach.flags[:, i] for i, kind in enumerate(BREACH_KINDS)},
+            "initial_safe": s.initial_safe,
+            **_own_lane_columns(s),
         }
     )
+
+
+def _own_lane_columns(s) -> dict:
+    """With an own-lane leader L0 (issue 17): the ego's collisions / violations against it (also counted in
+    ``collision`` / ``safety_violation``) and the smallest gap."""
+    if getattr(s, "l0", None) is None:
+        return {}
+    gap = s.min_gap_l0
+    return {"own_lane_collision": s.l0_collided, "own_lane_violation": s.l0_violated,
+            "min_gap_own_lane_m": np.where(np.isinf(gap), np.nan, gap)}  # fmt: skip
 
 
 def trace_rows(b: ScenarioBatch, s, behaviour, limit: int) -> pd.DataFrame:

@@ -26,6 +26,7 @@ from .checks import ego_checks, lane_checks, lane_pairs
 from .config import SimConfig
 from .kinematics import Fleet, Motion
 from .link import Link
+from .realworld import executed_motion, issued, l0_motion, measure, own_lane_checks, with_own_lane
 from .rng import counter_normal
 from .scenario import ScenarioBatch
 from .traffic import TrafficView, resolve_traffic
@@ -55,6 +56,12 @@ class SimState:
     n_invalid: np.ndarray  # (B,) periods whose nominal proposal was invalid (non-finite or out of range)
     leader_cap: np.ndarray  # (B, K) the smallest chain bound each vehicle has had: it never brakes harder
     link: Link | None = None  # the V2X emulation's received messages (None: perfect V2X)
+    l0: tuple | None = None  # (x, v) of the own lane's leader L0 (sim/realworld.py); None: the paper's empty lane
+    l0_collided: np.ndarray | None = None
+    l0_violated: np.ndarray | None = None
+    min_gap_l0: np.ndarray | None = None
+    in_flight: tuple = ()  # commands issued but not acting yet (actuation delay), oldest first
+    initial_safe: np.ndarray | None = None  # the shield's initial plan is a safe evasion (inside the assumptions)
 
     @property
     def belief(self):
@@ -81,6 +88,8 @@ class ClosedLoop:
         nominal: NominalPlanner,
         traffic=None,
     ):
+        if cfg.own_lane:
+            batch = with_own_lane(batch, seed, cfg, prm)
         # (B, K) arrays are kept column-major: the engine works vehicle by vehicle (x[:, i]), and a strided
         # column costs NumPy several times a contiguous one.
         batch = dataclasses.replace(
@@ -93,7 +102,14 @@ class ClosedLoop:
             assessment=cfg.assessment, assess_window=cfg.assess_window, assess_threshold=cfg.assess_threshold,
             monitor=cfg.monitor, enabled=cfg.supervised, completion=cfg.completion,
             assess_delay_s=cfg.assess_delay_s, assess_miss=cfg.assess_miss,
+            actuation_delay_s=cfg.actuation_delay_s if cfg.shield_delay else 0.0, own_lane=cfg.shield_own_lane,
+            sensing=cfg.shield_sensing,
         )  # fmt: skip
+        self.delay_periods = round(cfg.actuation_delay_s / prm.dt)
+        if abs(self.delay_periods * prm.dt - cfg.actuation_delay_s) > 1e-9:
+            raise ValueError(f"SimConfig.actuation_delay_s={cfg.actuation_delay_s} must be a whole number of control "
+                             f"periods (dt={prm.dt} s)")  # fmt: skip
+        self.sensing = cfg.sensing_bounds() if cfg.sensing_error else None
         self.planner_name = getattr(nominal, "__name__", type(nominal).__name__)
         k = batch.x.shape[1]
         slots = np.arange(1, k)
@@ -114,7 +130,16 @@ class ClosedLoop:
         link = Link.start(b.x, b.v) if self.emulate_v2x else None
         x, v = b.x.copy(order="F"), b.v.copy(order="F")
         ego = (b.ego_x.copy(), b.ego_y.copy(), b.ego_vx.copy(), b.ego_vy.copy())
-        start = self.situation(0.0, ego, x, v, None, b.v[:, 0])
+        l0 = None if b.l0_x is None else (b.l0_x.copy(), b.l0_v.copy())
+        start = self.situation(0.0, ego, x, v, None, b.v[:, 0], l0)
+        if self.sensing is not None:
+            start = measure(self.seed, b, -1, start, self.sensing)
+        in_flight = ()
+        if self.delay_periods:  # the commands acting when the run starts: cruise
+            zero = np.zeros(n)
+            cruise = issued(_Cruise(zero, zero, np.zeros(n, bool)))
+            in_flight = (cruise,) * self.delay_periods
+        start_state = shield.init(start, self.prm, self.shield_config, b.variant)
         return SimState(
             t=0.0,
             step=0,
@@ -124,7 +149,8 @@ class ClosedLoop:
             acc=np.zeros_like(b.x, order="F"),
             completed=np.zeros(n, bool),
             t_complete=np.full(n, np.nan),
-            shield=shield.init(start, self.prm, self.shield_config, b.variant),
+            shield=start_state,
+            initial_safe=start_state.plan.feasible.copy(),
             collided=np.zeros(n, bool),
             violated=np.zeros(n, bool),
             leader_collided=np.zeros(n, bool),
@@ -136,9 +162,14 @@ class ClosedLoop:
             n_invalid=np.zeros(n, np.int64),
             leader_cap=np.full(b.x.shape, np.inf),
             link=link,
+            l0=l0,
+            l0_collided=None if l0 is None else np.zeros(n, bool),
+            l0_violated=None if l0 is None else np.zeros(n, bool),
+            min_gap_l0=None if l0 is None else np.full(n, np.inf),
+            in_flight=in_flight,
         )
 
-    def situation(self, t: float, ego, x, v, link: Link | None, f_speed_observed) -> Situation:
+    def situation(self, t: float, ego, x, v, link: Link | None, f_speed_observed, l0=None) -> Situation:
         """What the ego knows: the true states with perfect V2X, else its view through the staleness fallback. A
         connected F declares itself collaborative (the paper's connected followers are)."""
         b = self.b
@@ -156,7 +187,13 @@ class ClosedLoop:
             f_connected=f_connected, f_collaborative=b.connected[:, 0], chain_x=chain_x, chain_v=chain_v,
             chain_promise=self.situation_promise, chain_human=self.situation_human, n_connected=n_connected,
             f_speed_observed=f_speed_observed, f_aggressive_truth=b.follower_aggressive, v2x_stale=stale,
+            **({} if l0 is None else self._own_fields(l0)),
         )  # fmt: skip
+
+    def _own_fields(self, l0) -> dict:
+        n = len(l0[0])
+        return dict(own_x=l0[0][:, None], own_v=l0[1][:, None], own_promise=np.zeros((n, 0)),
+                    own_n_connected=np.zeros(n, np.int64))  # fmt: skip
 
     def observe(self, s: SimState) -> Observation:
         b = self.b
@@ -207,20 +244,29 @@ class ClosedLoop:
             link = link.update(
                 s.t, s.x, s.v, s.acc, s.step, self.seed, b.scenario_id, cfg.v2x_loss, cfg.v2x_latency_periods
             )
-        situation = self.situation(s.t, s.ego, s.x, s.v, link, observed_f_v)
+        situation = self.situation(s.t, s.ego, s.x, s.v, link, observed_f_v, s.l0)
+        if self.sensing is not None:  # the shield sees measurements (and their bounds) only
+            situation = measure(self.seed, b, s.step, situation, self.sensing)
         # With perfect V2X the ego's chain analysis is the traffic's own: hand it over instead of recomputing it.
-        known = (chain[0][:, 1:], chain[1]) if link is None else None
+        known = (chain[0][:, 1:], chain[1]) if link is None and self.sensing is None else None
         shield_state, d = shield.step(
             s.shield, situation, self.nominal(obs, prm), prm, self.shield_config, b.variant,
             planner_name=self.planner_name, chain=known,
         )  # fmt: skip
         behaviour = d.behaviour
-        lon = Motion.constant(ex, evx, d.a_x, dt)
-        lat = Motion.free(ey, evy, d.a_y, dt)
-        plan = None
-        rows, knots, px, vx, py, vy = d.abort_motion()
-        if rows.size:  # the aborting rows follow their held plan, exactly
-            plan = (rows, Motion.from_samples(knots, px, vx), Motion.from_samples(knots, py, vy))
+        in_flight = s.in_flight
+        completing = d.completing
+        if self.delay_periods:  # the command acting now is the oldest in flight; this one acts later
+            acting, in_flight = in_flight[0], (*in_flight[1:], issued(d))
+            lon, lat, plan = executed_motion(acting, s.ego, dt)
+            completing = acting.completing
+        else:
+            lon = Motion.constant(ex, evx, d.a_x, dt)
+            lat = Motion.free(ey, evy, d.a_y, dt)
+            plan = None
+            rows, knots, px, vx, py, vy = d.abort_motion()
+            if rows.size:  # the aborting rows follow their held plan, exactly
+                plan = (rows, Motion.from_samples(knots, px, vx), Motion.from_samples(knots, py, vy))
 
         # A leader's bound never grows in exact arithmetic (docs/simulator.md); the running minimum makes that exact
         # in floating point too (the analysis' 1 nm tolerance lets a recomputed bound exceed an earlier one by ~1e-9).
@@ -231,17 +277,35 @@ class ClosedLoop:
         else:  # L(N+1)'s profile switches inside the period: its slot gets a second segment
             t_sw, a2 = last_switch
             others = Fleet.switched(s.x, s.v, acc, t_sw, a2, dt)
-        new = self.check_and_advance(s, lon, lat, plan, others, behaviour, d.completing, acc)
+        new = self.check_and_advance(s, lon, lat, plan, others, behaviour, completing, acc)
         new = dataclasses.replace(
-            new, shield=shield_state, n_invalid=s.n_invalid + d.invalid, leader_cap=leader_cap, link=link
+            new, shield=shield_state, n_invalid=s.n_invalid + d.invalid, leader_cap=leader_cap, link=link,
+            in_flight=in_flight,
         )
+        if s.l0 is not None:
+            new = self._own_lane(s, new, lon, lat, plan)
         _check_finite(new, b)
         return new, obs, behaviour
+
+    def _own_lane(self, s: SimState, new: SimState, lon, lat, plan) -> SimState:
+        """L0 drives its profile; the ego's collisions and p_m violations against it (sim/realworld.py)."""
+        prm = self.prm
+        present = np.isfinite(s.l0[0])
+        x0 = np.where(present, s.l0[0], 0.0)
+        motion, (x1, v1) = l0_motion(self.b, s.t, x0, s.l0[1], prm.dt)
+        col, vio, gap = own_lane_checks(prm, lon, lat, plan, motion, present, s.completed)
+        return dataclasses.replace(
+            new, l0=(np.where(present, x1, np.inf), v1), l0_collided=s.l0_collided | col,
+            l0_violated=s.l0_violated | vio, min_gap_l0=np.minimum(s.min_gap_l0, gap),
+            collided=new.collided | col, violated=new.violated | vio,
+        )  # fmt: skip
 
     def finish(self, s: SimState) -> SimState:
         """The state after the last period with the monitor's view of that period recorded (the shield observes a
         period at the start of the next one)."""
-        situation = self.situation(s.t, s.ego, s.x, s.v, s.link, s.v[:, 0])
+        situation = self.situation(s.t, s.ego, s.x, s.v, s.link, s.v[:, 0], s.l0)
+        if self.sensing is not None:
+            situation = measure(self.seed, self.b, s.step, situation, self.sensing)
         return dataclasses.replace(s, shield=shield.observe(s.shield, situation, self.prm))
 
     def others_accels(self, s: SimState, ex, evx, ey, evy, bounds):
@@ -296,6 +360,7 @@ class ClosedLoop:
             n_invalid=s.n_invalid,
             leader_cap=s.leader_cap,
             link=s.link,
+            initial_safe=s.initial_safe,
         )
 
 
@@ -310,6 +375,18 @@ def _check_finite(s: SimState, b: ScenarioBatch) -> None:
             f"non-finite simulator state at t = {s.t:.1f} s in scenario(s) {ids} ({int(bad.sum())} in all): a bug in "
             "a behaviour model or hook, not an outcome"
         )
+
+
+@dataclass(frozen=True)
+class _Cruise:
+    """A decision-shaped zero command (what acts before the first issued one, under actuation delay)."""
+
+    a_x: np.ndarray
+    a_y: np.ndarray
+    completing: np.ndarray
+
+    def abort_motion(self):
+        return (np.zeros(0, np.intp), None, None, None, None, None)
 
 
 def _columns(a):

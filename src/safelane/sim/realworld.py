@@ -1,0 +1,154 @@
+"""The simulator beyond the paper's world (issue 17): a leader ``L0`` in the ego's own lane, sensing error, delay.
+
+* **L0** (:func:`with_own_lane`, :func:`l0_motion`, :func:`own_lane_checks`): one non-connected vehicle ahead of the
+  ego in its original lane, driving a piecewise-constant acceleration profile (by default: cruise, then brake at
+  ``SimConfig.l0_decel_mps2`` from a random instant until it stops). The ego's collisions with it (footprints overlap:
+  ``|dx| < vehicle_length`` while ``y < w_v``) and ``p_m`` violations (``|dx| < p_m`` at the same instants, before the
+  lane change completes) are exact in continuous time and count as the ego's.
+* **Sensing error** (:func:`measure`): each period the ego measures every other vehicle's position and speed with an
+  error drawn uniformly inside its bound (:class:`~safelane.shield.SensingBounds`, by connectivity), from counters
+  (seed, scenario, step, slot): the shield sees only the measurements and the bounds.
+* **Actuation delay** (:class:`Actuator`): a command acts ``SimConfig.actuation_delay_s`` after it is issued; the
+  ones issued before keep acting meanwhile (at the start: cruise).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass
+
+import numpy as np
+
+from .._motion import advance
+from ..params import Params
+from ..shield.situation import SensingBounds, Situation
+from .kinematics import Fleet, Motion, crossing_knots, windowed_gap_extrema
+from .rng import counter_uniform
+from .traffic import profile_segment
+
+#: Counter slots of the draws made here (kept apart from the other per-step draws).
+_SLOT_L0, _SLOT_NOISE = 7001, 7100
+
+
+def with_own_lane(batch, seed: int, cfg, prm: Params):
+    """``batch`` with an ``L0`` per scenario from the configured distribution (where it has none yet): gap to the
+    ego uniform in ``[l0_gap_min_m, l0_gap_max_m]``, speed the ego's ``± l0_speed_spread_mps``, braking at
+    ``l0_decel_mps2`` (default ``a_x_d``) from an instant uniform in ``[0, l0_brake_window_s]``."""
+    if batch.l0_x is not None:
+        return batch
+    sid = batch.scenario_id
+    u = [counter_uniform(seed, sid, _SLOT_L0, k) for k in range(3)]
+    gap = cfg.l0_gap_min_m + (cfg.l0_gap_max_m - cfg.l0_gap_min_m) * u[0]
+    speed = batch.ego_vx + cfg.l0_speed_spread_mps * u[1]  # not slower than the ego: a start it can evade
+    t_brake = cfg.l0_brake_window_s * u[2]
+    decel = prm.a_x_d if cfg.l0_decel_mps2 is None else cfg.l0_decel_mps2
+    times = np.stack([np.zeros_like(t_brake), t_brake], 1)
+    accels = np.stack([np.zeros_like(t_brake), np.full_like(t_brake, -decel)], 1)
+    return dataclasses.replace(batch, l0_x=batch.ego_x + gap, l0_v=speed, l0_profile_t=times, l0_profile_a=accels)
+
+
+def l0_motion(batch, t: float, x, v, dt: float) -> tuple[Motion, tuple]:
+    """``L0``'s exact motion over the period ``[t, t + dt]`` and its state at the end."""
+    a1, t_sw, a2 = profile_segment(t, dt, batch.l0_profile_t, batch.l0_profile_a)
+    fleet = Fleet.switched(x, v, a1, t_sw, a2, dt)
+    return fleet.motion(...), fleet.end
+
+
+def measure(seed: int, batch, step: int, s: Situation, bounds: SensingBounds) -> Situation:
+    """The situation as measured: every other vehicle's position and speed off by a uniform draw inside its bound
+    (speeds stay ``>= 0``), the bounds attached."""
+    s = bounds.apply(s)
+    sid = batch.scenario_id[:, None]
+
+    def noisy(x, v, err, slot0):
+        k = np.arange(x.shape[1])[None, :]
+        ux = counter_uniform(seed, sid, step, slot0 + 2 * k)
+        uv = counter_uniform(seed, sid, step, slot0 + 2 * k + 1)
+        return x + err[..., 0] * (2.0 * ux - 1.0), np.maximum(v + err[..., 1] * (2.0 * uv - 1.0), 0.0)
+
+    fx, fv = noisy(s.f_x[:, None], s.f_v[:, None], s.err_f[:, None, :], _SLOT_NOISE)
+    cx, cv = noisy(s.chain_x, s.chain_v, s.err_chain, _SLOT_NOISE + 2)
+    out = dict(f_x=fx[:, 0], f_v=fv[:, 0], chain_x=cx, chain_v=cv)
+    if s.own_x is not None:
+        ox, ov = noisy(s.own_x, s.own_v, s.err_own, _SLOT_NOISE + 64)
+        out.update(own_x=np.where(np.isfinite(s.own_x), ox, np.inf), own_v=np.where(np.isfinite(s.own_x), ov, 0.0))
+    return dataclasses.replace(s, **out)
+
+
+@dataclass(frozen=True)
+class Issued:
+    """A command as issued by the shield: ``(a_x, a_y)`` per row, the aborting rows' exact knots and accelerations,
+    and whether it completes the lane change."""
+
+    a_x: np.ndarray
+    a_y: np.ndarray
+    rows: np.ndarray
+    knots: np.ndarray | None
+    ax_seg: np.ndarray | None
+    ay_seg: np.ndarray | None
+    completing: np.ndarray
+
+
+def issued(decision) -> Issued:
+    rows, knots, _, vx, _, vy = decision.abort_motion()
+    ax_seg = ay_seg = None
+    if rows.size:
+        span = np.diff(knots, axis=-1)
+        safe = np.where(span > 0.0, span, 1.0)
+        ax_seg = np.where(span > 0.0, np.diff(vx, axis=-1) / safe, 0.0)
+        ay_seg = np.where(span > 0.0, np.diff(vy, axis=-1) / safe, 0.0)
+    return Issued(decision.a_x, decision.a_y, rows, knots, ax_seg, ay_seg, decision.completing)
+
+
+def executed_motion(cmd: Issued, ego, dt: float):
+    """``(lon, lat, plan)`` of the ego executing ``cmd`` from its actual state (exact; the aborting rows' segments
+    integrated from where the ego is)."""
+    ex, ey, evx, evy = ego
+    lon = Motion.constant(ex, evx, cmd.a_x, dt)
+    lat = Motion.free(ey, evy, cmd.a_y, dt)
+    plan = None
+    if cmd.rows.size:
+        r = cmd.rows
+        px, vx, py, vy = [ex[r]], [evx[r]], [ey[r]], [evy[r]]
+        for k in range(cmd.knots.shape[1] - 1):
+            h = cmd.knots[:, k + 1] - cmd.knots[:, k]
+            x1, v1 = advance(px[-1], vx[-1], cmd.ax_seg[:, k], h)
+            px.append(x1)
+            vx.append(v1)
+            py.append(py[-1] + vy[-1] * h + 0.5 * cmd.ay_seg[:, k] * h * h)
+            vy.append(vy[-1] + cmd.ay_seg[:, k] * h)
+        stack = lambda xs: np.stack(xs, -1)  # noqa: E731
+        plan = (r, Motion.from_samples(cmd.knots, stack(px), stack(vx)),
+                Motion.from_samples(cmd.knots, stack(py), stack(vy)))  # fmt: skip
+    return lon, lat, plan
+
+
+def own_lane_checks(prm: Params, lon: Motion, lat: Motion, plan, l0: Motion, present, completed):
+    """``(collided, violated, min_gap)`` of the ego against ``L0`` over the period: exact extrema of ``x_0 − x`` over
+    the instants when the ego can overlap ``L0`` laterally (``y < w_v``; ``p_m`` counts there until the lane change
+    completes)."""
+    level = prm.vehicle_width
+    n = len(present)
+    lo, hi = np.full(n, np.inf), np.full(n, -np.inf)
+    on_plan = np.zeros(n, bool)
+    groups = []
+    if plan is not None and plan[0].size:
+        on_plan[plan[0]] = True
+        keep = np.flatnonzero(present[plan[0]])
+        groups.append((plan[0][keep], _take(plan[1], keep), _take(plan[2], keep)))
+    rest = np.flatnonzero(present & ~on_plan)
+    groups.append((rest, _take(lon, rest), _take(lat, rest)))
+    for rows, m_lon, m_lat in groups:
+        if rows.size == 0:
+            continue
+        neg = Motion(t=m_lat.t, x=-m_lat.x, v=-m_lat.v, acc=-m_lat.acc)  # y < level  <=>  -y > -level
+        knots = crossing_knots(neg, -level)
+        g_lo, g_hi = windowed_gap_extrema(m_lon, _take(l0, rows), neg, knots, -level)
+        lo[rows], hi[rows] = g_lo, g_hi
+    collided = present & (lo < prm.vehicle_length) & (hi > -prm.vehicle_length)
+    violated = present & ~completed & (lo < prm.p_m - 1e-9) & (hi > -prm.p_m + 1e-9)  # as the target lane's
+    return collided, violated, lo
+
+
+def _take(m: Motion, rows) -> Motion:
+    return Motion(t=m.t[rows], x=m.x[rows], v=m.v[rows], acc=m.acc[rows])
