@@ -32,6 +32,7 @@ from collections.abc import Callable
 import numpy as np
 import pandas as pd
 
+from ..parallel import Backend
 from ..params import Params
 from ..planners.base import ExpertPlanner
 from ..sim.engine import SimConfig
@@ -73,7 +74,7 @@ def candidate_to_preset(candidate: dict[str, float], meta: dict | None = None) -
     return Preset("paper", Params(**params), SimConfig(**sim), meta or {}, planner)
 
 
-def score(preset: Preset, samples: int, seed: int, workers: int = 1) -> tuple[float, pd.DataFrame]:
+def score(preset: Preset, samples: int, seed: int, workers: int | Backend = 1) -> tuple[float, pd.DataFrame]:
     """Loss (mean absolute success-rate difference over the published cells) and the per-cell fit."""
     table = run_cells(
         published_cells(),
@@ -108,7 +109,7 @@ def calibrate(
     final_samples: int = 400,
     seed: int = 0,
     on_candidate: Callable[[int, dict, float], None] | None = None,
-    workers: int = 1,
+    workers: int | Backend = 1,
 ) -> tuple[Preset, pd.DataFrame]:
     """Run the search; returns the best preset and the table of all scored candidates.
 

@@ -17,7 +17,9 @@ How (each method a stream of batches; ``method="all"`` takes them in turn):
 Everything is seeded: batch ``i`` of method ``m`` in stream ``w`` draws from ``default_rng([seed, w, m, i])``; with
 ``minutes=0`` the run is a function of ``(seed, scenarios, method, batch_size, workers)`` alone. Each simulation runs
 in one process (``simulate_batch(workers=1)``: the adversarial planners index per-scenario parameters by batch row);
-``workers > 1`` runs that many independent streams in parallel processes and merges their reports.
+``workers > 1`` runs that many independent streams in parallel processes and merges their reports; a
+:class:`~safelane.parallel.Backend` runs them on that backend (``Backend("ray", 16)``: 16 streams as Ray tasks; the
+report is the same as with 16 processes).
 """
 
 from __future__ import annotations
@@ -33,6 +35,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
+from ..parallel import Backend, as_backend, map_chunks
 from ..params import Params
 from ..sim.config import SimConfig
 from ..sim.engine import simulate_batch
@@ -189,7 +192,7 @@ def falsify(
     batch_size: int = 2048,
     setting: Setting | None = None,
     on_batch: Callable[[Report], None] | None = None,
-    workers: int = 1,
+    workers: int | Backend = 1,
     stream: int = 0,
 ) -> Report:
     """Run the falsifier until at least ``scenarios`` scenarios have been simulated *and* ``minutes`` have passed.
@@ -197,17 +200,20 @@ def falsify(
     ``method``: one of :data:`METHODS` or ``"all"`` (one batch of each in turn). ``setting``: limits and
     simulation settings (default: :class:`Setting` with ``seed``). ``on_batch`` is called after every batch (with
     ``workers > 1``: with the merged report so far). ``workers``: parallel streams, each with its share of
-    ``scenarios``; ``stream``: this run's stream number.
+    ``scenarios`` (a count of processes, or a :class:`~safelane.parallel.Backend`); ``stream``: this run's stream
+    number.
     """
     methods = METHODS if method == "all" else (method,)
     if any(m not in METHODS for m in methods):
         raise ValueError(f"method must be one of {(*METHODS, 'all')}; got {method!r}")
-    if scenarios < 0 or minutes < 0 or batch_size < 1 or workers < 1:
+    backend = workers if isinstance(workers, Backend) else None
+    if scenarios < 0 or minutes < 0 or batch_size < 1 or (backend is None and workers < 1):
         raise ValueError("scenarios and minutes must be >= 0, batch_size and workers >= 1")
     setting = setting or Setting(seed=seed)
     setting = dataclasses.replace(setting, seed=seed).resolved()
-    if workers > 1:
-        return _parallel(scenarios, minutes, seed, method, batch_size, setting, on_batch, workers)
+    backend = backend or as_backend(workers)
+    if not backend.in_process:
+        return _parallel(scenarios, minutes, seed, method, batch_size, setting, on_batch, backend)
     prm = setting.params
     dim = space.dimension(prm)
     report = Report(seed=seed, methods=methods, hooks=setting.use_hooks, profiles=setting.use_profiles)
@@ -241,50 +247,45 @@ def falsify(
     return report
 
 
-def _stream(args) -> Report:
-    scenarios, minutes, seed, method, batch_size, setting, stream, queue = args
+def _stream(args, progress) -> Report:
+    """One stream of a parallel run (a job of :func:`~safelane.parallel.map_chunks`); progress goes to the channel."""
+    scenarios, minutes, seed, method, batch_size, setting, stream = args
 
     def report_progress(report: Report) -> None:
-        queue.put((stream, report.summary(), report.min_ratio))
+        progress.put((stream, report.summary(), report.min_ratio))
 
     return falsify(scenarios, minutes, seed, method, batch_size=batch_size, setting=setting, stream=stream,
                    on_batch=report_progress)  # fmt: skip
 
 
-def _parallel(scenarios, minutes, seed, method, batch_size, setting, on_batch, workers: int) -> Report:
-    """``workers`` streams in parallel processes; progress comes back through a queue."""
-    import multiprocessing
-    import queue as queue_mod
-    from concurrent.futures import ProcessPoolExecutor, wait
+def _parallel(scenarios, minutes, seed, method, batch_size, setting, on_batch, backend: Backend) -> Report:
+    """``backend.parallelism()`` streams on the backend (processes, or Ray tasks); progress comes back through a
+    channel (a ``multiprocessing.Manager`` queue, or a Ray queue actor) as each stream finishes a batch.
 
+    Every stream runs until its share of ``scenarios`` and ``minutes`` are reached. On Ray a stream waits for a free
+    CPU: with more streams than the cluster has CPUs, the time box applies to each stream, so the run takes
+    ``minutes`` times the number of rounds of streams the cluster can hold at once."""
+    workers = backend.parallelism()
     share = -(-scenarios // workers)
-    with multiprocessing.Manager() as manager, ProcessPoolExecutor(max_workers=workers) as pool:
-        progress = manager.Queue()
-        jobs = [(share, minutes, seed, method, batch_size, setting, w, progress) for w in range(workers)]
-        futures = [pool.submit(_stream, job) for job in jobs]
-        latest: dict[int, tuple] = {}
-        while True:
-            done, _ = wait(futures, timeout=0.5)
-            fresh = False
-            try:
-                while True:
-                    stream, summary, min_ratio = progress.get_nowait()
-                    latest[stream], fresh = (summary, min_ratio), True
-            except queue_mod.Empty:
-                pass
-            if on_batch is not None and fresh:
-                partial = Report(seed=seed, methods=(), hooks=False, profiles=False)
-                partial.simulated = sum(v[0]["scenarios_simulated"] for v in latest.values())
-                partial.min_ratio = min(v[1] for v in latest.values())
-                partial.counts = {
-                    "collision": sum(v[0]["collisions"] for v in latest.values()),
-                    "safety_violation": sum(v[0]["p_m_violations_ego"] for v in latest.values()),
-                    "leader_collision": sum(v[0]["leader_collisions"] for v in latest.values()),
-                    "leader_violation": sum(v[0]["p_m_violations_leaders"] for v in latest.values()),
-                    "assumption_breach": sum(v[0]["assumption_breaches_flagged"] for v in latest.values()),
-                    "n_invalid_proposals": sum(v[0]["invalid_proposals"] for v in latest.values()),
-                }
-                on_batch(partial)
-            if len(done) == len(futures):
-                break
-        return merge([f.result() for f in futures])
+    jobs = [(share, minutes, seed, method, batch_size, setting, w) for w in range(workers)]
+    latest: dict[int, tuple] = {}
+
+    def on_progress(message) -> None:
+        stream, summary, min_ratio = message
+        latest[stream] = (summary, min_ratio)
+        if on_batch is None:
+            return
+        partial = Report(seed=seed, methods=(), hooks=False, profiles=False)
+        partial.simulated = sum(v[0]["scenarios_simulated"] for v in latest.values())
+        partial.min_ratio = min(v[1] for v in latest.values())
+        partial.counts = {
+            "collision": sum(v[0]["collisions"] for v in latest.values()),
+            "safety_violation": sum(v[0]["p_m_violations_ego"] for v in latest.values()),
+            "leader_collision": sum(v[0]["leader_collisions"] for v in latest.values()),
+            "leader_violation": sum(v[0]["p_m_violations_leaders"] for v in latest.values()),
+            "assumption_breach": sum(v[0]["assumption_breaches_flagged"] for v in latest.values()),
+            "n_invalid_proposals": sum(v[0]["invalid_proposals"] for v in latest.values()),
+        }
+        on_batch(partial)
+
+    return merge(map_chunks(_stream, jobs, backend, progress=on_progress))

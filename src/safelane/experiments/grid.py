@@ -8,6 +8,7 @@ from dataclasses import dataclass
 import numpy as np
 import pandas as pd
 
+from ..parallel import Backend
 from ..params import Params
 from ..planners.base import NominalPlanner
 from ..sim.engine import SimConfig, simulate_batch
@@ -43,7 +44,7 @@ def run_cells(
     scenario: ScenarioConfig | None = None,
     nominal: NominalPlanner | None = None,
     progress: bool = False,
-    workers: int = 1,
+    workers: int | Backend = 1,
     max_batch: int = 16384,
     cache: dict[tuple[Cell, int], pd.DataFrame] | None = None,
 ) -> pd.DataFrame:
@@ -53,7 +54,8 @@ def run_cells(
     restart at 0 in every cell, so per-step random draws are shared across cells as well (common random
     numbers); a cell's rows never depend on the other cells of the run. So a cell is simulated once however
     often it is listed, and ``cache`` (keyed by ``(cell, samples)``) carries its rows across calls that share
-    ``seed``, ``params``, ``config``, ``scenario`` and ``nominal`` — the caller's promise.
+    ``seed``, ``params``, ``config``, ``scenario`` and ``nominal`` — the caller's promise. ``workers``: a number
+    of local processes or a :class:`~safelane.parallel.Backend` (the table is the same on every one).
     """
     if not cells:
         raise ValueError("cells must not be empty")

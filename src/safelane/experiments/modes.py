@@ -48,7 +48,7 @@ def modes_cells(cfg: ModesConfig) -> list[Cell]:
     return [Cell(p, n, d) for n in cfg.n_leaders for d in cfg.decels for p in cfg.planners]
 
 
-def run_modes(cfg: ModesConfig, *, preset, seed: int, workers: int, nominal, cache=None):
+def run_modes(cfg: ModesConfig, *, preset, seed: int, workers, nominal, cache=None):
     """``(table, summary)`` of the grid in safe mode (``cache`` is not used: other settings, other outcomes)."""
     safe = safe_preset(preset)
     table = run_cells(

@@ -34,7 +34,7 @@ def nn_cells(cfg: NNTableConfig) -> list[Cell]:
     return [Cell(p, n, d) for n in cfg.n_leaders for d in cfg.decels for p in cfg.planners]
 
 
-def run_nn_table(cfg: NNTableConfig, *, preset, seed: int, workers: int, nominal, cache=None):
+def run_nn_table(cfg: NNTableConfig, *, preset, seed: int, workers, nominal, cache=None):
     """``(table, summary)`` of Table 1's cells with the distilled network as the nominal planner (``nominal`` and
     ``cache``, the rule-based planner's, are not used)."""
     net = get_nominal(NN_PLANNER)

@@ -31,6 +31,7 @@ from pathlib import Path
 import pandas as pd
 from pydantic import BaseModel
 
+from ..parallel import Backend, as_backend
 from .calibration import Preset, load_preset
 from .claims import check_claims, table1_side_by_side
 from .registry import EXPERIMENTS, get_experiment
@@ -48,7 +49,7 @@ def reproduce(
     *,
     seed: int = 0,
     quick: bool = False,
-    workers: int = 1,
+    workers: int | Backend = 1,
     preset: str | Path | Preset = "paper",
     progress: bool = True,
     experiments: Sequence[str] | None = None,
@@ -60,6 +61,8 @@ def reproduce(
     ``out_dir`` is the parent folder (default ``results``). ``experiments`` selects a subset (default: all
     registered), ``configs`` overrides an experiment's config (default: its paper or ``quick`` config).
     ``command`` is the command line recorded in the report (default: the equivalent ``safelane reproduce``).
+    ``workers``: local processes, or a :class:`~safelane.parallel.Backend` (``Backend("ray")``: a Ray cluster); the
+    CSVs are byte-identical on every backend and worker count.
     With ``progress`` a Rich progress bar runs and the time of every experiment is printed.
     """
     from ..reporting.report import RunRecord, write_report
@@ -212,7 +215,7 @@ def software_versions() -> dict[str, str]:
 def _equivalent_command(seed, quick, workers, preset: str, out_dir, configs) -> str:
     parts = ["safelane", "reproduce", "--seed", str(seed)]
     parts += ["--quick"] if quick else []
-    parts += ["--workers", str(workers)] if workers != 1 else []
+    parts += as_backend(workers).cli_args()
     parts += ["--preset", preset] + (["--out", str(out_dir)] if out_dir else [])
     if configs:
         parts.append(f"(Python API, custom configs for {', '.join(sorted(configs))})")

@@ -64,7 +64,7 @@ def rss_cells(cfg: RssBaselineConfig) -> list[Cell]:
     return [Cell(p, n, d) for n in cfg.n_leaders for d in cfg.decels for p in cfg.planners]
 
 
-def run_rss_baseline(cfg: RssBaselineConfig, *, preset, seed: int, workers: int, nominal, cache=None):
+def run_rss_baseline(cfg: RssBaselineConfig, *, preset, seed: int, workers, nominal, cache=None):
     """``(table, summary)``: every cell under every follower behaviour. ``cache`` (see
     :func:`~safelane.experiments.grid.run_cells`) serves the collaborative behaviour only — the sampler's own F, so
     its paper-variant cells are Table 1's; the other behaviours change F and share nothing."""

@@ -9,6 +9,7 @@ import numpy as np
 import pandas as pd
 from pydantic import BaseModel
 
+from ..parallel import Backend
 from ..planners.base import NominalPlanner
 from ..sim.engine import simulate_batch
 from ..sim.metrics import summarize
@@ -39,7 +40,7 @@ def run_experiment(
     preset: Preset | None = None,
     seed: int = 0,
     quick: bool = False,
-    workers: int = 1,
+    workers: int | Backend = 1,
     nominal: NominalPlanner | None = None,
     cache: dict | None = None,
 ) -> ExperimentResult:

@@ -35,6 +35,7 @@ from collections.abc import Callable
 import numpy as np
 import pandas as pd
 
+from ..parallel import Backend
 from ..params import Params
 from ..sim.engine import SimConfig
 from ..sim.metrics import summarize, wilson_interval
@@ -109,7 +110,7 @@ def structure_metrics(fit: pd.DataFrame, w_max: float = W_MAX) -> dict[str, floa
 
 
 def score_structure(
-    preset: Preset, samples: int, seed: int, workers: int = 1, w_max: float = W_MAX
+    preset: Preset, samples: int, seed: int, workers: int | Backend = 1, w_max: float = W_MAX
 ) -> tuple[dict, pd.DataFrame]:
     """:func:`structure_metrics` of a preset on the published cells, and the per-cell fit."""
     table = run_cells(published_cells(), samples, seed, params=preset.params, config=preset.sim,
@@ -124,7 +125,7 @@ def calibrate_structure(
     samples: int = 100,
     refine: int = 48,
     seed: int = 0,
-    workers: int = 1,
+    workers: int | Backend = 1,
     start: dict | None = None,
     on_candidate: Callable[[int, dict, dict], None] | None = None,
     w_max: float = W_MAX,
@@ -168,7 +169,7 @@ def n3_cells() -> list[Cell]:
 
 def identifiability(
     stage1: pd.DataFrame, finalists: int = 8, samples: int = 400, seed: int = 1, tol: float = 0.005,
-    workers: int = 1, n3_samples: int = 400, w_max: float = W_MAX,
+    workers: int | Backend = 1, n3_samples: int = 400, w_max: float = W_MAX,
 ) -> dict:  # fmt: skip
     """Re-score the best ``finalists`` with ``samples`` per cell; the near-optimal sets (within ``tol`` of the best
     re-scored loss), their parameter ranges, and the N = 3 prediction under each (``interval``: the min and max

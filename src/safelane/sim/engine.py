@@ -1,7 +1,8 @@
 """The batched closed-loop simulator: one state of arrays, a Python loop over time steps only.
 
 ``simulate`` runs one experiment cell; ``simulate_batch`` runs any :class:`ScenarioBatch` (a whole grid of
-cells is just a bigger batch) — in one process, or split over worker processes. One period of the loop is
+cells is just a bigger batch) — in one process, or split into chunks on worker processes or a Ray cluster
+(:func:`safelane.parallel.map_chunks`). One period of the loop is
 :meth:`safelane.sim.step.ClosedLoop.step`.
 """
 
@@ -11,6 +12,7 @@ import numpy as np
 import pandas as pd
 from threadpoolctl import threadpool_limits
 
+from ..parallel import Backend, as_backend, map_chunks
 from ..params import Params
 from ..planners.base import ExpertPlanner, NominalPlanner
 from ._alloc import tune_allocator
@@ -39,14 +41,15 @@ def simulate(
     preset: str | None = None,
     trace_limit: int = 16,
     traffic=None,
+    workers: int | Backend = 1,
 ) -> SimResult:
     """Simulate one experiment cell of the paper's sampler.
 
     ``preset`` (a name such as ``"paper"``, a YAML path or a ``Preset``) supplies ``params``, ``config`` and the
     nominal planner where those are not given; ``nominal`` takes a registered name (``"mlp"``). The cell's
     scenarios come from :func:`~safelane.sim.inputs.cell_rng`, as in ``safelane reproduce``: the same cell and
-    seed give the same numbers as the report. Bad arguments raise ``InputError`` naming the argument. ``traffic``:
-    as for :func:`simulate_batch`.
+    seed give the same numbers as the report. Bad arguments raise ``InputError`` naming the argument. ``traffic``
+    and ``workers``: as for :func:`simulate_batch`.
 
     Example: ``simulate("CV_all", n_leaders=5, decel=5.0, samples=1000, seed=0).summary()``.
     """
@@ -65,6 +68,7 @@ def simulate(
         progress=progress,
         trace_limit=trace_limit,
         traffic=traffic,
+        workers=workers,
     )
 
 
@@ -79,16 +83,18 @@ def simulate_batch(
     record_observations: bool = False,
     progress: bool = False,
     trace_limit: int = 16,
-    workers: int = 1,
+    workers: int | Backend = 1,
     traffic=None,
 ) -> SimResult:
     """Run every scenario of ``batch`` in closed loop; see :class:`SimResult`.
 
-    ``workers > 1`` splits the batch across processes; scenarios are independent and their random draws are
-    counter-based, so the table is identical to a single-process run (traces and observations need
-    ``workers=1``). ``traffic``: the target-lane traffic — a registered name (``safelane.sim.traffic.TRAFFIC_MODELS``),
-    a :class:`~safelane.sim.traffic.TrafficModel`, or :class:`~safelane.sim.traffic.TrafficHooks` (the paper's model
-    with some wishes replaced); with workers it must be picklable and index per-scenario data by ``scenario_id``.
+    ``workers > 1`` splits the batch across processes, and a :class:`~safelane.parallel.Backend` (e.g.
+    ``Backend("ray", 8)``) into chunks on that backend; scenarios are independent and their random draws are
+    counter-based, so the table is identical, bit for bit, to a single-process run (traces and observations are
+    recorded in this process only: with them the batch runs here). ``traffic``: the target-lane traffic — a
+    registered name (``safelane.sim.traffic.TRAFFIC_MODELS``), a :class:`~safelane.sim.traffic.TrafficModel`, or
+    :class:`~safelane.sim.traffic.TrafficHooks` (the paper's model with some wishes replaced); with workers it must be
+    picklable and index per-scenario data by ``scenario_id``.
     """
     prm = params or Params()
     cfg = config or SimConfig()
@@ -96,8 +102,11 @@ def simulate_batch(
     check_batch(batch, prm)
     check_settings(prm, cfg)
     tune_allocator()
-    if workers > 1 and len(batch) >= 2 * workers and not (trace or record_observations):
-        return _simulate_parallel(batch, seed, prm, cfg, nominal, workers, traffic)
+    backend = as_backend(workers)
+    if not (trace or record_observations) and not backend.in_process:
+        chunks = min(backend.parallelism(), len(batch) // 2)
+        if chunks > 1 or (chunks == 1 and backend.name == "ray"):  # Ray: the driver may be a laptop
+            return _simulate_parallel(batch, seed, prm, cfg, nominal, backend, chunks, traffic)
     sim = ClosedLoop(batch, seed, prm, cfg, nominal, traffic)
     state = sim.initial_state()
     n_steps = round(cfg.horizon_s / prm.dt)
@@ -127,11 +136,8 @@ def _simulate_chunk(args) -> pd.DataFrame:
     return simulate_batch(batch, seed, params=prm, config=cfg, nominal=nominal, traffic=traffic).table
 
 
-def _simulate_parallel(batch, seed, prm, cfg, nominal, workers: int, traffic=None) -> SimResult:
-    from concurrent.futures import ProcessPoolExecutor
-
-    chunks = np.array_split(np.arange(len(batch)), workers)
-    jobs = [(batch.take(rows), seed, prm, cfg, nominal, traffic) for rows in chunks]
-    with ProcessPoolExecutor(max_workers=workers) as pool:
-        tables = list(pool.map(_simulate_chunk, jobs))
+def _simulate_parallel(batch, seed, prm, cfg, nominal, backend: Backend, chunks: int, traffic=None) -> SimResult:
+    parts = np.array_split(np.arange(len(batch)), chunks)
+    jobs = [(batch.take(rows), seed, prm, cfg, nominal, traffic) for rows in parts]
+    tables = map_chunks(_simulate_chunk, jobs, backend)
     return SimResult(table=pd.concat(tables, ignore_index=True))

@@ -1,0 +1,385 @@
+"""Independent chunks of work on local processes or on a Ray cluster: one abstraction for every sweep (issue 13).
+
+``map_chunks(fn, jobs, backend, workers, ray_address)`` returns ``[fn(job) for job in jobs]`` — in job order,
+whatever ran them and in whatever order they finished. A sweep whose jobs are pure functions of their arguments
+(the simulator's are: its random draws are counter-based per scenario) therefore gives the same output, bit for bit,
+on every backend and worker count. ``fn`` must be a module-level function of an importable module — in practice of
+this package (``safelane.sim.engine._simulate_chunk``): Ray workers import it by name, and cannot import a test
+module or a script's ``__main__``.
+
+Backends (:data:`BACKENDS`):
+
+* ``process`` — a :class:`~concurrent.futures.ProcessPoolExecutor` of ``workers`` processes on this machine;
+  ``workers=1`` (the default) runs the jobs here, in this process.
+* ``ray`` — one Ray task (1 CPU) per job. The cluster is ``ray_address``, else ``$RAY_ADDRESS``, else a Ray
+  instance already running on this machine (``ray start --head``), else a fresh local instance started here
+  (no dashboard, usage statistics off, as many CPUs as the machine or ``workers``, whichever is larger). The
+  connection stays open for the next call (a start costs 3–5 s); :func:`ray_session` closes it at the end of a
+  block — and shuts the instance down only if this process started it. ``workers=None``: the cluster's CPUs.
+
+Shipping the code: when it connects to a running cluster, this module passes ``runtime_env={"py_modules":
+[<this safelane package>]}``, so every worker runs the driver's safelane, whatever (if anything) is installed
+on the nodes; its dependencies (NumPy, pandas, pydantic, …) must be installed on every node, at the driver's
+versions for identical numbers. ``SAFELANE_RAY_SHIP=installed`` skips the upload (the nodes' own install is
+used). See ``docs/scale.md``.
+
+Ray is the optional extra ``ray`` (``pip install 'safelane[ray]'``), imported only when the ``ray`` backend is
+used: ``import safelane`` never imports it.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import os
+import time
+from collections.abc import Callable, Iterator, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from .errors import InputError
+
+#: The backends :func:`map_chunks` knows.
+BACKENDS = ("process", "ray")
+RAY_INSTALL_HINT = "the ray backend needs Ray: pip install 'safelane[ray]' (or: pip install 'ray>=2.9')"
+#: How often a run with a progress channel drains it [s].
+POLL_S = 0.2
+
+_state: dict[str, Any] = {"started": False, "address": None, "remote": None}
+
+
+@dataclass(frozen=True)
+class Backend:
+    """Where a sweep's chunks run: ``name`` (:data:`BACKENDS`), ``workers`` (``None``: 1 process, or every CPU of
+    the Ray cluster) and, for Ray, ``ray_address``. Accepted wherever a ``workers`` count is (``as_backend``)."""
+
+    name: str = "process"
+    workers: int | None = None
+    ray_address: str | None = None
+
+    def __post_init__(self) -> None:
+        check_backend_args(self.name, self.workers, self.ray_address)
+
+    def parallelism(self) -> int:
+        """How many chunks to cut a job into: ``workers``, or 1 process, or the Ray cluster's CPUs (connects)."""
+        if self.workers is not None:
+            return self.workers
+        if self.name == "process":
+            return 1
+        ray = ensure_ray(self.ray_address)
+        return max(1, int(ray.cluster_resources().get("CPU", 1)))
+
+    @property
+    def in_process(self) -> bool:
+        """Whether the jobs run in this process (the process backend with one worker)."""
+        return self.name == "process" and (self.workers or 1) == 1
+
+    def cli_args(self) -> list[str]:
+        """The command-line options that select this backend (empty for the default)."""
+        out = [] if self.name == "process" else ["--backend", self.name]
+        out += ["--workers", str(self.workers)] if self.workers not in (None, 1) else []
+        return out + (["--ray-address", self.ray_address] if self.ray_address else [])
+
+    def record(self) -> dict:
+        """For ``run.json``."""
+        return {"backend": self.name, "workers": self.workers, "ray_address": self.ray_address}
+
+
+def check_backend_args(name: str, workers: int | None = None, ray_address: str | None = None) -> None:
+    """:class:`~safelane.errors.InputError` naming the argument, the value and what is allowed."""
+    if name not in BACKENDS:
+        raise InputError(f"backend must be one of {', '.join(BACKENDS)}; got {name!r}", "backend")
+    if workers is not None and (isinstance(workers, bool) or not isinstance(workers, int) or workers < 1):
+        raise InputError(f"workers must be an integer >= 1 (or None); got {workers!r}", "workers")
+    if ray_address is not None:
+        if name != "ray":
+            raise InputError(f"ray_address {ray_address!r} is given but the backend is {name!r}; use backend 'ray'",
+                             "ray_address")  # fmt: skip
+        if not isinstance(ray_address, str) or not ray_address.strip():
+            raise InputError(f"ray_address must be 'HOST:PORT', 'auto' or 'ray://HOST:PORT'; got {ray_address!r}",
+                             "ray_address")  # fmt: skip
+
+
+def as_backend(workers: int | Backend | None = 1) -> Backend:
+    """A :class:`Backend` from a ``workers`` argument: a count means that many local processes."""
+    if isinstance(workers, Backend):
+        return workers
+    return Backend("process", 1 if workers is None else workers)
+
+
+def map_chunks(
+    fn: Callable,
+    jobs: Sequence,
+    backend: str | Backend = "process",
+    workers: int | None = None,
+    ray_address: str | None = None,
+    progress: Callable[[Any], None] | None = None,
+) -> list:
+    """``[fn(job) for job in jobs]``, computed on ``backend``; results in job order (see the module docstring).
+
+    ``backend``: a name of :data:`BACKENDS` (with ``workers`` and ``ray_address``) or a :class:`Backend`.
+    ``progress``: messages from running jobs. With it, ``fn`` is called as ``fn(job, channel)`` and each
+    ``channel.put(message)`` reaches ``progress(message)`` here, in this process, in the order they arrive
+    (polled every :data:`POLL_S` seconds; at once when the jobs run in this process). A job's exception is raised
+    here (the first in job order, as the cause Ray reports for the ``ray`` backend); the jobs not yet started are
+    cancelled.
+    """
+    be = backend if isinstance(backend, Backend) else Backend(backend, workers, ray_address)
+    jobs = list(jobs)
+    if not jobs:
+        return []
+    if be.name == "ray":
+        return _map_ray(fn, jobs, be, progress)
+    if be.in_process or len(jobs) == 1:
+        channel = None if progress is None else _Direct(progress)
+        return [fn(job) if channel is None else fn(job, channel) for job in jobs]
+    return _map_process(fn, jobs, min(be.parallelism(), len(jobs)), progress)
+
+
+class _Direct:
+    """A channel for jobs that run here: ``put`` is the progress callback itself."""
+
+    def __init__(self, sink: Callable[[Any], None]):
+        self.put = sink
+
+
+def _map_process(fn, jobs: list, workers: int, progress) -> list:
+    from concurrent.futures import FIRST_EXCEPTION, ProcessPoolExecutor, wait
+
+    with contextlib.ExitStack() as stack:
+        channel = None
+        if progress is not None:
+            import multiprocessing
+
+            channel = stack.enter_context(multiprocessing.Manager()).Queue()
+        pool = stack.enter_context(ProcessPoolExecutor(max_workers=workers))
+        try:
+            futures = [pool.submit(fn, job) if channel is None else pool.submit(fn, job, channel) for job in jobs]
+            while True:
+                done, pending = wait(futures, timeout=POLL_S if channel is not None else None,
+                                     return_when=FIRST_EXCEPTION)  # fmt: skip
+                if channel is not None:
+                    _drain(channel, progress)
+                if not pending or any(f.exception() is not None for f in done):
+                    break
+            return [f.result() for f in futures]  # the first failed job, in job order, raises
+        except BaseException:
+            pool.shutdown(wait=True, cancel_futures=True)
+            raise
+
+
+def _drain(channel, progress) -> None:
+    import queue
+
+    while True:
+        try:
+            message = channel.get_nowait()
+        except queue.Empty:
+            return
+        except Exception as exc:  # ray.util.queue.Empty is not a queue.Empty
+            if type(exc).__name__ == "Empty":
+                return
+            raise
+        progress(message)
+
+
+# --- Ray -------------------------------------------------------------------------------------------------------------
+
+
+def import_ray():
+    """The ``ray`` module, or :class:`ImportError` with the install hint."""
+    try:
+        import ray
+    except ImportError as exc:
+        raise ImportError(RAY_INSTALL_HINT) from exc
+    return ray
+
+
+def ray_available() -> bool:
+    import importlib.util
+
+    return importlib.util.find_spec("ray") is not None
+
+
+def ensure_ray(address: str | None = None, num_cpus: int | None = None):
+    """Connect to (or start) Ray once per process and return the ``ray`` module; see the module docstring.
+
+    ``num_cpus``: a wish for a freshly started local instance only (at least the machine's CPUs). An address where
+    nothing listens is a :class:`ConnectionError` within seconds (Ray itself would retry for minutes)."""
+    ray = import_ray()
+    if ray.is_initialized():
+        if address and _state["address"] not in (None, address):
+            raise InputError(f"Ray is already connected to {_state['address']!r} in this process; cannot also "
+                             f"connect to {address!r}", "ray_address")  # fmt: skip
+        return ray
+    import logging
+
+    target = address or os.environ.get("RAY_ADDRESS") or None
+    if target is None:
+        local = _local_cluster(ray)  # started with `ray start --head` on this machine, and still there
+        if local is None:
+            # Our own instance: no usage statistics, no dashboard. RAY_AUTH_MODE is left to Ray and the user (for a
+            # new local instance Ray's default is token authentication; docs/scale.md says why we keep it).
+            os.environ.setdefault("RAY_USAGE_STATS_ENABLED", "0")
+            cpus = max(os.cpu_count() or 1, num_cpus or 0)
+            ray.init(include_dashboard=False, num_cpus=cpus, runtime_env=_runtime_env(), logging_level=logging.WARNING)
+            _state.update(started=True, address="a local instance started by this process")
+            return ray
+        target = local
+    if not target.startswith("ray://") and target != "auto" and not _reachable(target):
+        raise ConnectionError(f"no Ray cluster answers at {target!r} (start one with 'ray start --head --port=PORT')")
+    ray.init(address=target, runtime_env=_runtime_env(), logging_level=logging.WARNING)
+    _state.update(started=False, address=target)
+    return ray
+
+
+def _local_cluster(ray) -> str | None:
+    """The address ``ray start --head`` left on this machine, if a cluster still answers there."""
+    try:
+        address = ray._private.utils.read_ray_address()
+    except Exception:  # a private helper: if it moves, we start our own instance
+        return None
+    return address if address and _reachable(address) else None
+
+
+def _reachable(address: str, timeout_s: float = 3.0) -> bool:
+    """Whether something accepts TCP connections at ``HOST:PORT``."""
+    import socket
+
+    host, _, port = address.rpartition(":")
+    try:
+        with socket.create_connection((host or "127.0.0.1", int(port)), timeout=timeout_s):
+            return True
+    except (OSError, ValueError):
+        return False
+
+
+def _runtime_env() -> dict | None:
+    """This safelane package as a ``py_modules`` entry (unless ``SAFELANE_RAY_SHIP=installed``)."""
+    mode = os.environ.get("SAFELANE_RAY_SHIP", "package")
+    if mode == "installed":
+        return None
+    if mode != "package":
+        raise InputError(f"SAFELANE_RAY_SHIP must be 'package' or 'installed'; got {mode!r}", "SAFELANE_RAY_SHIP")
+    return {"py_modules": [str(Path(__file__).resolve().parent)], "excludes": ["__pycache__", "*.pyc"]}
+
+
+def started_ray() -> bool:
+    """Whether this process started the Ray instance it is connected to."""
+    return bool(_state["started"])
+
+
+def shutdown_ray() -> None:
+    """Disconnect from Ray; the instance stops with it only if this process started it (Ray's own rule)."""
+    if "ray" not in __import__("sys").modules:
+        return
+    import ray
+
+    if ray.is_initialized():
+        ray.shutdown()
+    _state.update(started=False, address=None, remote=None)
+
+
+def connect_ray(address: str | None = None, num_cpus: int | None = None) -> bool:
+    """:func:`ensure_ray`; ``True`` if this call opened the connection (its caller then closes it)."""
+    already = import_ray().is_initialized()
+    ensure_ray(address, num_cpus)
+    return not already
+
+
+@contextlib.contextmanager
+def ray_session(address: str | None = None, num_cpus: int | None = None) -> Iterator[Any]:
+    """Connect to (or start) Ray for a block; at its end disconnect — and so stop the instance if this process
+    started it — only if the block connected (a connection open before the block stays open). Yields ``ray``."""
+    opened = connect_ray(address, num_cpus)
+    try:
+        yield import_ray()
+    finally:
+        if opened:
+            shutdown_ray()
+
+
+@contextlib.contextmanager
+def backend_session(backend: Backend) -> Iterator[Backend]:
+    """:func:`ray_session` for a Ray backend; nothing for the process backend."""
+    if backend.name != "ray":
+        yield backend
+        return
+    with ray_session(backend.ray_address, backend.workers):
+        yield backend
+
+
+def _run_job(fn, job, channel=None):
+    """The Ray task: ``fn(job)`` (or ``fn(job, channel)``). It lives here so that workers import it by name."""
+    return fn(job) if channel is None else fn(job, channel)
+
+
+def _map_ray(fn, jobs: list, be: Backend, progress) -> list:
+    ray = ensure_ray(be.ray_address, be.workers)
+    if _state["remote"] is None:
+        _state["remote"] = ray.remote(num_cpus=1)(_run_job)
+    remote = _state["remote"]
+    channel = None
+    if progress is not None:
+        from ray.util.queue import Queue
+
+        channel = Queue(actor_options={"num_cpus": 0})
+    refs = [remote.remote(fn, job) if channel is None else remote.remote(fn, job, channel) for job in jobs]
+    index = {ref: k for k, ref in enumerate(refs)}
+    pending = list(refs)
+    try:
+        while pending:
+            ready, pending = ray.wait(pending, num_returns=1, timeout=POLL_S if channel else None)
+            if channel is not None:
+                _drain(channel, progress)
+            for ref in ready:
+                try:
+                    ray.get(ref)
+                except ray.exceptions.RayTaskError:
+                    # Stop the jobs after this one; the first failure in job order is raised below.
+                    for later in pending:
+                        if index[later] > index[ref]:
+                            ray.cancel(later)
+                    pending = [p for p in pending if index[p] < index[ref]]
+                    _consume(ray, refs[index[ref] + 1 :])
+                    for first in refs[: index[ref] + 1]:
+                        ray.get(first)
+        if channel is not None:
+            _drain(channel, progress)
+        return ray.get(refs)
+    except ray.exceptions.RayTaskError as exc:
+        cause = getattr(exc, "cause", None)
+        if isinstance(cause, BaseException):
+            raise cause from exc
+        raise
+    except BaseException:
+        for ref in pending:
+            ray.cancel(ref)
+        raise
+    finally:
+        if channel is not None:
+            with contextlib.suppress(Exception):
+                ray.kill(channel.actor)
+
+
+def _consume(ray, refs) -> None:
+    """Fetch (and drop) the results of finished jobs, so that Ray does not log their errors as unhandled."""
+    ready, _ = ray.wait(list(refs), num_returns=len(refs), timeout=0) if refs else ([], [])
+    for ref in ready:
+        with contextlib.suppress(Exception):
+            ray.get(ref)
+
+
+def probe(job: tuple[float, float], channel=None) -> tuple[float, int, str]:
+    """A diagnostic job: sleeps ``job[1]`` seconds and returns ``(job[0], pid, host)`` — where it ran; with a
+    progress ``channel`` it also puts ``job[0]`` there. A negative value raises :class:`ValueError` (for testing a
+    backend's error path)."""
+    import socket
+
+    value, sleep_s = job
+    if value < 0:
+        raise ValueError(f"probe: negative value {value!r}")
+    time.sleep(sleep_s)
+    if channel is not None:
+        channel.put(value)
+    return value, os.getpid(), socket.gethostname()
