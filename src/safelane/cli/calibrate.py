@@ -8,6 +8,7 @@ from pathlib import Path
 import typer
 
 from . import app
+from ._backend import backend_option, ray_address_option, record, resolve_backend, session, workers_option
 
 
 @app.command()
@@ -21,7 +22,9 @@ def calibrate(
     out: Path = typer.Option(
         Path("results/calibration"), "--out", "-o", help="Parent folder; the run goes to OUT/<run-id>/."
     ),
-    workers: int = typer.Option(1, "--workers", min=1, help="Processes per simulation batch."),
+    backend: str = backend_option(),
+    workers: int = workers_option(),
+    ray_address: str = ray_address_option(),
     install: bool = typer.Option(
         False, "--install", help="Also install the result as a user preset (see --name), outside the package."
     ),
@@ -43,6 +46,8 @@ def calibrate(
     writes the preset as a user preset NAME (never into the package): use it with --preset NAME.
 
     Example: safelane calibrate --install --name mine   (then: safelane simulate --preset mine)
+
+    Example: safelane calibrate --backend ray --ray-address HEAD_HOST:6379   (a cluster: docs/scale.md)
     """
     import pandas as pd
     from rich.console import Console
@@ -55,6 +60,7 @@ def calibrate(
     if install and (PRESET_DIR / f"{name}.yaml").exists():
         raise typer.BadParameter(f"{name!r} is a shipped preset and cannot be replaced; choose another name",
                                  param_hint="--name")
+    where = resolve_backend(backend, workers, ray_address)
     out = check_out_dir(out)
     target = preset_dir or user_preset_dir()
     if install:
@@ -78,8 +84,9 @@ def calibrate(
                       f"[{elapsed:.0f} s, ~{eta:.0f} s left]", soft_wrap=True, markup=False)
 
     args = {"candidates": candidates, "samples": samples, "refine": refine, "finalists": finalists,
-            "final_samples": final_samples, "seed": seed, "workers": workers}
-    with run_folder(out, f"calibrate-seed{seed}", {"kind": "calibrate", **args}) as (run_dir, info):
+            "final_samples": final_samples, "seed": seed, "workers": where}
+    info = {"kind": "calibrate", **args, **record(where)}
+    with session(where), run_folder(out, f"calibrate-seed{seed}", info) as (run_dir, info):
         preset, frame = run(**args, on_candidate=on_candidate)
         console.print()
         text = preset.to_yaml()

@@ -7,6 +7,7 @@ from pathlib import Path
 import typer
 
 from . import app
+from ._backend import backend_option, ray_address_option, resolve_backend, session, workers_option
 
 
 @app.command()
@@ -16,7 +17,9 @@ def falsify(
     seed: int = typer.Option(0, "--seed", min=0, help="Seed of every draw; with --minutes 0 the report repeats."),
     method: str = typer.Option("all", "--method", help="random, cem (cross-entropy), knife (knife edges) or all."),
     batch_size: int = typer.Option(16384, "--batch-size", min=1, help="Scenarios generated per batch."),
-    workers: int = typer.Option(1, "--workers", min=1, help="Parallel search streams (processes)."),
+    backend: str = backend_option(),
+    workers: int = workers_option("Parallel search streams: processes, or Ray tasks (default: the cluster's CPUs)."),
+    ray_address: str = ray_address_option(),
     out: Path = typer.Option(Path("results/falsify"), "--out", "-o", help="Folder for report.json and dumps."),
     replay: Path = typer.Option(None, "--replay", help="Re-simulate one dumped scenario (a JSON from --out)."),
     progress: bool = typer.Option(True, "--progress/--no-progress", help="Show a progress bar."),
@@ -32,6 +35,8 @@ def falsify(
     Example: safelane falsify --minutes 10 --scenarios 1000000 --seed 0 --out results/falsify
 
     Example: safelane falsify --replay results/falsify/worst.json
+
+    Example: safelane falsify --backend ray --workers 64 --minutes 30 --scenarios 100000000   (docs/scale.md)
     """
     from ..experiments import falsify as fz
 
@@ -47,9 +52,10 @@ def falsify(
 
     from ._runs import check_out_dir
 
+    where = resolve_backend(backend, workers, ray_address)
     out = check_out_dir(out)  # before minutes of search, not after
     columns = (TextColumn("{task.description}"), BarColumn(), TextColumn("{task.fields[status]}"), TimeElapsedColumn())
-    with Progress(*columns, disable=not progress, transient=True) as bar:
+    with session(where), Progress(*columns, disable=not progress, transient=True) as bar:
         task = bar.add_task("falsifying", total=max(scenarios, 1), status="")
 
         def on_batch(report: fz.Report) -> None:
@@ -57,7 +63,7 @@ def falsify(
             status = f"{report.simulated:,} simulated, min gap/p_m {report.min_ratio:.12f}, failures {failures}"
             bar.update(task, completed=min(report.simulated, scenarios), status=status)
 
-        report = fz.falsify(scenarios, minutes, seed, method, batch_size=batch_size, on_batch=on_batch, workers=workers)
+        report = fz.falsify(scenarios, minutes, seed, method, batch_size=batch_size, on_batch=on_batch, workers=where)
     typer.echo(report.text())
     written = report.write(out)
     typer.echo(f"wrote {written[0]}" + (f" and {len(written) - 1} scenario dumps" if len(written) > 1 else ""))

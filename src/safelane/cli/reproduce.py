@@ -9,6 +9,7 @@ from pathlib import Path
 import typer
 
 from . import app
+from ._backend import backend_option, ray_address_option, resolve_backend, session, workers_option
 
 
 @app.command()
@@ -18,7 +19,9 @@ def reproduce(
         0, "--seed", min=0, help="Seed of every random draw; the same seed reproduces every number."
     ),
     out: Path = typer.Option(Path("results"), "--out", "-o", help="Parent folder; the run goes to OUT/<run-id>/."),
-    workers: int = typer.Option(1, "--workers", min=1, help="Processes per simulation batch."),
+    backend: str = backend_option(),
+    workers: int = workers_option(),
+    ray_address: str = ray_address_option(),
     preset: str = typer.Option("paper", "--preset", help="Preset name (safelane/presets/NAME.yaml) or a YAML path."),
     only: list[str] = typer.Option(None, "--only", help="Run only this experiment (repeatable); default all."),
     progress: bool = typer.Option(True, "--progress/--no-progress", help="Show progress and per-experiment times."),
@@ -31,7 +34,11 @@ def reproduce(
 
     The same seed reproduces every number in the CSVs.
 
+    The CSVs are byte-identical on every --backend and --workers (docs/scale.md).
+
     Example: safelane reproduce --quick --seed 0 --out results
+
+    Example: safelane reproduce --backend ray --ray-address HEAD_HOST:6379
     """
     from ..experiments.registry import get_experiment
     from ..experiments.reproduce import reproduce as run
@@ -48,15 +55,17 @@ def reproduce(
             get_experiment(name)
         except ValueError as exc:
             raise typer.BadParameter(str(exc), param_hint="--only") from exc
+    where = resolve_backend(backend, workers, ray_address)
     out = check_out_dir(out)
-    run_dir = run(
-        out,
-        seed=seed,
-        quick=quick,
-        workers=workers,
-        preset=preset,
-        progress=progress,
-        experiments=only or None,
-        command=command,
-    )
+    with session(where):
+        run_dir = run(
+            out,
+            seed=seed,
+            quick=quick,
+            workers=where,
+            preset=preset,
+            progress=progress,
+            experiments=only or None,
+            command=command,
+        )
     typer.echo(str(run_dir / "report.html"))

@@ -8,6 +8,7 @@ from pathlib import Path
 import typer
 
 from . import app
+from ._backend import backend_option, ray_address_option, record, resolve_backend, session, workers_option
 
 
 @app.command()
@@ -34,6 +35,9 @@ def simulate(
     ),
     trace: bool = typer.Option(False, "--trace", help="Also write one scenario's trajectories (CSV) and a plot."),
     progress: bool = typer.Option(True, "--progress/--no-progress", help="Show a progress bar."),
+    backend: str = backend_option(),
+    workers: int = workers_option(),
+    ray_address: str = ray_address_option(),
 ) -> None:
     """Simulate one cell of the paper's sampler and summarise it (rates with 95 % Wilson intervals).
 
@@ -47,6 +51,8 @@ def simulate(
 
     Example: safelane simulate --planner CV_all --leaders 5 --decel 5 --samples 1000 --seed 0
     Example: safelane simulate --preset paper --nominal mlp --leaders 1 --decel 4
+
+    Example: safelane simulate --samples 1000000 --backend ray   (the same numbers, on a Ray cluster)
     """
     from ..config import load_params
     from ..sim import SimConfig
@@ -82,6 +88,7 @@ def simulate(
         check_cell_args(planner, leaders, decel, samples, seed, p_v)
     except ValueError as exc:  # InputError names the argument; an unknown variant comes from the registry
         raise bad(exc, options.get(getattr(exc, "where", None) or "", "--planner")) from exc
+    where = resolve_backend(backend, workers, ray_address)
     out = check_out_dir(out)
 
     label = f"{planner}_N{leaders}_decel{decel:g}_pv{p_v:g}_seed{seed}"
@@ -100,10 +107,11 @@ def simulate(
         "assessment": config.assessment,
         "params": params.model_dump(),
         "sim": config.model_dump(),
+        **record(where),
     }
-    with run_folder(out, label, info) as (run_dir, info):
+    with session(where), run_folder(out, label, info) as (run_dir, info):
         result = run(planner, leaders, decel, samples, seed, p_v=p_v, params=params, config=config, trace=trace,
-                     progress=progress, nominal=planner_obj)  # fmt: skip
+                     progress=progress, nominal=planner_obj, workers=where)  # fmt: skip
         table, summary = result.table, result.summary()
         written = [run_dir / "scenarios.csv", run_dir / "summary.csv"]
         table.to_csv(written[0], index=False)
