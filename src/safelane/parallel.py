@@ -228,9 +228,29 @@ def ensure_ray(address: str | None = None, num_cpus: int | None = None):
         target = local
     if not target.startswith("ray://") and target != "auto" and not _reachable(target):
         raise ConnectionError(f"no Ray cluster answers at {target!r} (start one with 'ray start --head --port=PORT')")
-    ray.init(address=target, runtime_env=_runtime_env(), logging_level=logging.WARNING)
+    _token_auth_like_ray_start()
+    try:
+        ray.init(address=target, runtime_env=_runtime_env(), logging_level=logging.WARNING)
+    except ConnectionError as exc:
+        raise ConnectionError(f"{exc} (a cluster with token authentication needs its token here: RAY_AUTH_TOKEN, "
+                              "RAY_AUTH_TOKEN_PATH or ~/.ray/auth_token; docs/scale.md)") from exc  # fmt: skip
     _state.update(started=False, address=target)
     return ray
+
+
+def _token_auth_like_ray_start() -> None:
+    """A driver that connects decides on token authentication as ``ray start`` does: with ``RAY_AUTH_MODE`` unset,
+    token mode if a token is available (``RAY_AUTH_TOKEN``, ``RAY_AUTH_TOKEN_PATH`` or ``~/.ray/auth_token``). Ray
+    2.5x's ``ray.init(address=...)`` does not, and fails against a ``ray start`` head node on the same machine."""
+    if "RAY_AUTH_MODE" in os.environ:
+        return
+    try:
+        from ray._private.authentication.authentication_token_setup import (
+            maybe_enable_token_auth_if_token_available,
+        )
+    except ImportError:  # a Ray without token authentication
+        return
+    maybe_enable_token_auth_if_token_available(warn_if_disabled=False)
 
 
 def _local_cluster(ray) -> str | None:
