@@ -20,6 +20,8 @@ def falsify(
     backend: str = backend_option(),
     workers: int = workers_option("Parallel search streams: processes, or Ray tasks (default: the cluster's CPUs)."),
     ray_address: str = ray_address_option(),
+    world: str = typer.Option("paper", "--world", help="paper (the paper's assumptions) or realistic (plus an "
+                              "own-lane leader L0, sensing errors and actuation delay; docs/real_roads.md)."),
     out: Path = typer.Option(Path("results/falsify"), "--out", "-o", help="Folder for report.json and dumps."),
     replay: Path = typer.Option(None, "--replay", help="Re-simulate one dumped scenario (a JSON from --out)."),
     progress: bool = typer.Option(True, "--progress/--no-progress", help="Show a progress bar."),
@@ -41,9 +43,16 @@ def falsify(
     from ..experiments import falsify as fz
 
     if replay is not None:
-        row = fz.replay(replay).drop(columns="row").iloc[0]
+        outcome = fz.replay(replay)
+        if outcome.empty:
+            typer.echo("not simulated: the scenario does not start inside the assumptions (the shield's initial "
+                       "check finds no safe evasion)")  # fmt: skip
+            return
+        row = outcome.drop(columns="row").iloc[0]
         typer.echo("\n".join(f"{k}: {fz.json_scalar(v)!r}" for k, v in row.items()))
         return
+    if world not in fz.space.WORLDS:
+        raise typer.BadParameter(f"must be one of {', '.join(fz.space.WORLDS)}; got {world!r}", param_hint="--world")
     if method not in (*fz.METHODS, "all"):
         raise typer.BadParameter(
             f"must be one of {', '.join((*fz.METHODS, 'all'))}; got {method!r}", param_hint="--method"
@@ -63,7 +72,9 @@ def falsify(
             status = f"{report.simulated:,} simulated, min gap/p_m {report.min_ratio:.12f}, failures {failures}"
             bar.update(task, completed=min(report.simulated, scenarios), status=status)
 
-        report = fz.falsify(scenarios, minutes, seed, method, batch_size=batch_size, on_batch=on_batch, workers=where)
+        setting = fz.Setting.realistic(seed=seed) if world == "realistic" else None
+        report = fz.falsify(scenarios, minutes, seed, method, batch_size=batch_size, on_batch=on_batch, workers=where,
+                            setting=setting)  # fmt: skip
     typer.echo(report.text())
     written = report.write(out)
     typer.echo(f"wrote {written[0]}" + (f" and {len(written) - 1} scenario dumps" if len(written) > 1 else ""))

@@ -78,6 +78,14 @@ class Setting:
     decel_last_max: float | None = None  # > a_x_d: L(N+1) may brake beyond the assumptions (studies, tests)
     use_hooks: bool = True  # traffic hooks, where the simulator has them
     use_profiles: bool = True  # L(N+1) profiles, where the simulator has them (else sudden braking at decel_last)
+    world: str = "paper"  # "realistic": L0, sensing errors, actuation delay (issue 17; falsify_space.WORLDS)
+
+    @classmethod
+    def realistic(cls, **kwargs) -> Setting:
+        """The realistic world (issue 17): an own-lane leader L0 from the spec, measurement errors inside their
+        bounds (half of them at the bounds' ends), the delay from the spec; the extended shield."""
+        sim = SimConfig(assessment="truth", own_lane=True, sensing_error=True, sensing_edge_share=0.5)
+        return cls(sim=sim, world="realistic", **kwargs)
 
     def resolved(self) -> Setting:
         """This setting with ``use_hooks`` / ``use_profiles`` saying what this simulator really does (dumps record
@@ -101,11 +109,16 @@ def evaluate(spec: dict, setting: Setting) -> tuple[pd.DataFrame, dict]:
     batch, ok = space.build(spec, prm, profiles=profiles)
     keep = np.flatnonzero(ok)
     frames = []
-    for start in np.unique(spec["brake_start_s"][keep]):
-        rows = keep[spec["brake_start_s"][keep] == start]
+    delay = spec.get("delay_periods", np.zeros(len(ok), np.int64))
+    groups = {(float(a), int(d)) for a, d in zip(spec["brake_start_s"][keep], delay[keep], strict=True)}
+    for start, periods in sorted(groups):
+        rows = keep[(spec["brake_start_s"][keep] == start) & (delay[keep] == periods)]
         sub = dataclasses.replace(batch.take(rows), scenario_id=np.arange(rows.size, dtype=np.int64))
         sub_spec = space.take(spec, rows)
-        cfg = setting.sim.model_copy(update={"brake_start_s": float(start)})
+        update = {"brake_start_s": float(start)}
+        if "delay_periods" in spec:
+            update["actuation_delay_s"] = periods * prm.dt
+        cfg = setting.sim.model_copy(update=update)
         kwargs = {}
         recorder = None
         if hooks:
@@ -123,11 +136,16 @@ def evaluate(spec: dict, setting: Setting) -> tuple[pd.DataFrame, dict]:
             out[name] = table[name].to_numpy(np.int64) if name in table else 0
         out["ratio_l1"] = table["min_gap_leader_m"].to_numpy() / prm.p_m
         out["ratio_f"] = table["min_gap_follower_m"].to_numpy() / prm.p_m
+        if "min_gap_own_lane_m" in table:
+            out["ratio_f"] = np.fmin(out["ratio_f"], table["min_gap_own_lane_m"].to_numpy() / prm.p_m)
         out["lane_ratio"] = recorder.min_ratio if recorder is not None else np.nan
+        # The shield's own check at t = 0 (with L0, errors and delay) decides what starts inside the assumptions.
+        out = out[table["initial_safe"].to_numpy(bool)] if "initial_safe" in table else out
         frames.append(out)
     outcome = pd.concat(frames, ignore_index=True) if frames else pd.DataFrame(columns=["row", *OUTCOMES])
     outcome["ratio"] = np.fmin(outcome["ratio_l1"], outcome["ratio_f"]) if len(outcome) else []
-    return outcome.sort_values("row", ignore_index=True), space.take(spec, keep)
+    outcome = outcome.sort_values("row", ignore_index=True)
+    return outcome, space.take(spec, outcome["row"].to_numpy(np.int64))
 
 
 def score(outcome: pd.DataFrame) -> np.ndarray:
@@ -215,7 +233,7 @@ def falsify(
     if not backend.in_process:
         return _parallel(scenarios, minutes, seed, method, batch_size, setting, on_batch, backend)
     prm = setting.params
-    dim = space.dimension(prm)
+    dim = space.dimension(prm, setting.world)
     report = Report(seed=seed, methods=methods, hooks=setting.use_hooks, profiles=setting.use_profiles)
     cem = CrossEntropy(dim)
     start = time.perf_counter()
@@ -230,10 +248,10 @@ def falsify(
                 else float(rng.choice([0.0, rng.integers(0, 30) * prm.dt, rng.uniform(0.0, 3.0)]))
             )
             if m == "knife":
-                spec, u = space.knife_specs(rng, batch_size, prm, brake_start), None
+                spec, u = space.knife_specs(rng, batch_size, prm, brake_start, setting.world), None
             else:
                 u = cem.ask(rng, batch_size) if m == "cem" else rng.uniform(size=(batch_size, dim))
-                spec = space.decode(u, prm, brake_start)
+                spec = space.decode(u, prm, brake_start, setting.world)
             outcome, kept = evaluate(spec, setting)
             if m == "cem":
                 scores = np.full(batch_size, np.inf)

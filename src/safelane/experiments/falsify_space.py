@@ -62,7 +62,14 @@ def _edge(u, lo, hi, *, exact=None, p_exact=0.1, p_tiny=0.2, tiny_lo=1e-12):
     return np.where(u < p_exact, exact, np.where(u < p_exact + p_tiny, tiny, plain))
 
 
-def decode(u: np.ndarray, prm: Params, brake_start_s: float = 0.0) -> dict[str, np.ndarray]:
+#: The worlds the falsifier searches: the paper's, and the realistic one (issue 17: an own-lane leader L0 with a
+#: braking profile, measurement errors inside their bounds, actuation delay 0–0.3 s), whose extra coordinates
+#: come after the paper's (the paper's decode is unchanged).
+WORLDS = ("paper", "realistic")
+MAX_DELAY_PERIODS = 3
+
+
+def decode(u: np.ndarray, prm: Params, brake_start_s: float = 0.0, world: str = "paper") -> dict[str, np.ndarray]:
     """The spec of each row of ``u`` (``(n, D)`` in ``[0, 1]``); see the module docstring."""
     u = np.clip(np.asarray(u, float), 0.0, 1.0)
     c = _Cube(u)
@@ -104,13 +111,32 @@ def decode(u: np.ndarray, prm: Params, brake_start_s: float = 0.0) -> dict[str, 
     spec["f_lo"] = c.take()
     spec["f_period_s"] = _lin(c.take(), prm.dt, 4.0)
     spec["f_phase"] = c.take()
+    if world == "realistic":
+        _decode_realistic(c, spec, prm)
     spec["_width"] = np.full(len(u), c.width)
     return spec
 
 
-def dimension(prm: Params) -> int:
+def _decode_realistic(c: _Cube, spec: dict, prm: Params) -> None:
+    """L0 (present in 85 % of rows): its slack behind which the ego starts (edge mixture: exactly ``p_m``), its speed
+    relative to the ego's, a piecewise-constant profile as L(N+1)'s (a quarter of the segments at ``-a_x_d``); the
+    actuation delay in periods (0–3)."""
+    n = len(spec["n"])
+    spec["l0_present"] = c.take() < 0.85
+    spec["l0_slack"] = _edge(c.take(), 0.0, 60.0)  # L0 − ego − p_m
+    spec["l0_dv"] = np.where(c.take() < 0.3, 0.0, _lin(c.take(), -5.0, 10.0))  # L0's speed − the ego's
+    gaps = _lin(c.take(P - 1), prm.dt, 3.0)
+    snap = c.take(P - 1) < 0.5
+    gaps = np.where(snap, np.maximum(np.round(gaps / prm.dt), 1.0) * prm.dt, gaps)
+    spec["l0_profile_t"] = np.concatenate([np.zeros((n, 1)), np.cumsum(gaps, axis=1)], axis=1)
+    acc = _lin(c.take(P), -prm.a_x_d, prm.a_x_a)
+    spec["l0_profile_a"] = np.where(c.take(P) < 0.25, -prm.a_x_d, acc)
+    spec["delay_periods"] = np.minimum((c.take() * (MAX_DELAY_PERIODS + 1)).astype(np.int64), MAX_DELAY_PERIODS)
+
+
+def dimension(prm: Params, world: str = "paper") -> int:
     """``D``, the number of coordinates :func:`decode` reads."""
-    return int(decode(np.zeros((1, 1000)), prm)["_width"][0])
+    return int(decode(np.zeros((1, 1000)), prm, world=world)["_width"][0])
 
 
 def take(spec: dict, rows) -> dict:
@@ -122,7 +148,8 @@ def concat_specs(specs: list[dict]) -> dict:
     return {k: np.concatenate([s[k] for s in specs]) for k in specs[0]}
 
 
-def knife_specs(rng: np.random.Generator, count: int, prm: Params, brake_start_s: float = 0.0) -> dict:
+def knife_specs(rng: np.random.Generator, count: int, prm: Params, brake_start_s: float = 0.0,
+                world: str = "paper") -> dict:  # fmt: skip
     """Random specs snapped to knife edges (each edge applied to a random share of the rows):
 
     * **margin ties**: leaders exactly at their margin behind the vehicle ahead at the same speed (the state the
@@ -137,7 +164,7 @@ def knife_specs(rng: np.random.Generator, count: int, prm: Params, brake_start_s
     * **the paper's setting with a hugging planner** (where issue 9's violation was found): traffic at 30 m/s, one
       spacing ``δp ~ U[17, 22]`` m, promises 0.5, L(N+1) braking at one constant deceleration, CV_all, hug L1.
     """
-    spec = decode(rng.uniform(size=(count, dimension(prm))), prm, brake_start_s)
+    spec = decode(rng.uniform(size=(count, dimension(prm, world))), prm, brake_start_s, world)
     n = spec["n"]
     pick = lambda p: rng.uniform(size=count) < p  # noqa: E731
     # Margin ties among the leaders (and speed ties), ego behind L1, F behind the ego.
@@ -222,6 +249,20 @@ def knife_specs(rng: np.random.Generator, count: int, prm: Params, brake_start_s
     lateral = pick(0.4) & ~paper
     spec["ego_y"] = np.where(lateral, rng.choice(y_edges, size=count), spec["ego_y"])
     spec["ego_vy"] = np.where(lateral, rng.choice([0.0, 1e-12, -1e-12, 0.5, -0.5], size=count), spec["ego_vy"])
+    if world == "realistic":  # L0 at its margin at the ego's speed, braking at a_x_d from a period boundary or not
+        tie = pick(0.5)
+        spec["l0_slack"] = np.where(tie, 0.0, np.round(spec["l0_slack"] * 1024) / 1024)
+        spec["l0_dv"] = np.where(tie | pick(0.3), 0.0, spec["l0_dv"])
+        brake = pick(0.5)
+        k0 = rng.integers(0, 30, size=count)
+        t0 = np.where(pick(0.5), k0 * prm.dt, np.array([sum([prm.dt] * int(j)) for j in k0]))
+        t0 = t0 + rng.choice([0.0, 0.0, 1e-12, 1e-9, 0.5 * prm.dt], size=count)
+        times = np.stack([np.zeros(count), np.maximum(t0, prm.dt), np.maximum(t0, prm.dt) + 1.0,
+                          np.maximum(t0, prm.dt) + 2.0], 1)  # fmt: skip
+        accels = np.stack([rng.uniform(0.0, prm.a_x_a, count), -prm.a_x_d * np.ones(count), np.zeros(count),
+                           -prm.a_x_d * np.ones(count)], 1)  # fmt: skip
+        spec["l0_profile_t"] = np.where(brake[:, None], times, spec["l0_profile_t"])
+        spec["l0_profile_a"] = np.where(brake[:, None], accels, spec["l0_profile_a"])
     return spec
 
 
@@ -300,6 +341,12 @@ def build(spec: dict, prm: Params, *, profiles: bool) -> tuple[ScenarioBatch, np
         from ..sim.traffic import with_last_profile
 
         batch = with_last_profile(batch, spec["profile_t"], spec["profile_a"], prm)
+    if "l0_present" in spec:  # the realistic world: L0 (the shield's own initial check decides what is evadable)
+        l0_v = np.maximum(ego_vx + spec["l0_dv"], 0.0)
+        batch = dataclasses.replace(
+            batch, l0_x=np.where(spec["l0_present"], prm.p_m + spec["l0_slack"], np.inf), l0_v=l0_v,
+            l0_profile_t=spec["l0_profile_t"].astype(float), l0_profile_a=spec["l0_profile_a"].astype(float),
+        )  # fmt: skip
     return batch, _assumptions_hold(batch, prm)
 
 

@@ -25,7 +25,7 @@ import numpy as np
 from pydantic import BaseModel, ConfigDict, Field, field_validator
 
 from ..params import Params
-from ..safety._backend import ARRAY
+from ..safety._backend import ARRAY, FEASIBILITY_TOL_M
 from ..safety.chain import propagate_chain
 from ..safety.evasion import plan_evasion
 from ..safety.plan import EvasionPlan
@@ -123,7 +123,7 @@ def init(situation: Situation, params: Params, config: ShieldConfig | None = Non
         ex, ey, evx, evy = pending.carry(ex, ey, evx, evy)
         l1x, l1v = carry_worst(l1x, l1v, params.a_x_d, delay)
         fx, fv = carry_worst(fx, fv, -params.a_x_a, delay)
-    own = _own(s, cfg, params, np.zeros(n, bool), np.ones(n, bool))
+    own = own_now = _own(s, cfg, params, np.zeros(n, bool), np.ones(n, bool))
     if own is not None and pending is not None:
         own = (*carry_worst(own[0], own[1], own[2], delay), own[2])
     # The plan held at the start: one candidate check of "cruise laterally as now" would also verify the period;
@@ -132,6 +132,8 @@ def init(situation: Situation, params: Params, config: ShieldConfig | None = Non
     if own is not None and np.isfinite(own[0]).any():
         plan = _own_plan(plan, (ex, ey, evx, evy, l1x, l1v, np.full(n, params.a_x_d), fx, fv, np.ones(n, bool)),
                          own, params)  # fmt: skip
+    if pending is not None:  # nothing verified the commands acting at the start: check their window now
+        plan = _in_flight_checked(plan, s, own_now, delay, params)
     return ShieldState(
         t=situation.t,
         plan=plan,
@@ -143,6 +145,27 @@ def init(situation: Situation, params: Params, config: ShieldConfig | None = Non
         last=None,
         pending=pending,
     )
+
+
+def _in_flight_checked(plan: EvasionPlan, s: Situation, own, delay: float, prm: Params) -> EvasionPlan:
+    """``plan`` marked infeasible where the commands acting at the start (cruise, :meth:`Pending.idle`) break a
+    worst-case gap during the delay: to L1 and F while the ego is in the conflict zone, to L0 throughout."""
+    from .._motion import free_max
+    from ..safety.lateral import LATERAL_TOL_M
+    from ..safety.responsible import pair_min_gap
+
+    tol = FEASIBILITY_TOL_M
+    ex, evx = s.ego_x, s.ego_vx
+    zero = np.zeros(len(s))
+    conflict = free_max(s.ego_y, s.ego_vy, zero, delay) > prm.y_safe + LATERAL_TOL_M
+    gap_l = pair_min_gap(s.chain_x[:, 0] - ex - prm.p_m, evx, zero, s.chain_v[:, 0], -prm.a_x_d + zero, delay)
+    gap_f = pair_min_gap(ex - s.f_x - prm.p_m, s.f_v, prm.a_x_a + zero, evx, zero, delay)
+    ok = ~conflict | ((gap_l >= -tol) & (gap_f >= -tol))
+    if own is not None:
+        has = np.isfinite(own[0])
+        slack = np.where(has, own[0] - ex - prm.p_m, 0.0)
+        ok &= ~has | (pair_min_gap(slack, evx, zero, np.where(has, own[1], 0.0), -own[2], delay) >= -0.5 * tol)
+    return dataclasses.replace(plan, feasible=plan.feasible & ok)
 
 
 def delay_periods(cfg: ShieldConfig, prm: Params) -> int:
@@ -357,7 +380,7 @@ def observe(state: ShieldState, situation: Situation, params: Params) -> ShieldS
     final period, which :func:`step` would observe only at the next one)."""
     if state.last is None:
         return state
-    breach = observe_breaches(state.breach, state.last, situation, params, situation.t)
+    breach = observe_breaches(state.breach, state.last, worst_corners(situation)[1], params, situation.t)
     return dataclasses.replace(state, breach=breach)
 
 

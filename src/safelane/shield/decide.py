@@ -60,7 +60,9 @@ def commit_guard(ex, evx, lx, lv, l1_decel, fx, fv, prm: Params):
 
 def own_completion_level(prm: Params) -> float:
     """With a leader ``L0`` in the own lane, the lane change completes (and ``L0`` stops counting) when the ego's
-    centre is past the lane boundary *and* its body can no longer overlap ``L0``'s laterally (``y >= w_v``)."""
+    centre is past the lane boundary *and* its body can no longer overlap ``L0``'s laterally (``y >= w_v``), moving
+    away from it or not at all laterally (``v_y >= 0``: the lane-keeping after completion then never brings it
+    back below that level)."""
     return max(prm.y_boundary, prm.vehicle_width)
 
 
@@ -116,6 +118,8 @@ def check_candidate(
         ox, ov = advance(np.where(has_own, o_x, 0.0), o_v, -o_decel, dt)
 
     completing = ey >= level
+    if has_own is not None:  # with L0 a completed lane change must not drift back toward it: moving away, or still
+        completing &= ~has_own | (evy >= 0.0)
     n = np.shape(ex)
     ok = np.zeros(n, bool)
     plans = []

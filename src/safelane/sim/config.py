@@ -68,6 +68,8 @@ class SimConfig(BaseModel):
     sense_connected_speed_mps: float = Field(0.2, ge=0.0, description="Speed error bound, connected [m/s].")
     sense_sensed_pos_m: float = Field(1.0, ge=0.0, description="Position error bound, non-connected vehicles [m].")
     sense_sensed_speed_mps: float = Field(0.5, ge=0.0, description="Speed error bound, non-connected [m/s].")
+    sensing_edge_share: float = Field(0.0, ge=0.0, le=1.0, description="Share of measurement errors drawn at the "
+                                      "ends of their bounds (the falsifier's corners; 0: uniform inside).")  # fmt: skip
     actuation_delay_s: float = Field(0.0, ge=0.0, le=1.0, description="Actuation delay [s], whole control periods.")
     shield_own_lane: bool = Field(True, description="The shield keeps p_m to L0 (False: the paper's shield).")
     shield_sensing: bool = Field(True, description="The shield takes the worst case over the error bounds (False: "

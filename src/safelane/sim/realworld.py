@@ -54,16 +54,24 @@ def l0_motion(batch, t: float, x, v, dt: float) -> tuple[Motion, tuple]:
     return fleet.motion(...), fleet.end
 
 
-def measure(seed: int, batch, step: int, s: Situation, bounds: SensingBounds) -> Situation:
+def measure(seed: int, batch, step: int, s: Situation, bounds: SensingBounds, edge_share: float = 0.0) -> Situation:
     """The situation as measured: every other vehicle's position and speed off by a uniform draw inside its bound
-    (speeds stay ``>= 0``), the bounds attached."""
+    (speeds stay ``>= 0``), the bounds attached. ``edge_share``: the share of draws put at either end of the bound
+    (the box's corners, where a sound analysis is tightest)."""
     s = bounds.apply(s)
     sid = batch.scenario_id[:, None]
 
+    def draw(*counters):
+        u = counter_uniform(seed, sid, step, *counters)
+        if edge_share <= 0.0:
+            return u
+        w = counter_uniform(seed, sid, step, *counters, 9)
+        return np.where(w < edge_share, np.round(u), u)
+
     def noisy(x, v, err, slot0):
         k = np.arange(x.shape[1])[None, :]
-        ux = counter_uniform(seed, sid, step, slot0 + 2 * k)
-        uv = counter_uniform(seed, sid, step, slot0 + 2 * k + 1)
+        ux = draw(slot0 + 2 * k)
+        uv = draw(slot0 + 2 * k + 1)
         return x + err[..., 0] * (2.0 * ux - 1.0), np.maximum(v + err[..., 1] * (2.0 * uv - 1.0), 0.0)
 
     fx, fv = noisy(s.f_x[:, None], s.f_v[:, None], s.err_f[:, None, :], _SLOT_NOISE)

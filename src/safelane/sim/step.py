@@ -133,7 +133,7 @@ class ClosedLoop:
         l0 = None if b.l0_x is None else (b.l0_x.copy(), b.l0_v.copy())
         start = self.situation(0.0, ego, x, v, None, b.v[:, 0], l0)
         if self.sensing is not None:
-            start = measure(self.seed, b, -1, start, self.sensing)
+            start = measure(self.seed, b, -1, start, self.sensing, self.cfg.sensing_edge_share)
         in_flight = ()
         if self.delay_periods:  # the commands acting when the run starts: cruise
             zero = np.zeros(n)
@@ -246,7 +246,7 @@ class ClosedLoop:
             )
         situation = self.situation(s.t, s.ego, s.x, s.v, link, observed_f_v, s.l0)
         if self.sensing is not None:  # the shield sees measurements (and their bounds) only
-            situation = measure(self.seed, b, s.step, situation, self.sensing)
+            situation = measure(self.seed, b, s.step, situation, self.sensing, cfg.sensing_edge_share)
         # With perfect V2X the ego's chain analysis is the traffic's own: hand it over instead of recomputing it.
         known = (chain[0][:, 1:], chain[1]) if link is None and self.sensing is None else None
         shield_state, d = shield.step(
@@ -305,7 +305,7 @@ class ClosedLoop:
         period at the start of the next one)."""
         situation = self.situation(s.t, s.ego, s.x, s.v, s.link, s.v[:, 0], s.l0)
         if self.sensing is not None:
-            situation = measure(self.seed, self.b, s.step, situation, self.sensing)
+            situation = measure(self.seed, self.b, s.step, situation, self.sensing, self.cfg.sensing_edge_share)
         return dataclasses.replace(s, shield=shield.observe(s.shield, situation, self.prm))
 
     def others_accels(self, s: SimState, ex, evx, ey, evy, bounds):
