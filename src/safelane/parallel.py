@@ -17,11 +17,14 @@ Backends (:data:`BACKENDS`):
   connection stays open for the next call (a start costs 3–5 s); :func:`ray_session` closes it at the end of a
   block — and shuts the instance down only if this process started it. ``workers=None``: the cluster's CPUs.
 
-Shipping the code: when it connects to a running cluster, this module passes ``runtime_env={"py_modules":
-[<this safelane package>]}``, so every worker runs the driver's safelane, whatever (if anything) is installed
-on the nodes; its dependencies (NumPy, pandas, pydantic, …) must be installed on every node, at the driver's
-versions for identical numbers. ``SAFELANE_RAY_SHIP=installed`` skips the upload (the nodes' own install is
-used). See ``docs/scale.md``.
+Shipping the code: whether it connects to a running cluster or starts a local instance, this module passes
+``runtime_env={"py_modules": [<this safelane package>]}``, so every worker runs the driver's safelane — a snapshot
+taken at connection time, whatever (if anything) is installed on the nodes or edited later in the checkout; its
+dependencies (NumPy, pandas, pydantic, …) must be installed on every node, at the driver's versions for identical
+numbers. ``SAFELANE_RAY_SHIP=installed`` skips the upload (the nodes' own install is used). Authentication: an
+explicit ``RAY_AUTH_MODE`` is respected; otherwise a local instance keeps Ray's default (token authentication), and
+a driver connecting to a cluster takes token mode when a token is available, as ``ray start`` does. See
+``docs/scale.md``.
 
 Ray is the optional extra ``ray`` (``pip install 'safelane[ray]'``), imported only when the ``ray`` backend is
 used: ``import safelane`` never imports it.
