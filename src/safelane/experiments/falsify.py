@@ -39,6 +39,7 @@ from ..parallel import Backend, as_backend, map_chunks
 from ..params import Params
 from ..sim.config import SimConfig
 from ..sim.engine import simulate_batch
+from ..sim.step import ClosedLoop
 from . import falsify_space as space
 from .falsify_report import NOTES, OUTCOMES, Report, json_scalar, merge, scenario_record  # noqa: F401
 
@@ -119,6 +120,15 @@ def evaluate(spec: dict, setting: Setting) -> tuple[pd.DataFrame, dict]:
         if "delay_periods" in spec:
             update["actuation_delay_s"] = periods * prm.dt
         cfg = setting.sim.model_copy(update=update)
+        if "world_key" in spec:  # drop, before simulating, the rows the shield's own initial check rejects
+            start = ClosedLoop(sub, setting.seed, prm, cfg, space.planner_for(sub_spec, prm)).initial_state()
+            inside = np.flatnonzero(start.initial_safe)
+            if inside.size < rows.size:
+                rows = rows[inside]
+                sub = dataclasses.replace(batch.take(rows), scenario_id=np.arange(rows.size, dtype=np.int64))
+                sub_spec = space.take(spec, rows)
+            if rows.size == 0:
+                continue
         kwargs = {}
         recorder = None
         if hooks:

@@ -132,6 +132,7 @@ def _decode_realistic(c: _Cube, spec: dict, prm: Params) -> None:
     acc = _lin(c.take(P), -prm.a_x_d, prm.a_x_a)
     spec["l0_profile_a"] = np.where(c.take(P) < 0.25, -prm.a_x_d, acc)
     spec["delay_periods"] = np.minimum((c.take() * (MAX_DELAY_PERIODS + 1)).astype(np.int64), MAX_DELAY_PERIODS)
+    spec["world_key"] = (c.take() * 2**52).astype(np.int64)  # keys the measurement errors: a replay draws the same
 
 
 def dimension(prm: Params, world: str = "paper") -> int:
@@ -346,6 +347,7 @@ def build(spec: dict, prm: Params, *, profiles: bool) -> tuple[ScenarioBatch, np
         batch = dataclasses.replace(
             batch, l0_x=np.where(spec["l0_present"], prm.p_m + spec["l0_slack"], np.inf), l0_v=l0_v,
             l0_profile_t=spec["l0_profile_t"].astype(float), l0_profile_a=spec["l0_profile_a"].astype(float),
+            world_key=spec["world_key"].astype(np.int64),
         )  # fmt: skip
     return batch, _assumptions_hold(batch, prm)
 

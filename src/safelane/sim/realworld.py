@@ -36,7 +36,7 @@ def with_own_lane(batch, seed: int, cfg, prm: Params):
     ``l0_decel_mps2`` (default ``a_x_d``) from an instant uniform in ``[0, l0_brake_window_s]``."""
     if batch.l0_x is not None:
         return batch
-    sid = batch.scenario_id
+    sid = _key(batch)
     u = [counter_uniform(seed, sid, _SLOT_L0, k) for k in range(3)]
     gap = cfg.l0_gap_min_m + (cfg.l0_gap_max_m - cfg.l0_gap_min_m) * u[0]
     speed = batch.ego_vx + cfg.l0_speed_spread_mps * u[1]  # not slower than the ego: a start it can evade
@@ -45,6 +45,12 @@ def with_own_lane(batch, seed: int, cfg, prm: Params):
     times = np.stack([np.zeros_like(t_brake), t_brake], 1)
     accels = np.stack([np.zeros_like(t_brake), np.full_like(t_brake, -decel)], 1)
     return dataclasses.replace(batch, l0_x=batch.ego_x + gap, l0_v=speed, l0_profile_t=times, l0_profile_a=accels)
+
+
+def _key(batch) -> np.ndarray:
+    """The counter key of a scenario's draws here: ``batch.world_key`` where set (the falsifier's, so that a replayed
+    row draws what it drew in the campaign), else the scenario id."""
+    return batch.scenario_id if batch.world_key is None else batch.world_key
 
 
 def l0_motion(batch, t: float, x, v, dt: float) -> tuple[Motion, tuple]:
@@ -59,7 +65,7 @@ def measure(seed: int, batch, step: int, s: Situation, bounds: SensingBounds, ed
     (speeds stay ``>= 0``), the bounds attached. ``edge_share``: the share of draws put at either end of the bound
     (the box's corners, where a sound analysis is tightest)."""
     s = bounds.apply(s)
-    sid = batch.scenario_id[:, None]
+    sid = _key(batch)[:, None]
 
     def draw(*counters):
         u = counter_uniform(seed, sid, step, *counters)

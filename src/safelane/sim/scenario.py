@@ -72,6 +72,8 @@ class ScenarioBatch:
     l0_v: np.ndarray | None = None
     l0_profile_t: np.ndarray | None = None
     l0_profile_a: np.ndarray | None = None
+    #: ``(B,)`` counter key of the realistic world's draws (measurement errors, L0), default the scenario id.
+    world_key: np.ndarray | None = None
 
     def __len__(self) -> int:
         return len(self.ego_x)
