@@ -41,19 +41,25 @@ def run(samples: int, seed: int) -> tuple[pd.DataFrame, pd.DataFrame]:
 
     t0 = time.perf_counter()
     base = table({})
+    rows.append(_rates("paper's world", "safe shield", base))
     per_cell["paper world, safe shield"] = base.groupby("cell").success.mean()
     for world, update in WORLDS.items():
         for shield, extra in (("paper's shield", PAPER_SHIELD), ("extended shield", {})):
             t = table({**update, **extra})
-            rows.append(dict(world=world, shield=shield, scenarios=len(t), collision_rate=t.collision.mean(),
-                             violation_rate=t.safety_violation.mean(), success=t.success.mean(),
-                             initial_unsafe=(~t.initial_safe).mean()))  # fmt: skip
+            rows.append(_rates(world, shield, t))
             if world == "all three" and shield == "extended shield":
                 per_cell["realistic world, extended shield"] = t.groupby("cell").success.mean()
     print(f"[{time.perf_counter() - t0:.0f} s]")
     cost = pd.DataFrame(per_cell)
+    cost.index = [f"{c.planner} N={c.n_leaders} a={c.decel:g}" for c in cells]
     cost["cost"] = cost["paper world, safe shield"] - cost["realistic world, extended shield"]
     return pd.DataFrame(rows), cost
+
+
+def _rates(world: str, shield: str, t: pd.DataFrame) -> dict:
+    return dict(world=world, shield=shield, scenarios=len(t), collision_rate=t.collision.mean(),
+                violation_rate=t.safety_violation.mean(), success=t.success.mean(),
+                initial_unsafe=(~t.initial_safe).mean())  # fmt: skip
 
 
 def main() -> None:
