@@ -132,3 +132,16 @@ def test_bad_preset_or_nominal(tmp_path, args, hint):
     result = _invoke(*args, "--out", str(tmp_path), "--no-progress")
     assert result.exit_code == 2
     assert hint in result.output
+
+
+def test_slow_assessment_is_accepted_and_differs_from_observed(tmp_path):
+    runs = {}
+    for name in ("observed", "slow"):
+        result = _invoke("--out", str(tmp_path / name), "--no-progress", "--assessment", name, "--planner", "CV_none")
+        assert result.exit_code == 0, result.output
+        run = _run_dir(tmp_path / name)
+        assert json.loads((run / "run.json").read_text())["assessment"] == name
+        runs[name] = pd.read_csv(run / "scenarios.csv")
+    # The slow assessment gives its collaborative verdicts later: the first verdict times differ.
+    a, b = (runs[n]["assessment_time_s"].fillna(-1.0).to_numpy() for n in ("observed", "slow"))
+    assert (a != b).any()

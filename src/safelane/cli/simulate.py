@@ -28,7 +28,8 @@ def simulate(
     ),
     nominal: str = typer.Option(None, "--nominal", help="Nominal planner: expert (default), mlp or teacher."),
     assessment: str = typer.Option(
-        None, "--assessment", help="'observed' (the real one; default) or 'truth' (F's true type)."
+        None, "--assessment", help="'observed' (the real one; default), 'slow' (delayed, sometimes missed verdicts; "
+        "the paper preset's) or 'truth' (F's true type)."
     ),
     out: Path = typer.Option(
         Path("results/simulate"), "--out", "-o", help="Parent folder; the run goes to OUT/<run-id>/ (created)."
@@ -75,8 +76,8 @@ def simulate(
     except ValueError as exc:
         raise bad(exc, "--params") from exc
     base = chosen.sim if chosen else SimConfig()
-    if assessment is not None and assessment not in ("observed", "truth"):
-        raise typer.BadParameter(f"{assessment!r} is not one of 'observed', 'truth'", param_hint="--assessment")
+    if assessment is not None and assessment not in ("observed", "slow", "truth"):
+        raise typer.BadParameter(f"{assessment!r} is not one of 'observed', 'slow', 'truth'", param_hint="--assessment")
     config = base.model_copy(update={"assessment": assessment or base.assessment})
     try:
         planner_obj = as_nominal(nominal) if nominal else (chosen.nominal() if chosen else None)
