@@ -118,7 +118,9 @@ def test_plan_evasion_shapes(shape):
     s = _as_inputs(evasion_inputs(np.random.default_rng(5), shape), shape)
     plan = plan_evasion(**s, params=PARAMS, chain_unsafe=True)
     assert isinstance(plan, EvasionPlan)
-    special = dict(feasible=np.bool_, follows_leader=np.bool_, reason=np.uint8, follows_own=np.bool_, continues=np.bool_)
+    special = dict(
+        feasible=np.bool_, follows_leader=np.bool_, reason=np.uint8, follows_own=np.bool_, continues=np.bool_
+    )
     for field in dataclasses.fields(plan):
         if field.name != "params":
             _check(getattr(plan, field.name), shape, special.get(field.name, np.float64))
