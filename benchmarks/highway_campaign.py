@@ -132,6 +132,7 @@ def main() -> None:
     for (name, mode), (records, _, _) in merged.items():
         classes = collections.Counter(
             (r["crash"]["partner"], r["crash"]["lane"], r["crash"]["ego_phase"], r["crash"]["kind"],
+             "partner changing lanes" if r["crash"].get("partner_changing_lanes") else "",
              "traffic broke assumptions" if r["others_crashed"] or r["reversed"] else "")
             for r in records if r["crashed"]
         )  # fmt: skip

@@ -122,7 +122,8 @@ def own_lane_leaders(road, ego, lane_index, k: int = 1) -> tuple[np.ndarray, np.
 def classify_crash(ego, road, roles: dict, frame: LaneFrame, params: Params, original_lane, target_lane) -> dict:
     """Who hit whom, where: the ego's collision partner (the nearest crashed vehicle), its role (``F``, ``L1``,
     ``L0``, … from ``roles``: vehicle id → name, else ``other``), its lane (``target``, ``original``, ``other``),
-    the ego's lateral phase (``original lane``, ``straddling``, ``target lane``) and the kind of contact."""
+    the ego's lateral phase (``original lane``, ``straddling``, ``target lane``), the kind of contact, and whether
+    the partner was changing lanes (e.g. MOBIL cutting in from the lane beyond the target lane)."""
     y, _ = frame.y(ego.position[1], 0.0)
     y = float(y)
     phase = "original lane" if y <= params.y_safe else ("target lane" if y >= params.lane_width - params.y_safe
@@ -141,7 +142,10 @@ def classify_crash(ego, road, roles: dict, frame: LaneFrame, params: Params, ori
         kind = "ego ran into it (ahead)"
     else:
         kind = "it ran into the ego (behind)"
+    changing = abs(float(getattr(partner, "heading", 0.0))) > 1e-3 or (
+        getattr(partner, "target_lane_index", partner.lane_index) != partner.lane_index)  # fmt: skip
     return {"partner": roles.get(id(partner), "other"), "lane": lane, "ego_phase": phase, "kind": kind,
+            "partner_changing_lanes": bool(changing),
             "dx_m": round(dx, 2), "partner_speed": round(float(partner.speed), 2),
             "ego_speed": round(float(ego.speed), 2)}  # fmt: skip
 
