@@ -11,7 +11,7 @@ $(STAMP): pyproject.toml
 	$(PY) -m pip install --quiet --upgrade pip
 	# The pinned CPU build of PyTorch first: an unpinned torch would pull several GB of CUDA wheels.
 	$(PY) -m pip install --quiet torch==2.13.0
-	$(PY) -m pip install --quiet -e ".[dev,train,gym,rl,highway]"
+	$(PY) -m pip install --quiet -e ".[dev,train,gym,rl,highway,fast]"
 	# Ray (extra ray; a 79 MB wheel, about 10 s): the Ray backend's tests run in CI (docs/scale.md).
 	$(PY) -m pip install --quiet -e ".[ray]"
 	# ad-rss (extra rss; wheels for Linux x86_64): the RSS parity tests need it and skip, saying so, where it is absent.

@@ -16,6 +16,7 @@ every admissible profile does.
 from __future__ import annotations
 
 import math
+import os
 
 import numpy as np
 
@@ -23,7 +24,7 @@ from ..params import Params
 from ._backend import ARRAY
 from ._checks import bool_array, check_params, finish, prepare
 from .chain import braked_position
-from .lateral import lateral_core
+from .lateral import LATERAL_TOL_M, lateral_core
 from .longitudinal import FEASIBILITY_TOL_M, ego_position, longitudinal_core
 from .plan import EvasionPlan, check_broadcasts, plan_from_core
 
@@ -177,7 +178,9 @@ def evasion_exists(
         leader_human, follower_human: keep ``p_m_human`` instead of ``p_m`` to that vehicle (footnote 1).
 
     Returns a bool array of the batch shape (a NumPy bool scalar for scalar inputs). Gaps within
-    ``FEASIBILITY_TOL_M`` of the margin count as kept.
+    ``FEASIBILITY_TOL_M`` of the margin count as kept. NumPy batches of ``FAST_MIN_BATCH`` elements or more run
+    through the compiled kernel of :mod:`._fast` where numba is installed (the same bits; ``SAFELANE_NO_NUMBA=1``
+    keeps the NumPy path).
     """
     xp, args, shape, *_ = _prepare_evasion(
         ego_px,
@@ -194,7 +197,12 @@ def evasion_exists(
         leader_human,
         follower_human,
     )
-    if xp is ARRAY and math.prod(shape) > CHUNK:
+    size = math.prod(shape)
+    if xp is ARRAY and size >= FAST_MIN_BATCH:
+        kernel = fast_kernel()
+        if kernel is not None:
+            return kernel.run(args, shape, params, FEASIBILITY_TOL_M, LATERAL_TOL_M)
+    if xp is ARRAY and size > CHUNK:
         return _exists_chunked(args, shape, params)
     with np.errstate(all="ignore"):
         exists, _ = evasion_core(xp, *args, params)
@@ -206,6 +214,29 @@ def evasion_exists(
 #: 128 KiB ``mmap`` threshold (larger blocks are mapped and unmapped, page fault by page fault, every time).
 #: That makes a batch of a million about twice as fast as one pass. The arithmetic is unchanged.
 CHUNK = 8192
+
+
+#: NumPy batches of at least this many elements go to the compiled kernel (:mod:`._fast`, extra ``fast``) when numba
+#: is installed and ``SAFELANE_NO_NUMBA`` is not ``1``; smaller ones, and every batch without numba, take the NumPy
+#: path, which stays the reference. The kernel's verdicts and gaps are bit-identical to it
+#: (``tests/test_fast_core.py``).
+FAST_MIN_BATCH = 4096
+
+_FAST: list = []  # the imported kernel module, or None once numba failed to import (tried once per process)
+
+
+def fast_kernel():
+    """The compiled kernel module :mod:`._fast`, or ``None`` (numba missing, or ``SAFELANE_NO_NUMBA=1``). The first
+    call imports numba and compiles the kernel or loads it from numba's on-disk cache."""
+    if os.environ.get("SAFELANE_NO_NUMBA", "") == "1":
+        return None
+    if not _FAST:
+        try:
+            from . import _fast
+        except ImportError:
+            _fast = None
+        _FAST.append(_fast)
+    return _FAST[0]
 
 
 def _exists_chunked(args, shape, params: Params) -> np.ndarray:
