@@ -15,7 +15,8 @@ the scenario's vehicles at their exact initial states, then every period:
 2. builds the :class:`~safelane.shield.Situation` from :mod:`safelane.v2x` messages of the connected vehicles
    (emulated with loss and latency, :class:`~.sumo_traffic.V2XLink`) and sensed states of the others — the chain
    stops at the first non-connected or stale leader ``L(N+1)``;
-3. asks the nominal policy (default: :func:`reckless`, always merging at full authority) and the
+3. asks the nominal policy (default: :func:`reckless`, always merging at full authority; or a built-in
+   simulator's planner wrapped in :class:`NominalPolicy`, e.g. ``NominalPolicy(ExpertPlanner())``) and the
    :class:`~safelane.shield.Shield` (or, unshielded, ``ShieldConfig(enabled=False)``: the proposal passes, and the
    ego follows L1 responsibly once across — the built-in simulator's ``supervised=False``);
 4. moves the ego as an exact point mass (constant accelerations over the period, the held plan's exact motion when
@@ -36,13 +37,15 @@ import numpy as np
 from .. import v2x
 from .._motion import advance
 from ..params import Params
-from ..shield import ABORT, HESITATE, Shield, ShieldConfig, Situation
+from ..shield import ABORT, HESITATE, PROCEED, Shield, ShieldConfig, Situation
+from ..shield.monitor import BREACH_KINDS
 from .sumo_traffic import TRAFFIC_MODES, TargetLaneTraffic, V2XLink, profile_accel
 from .sumo_world import SumoWorld, VehicleSpec, libsumo_available, net_file, overlaps
 
 __all__ = [
     "TRAFFIC_MODES",
     "EpisodeResult",
+    "NominalPolicy",
     "SumoRunner",
     "SumoScenario",
     "libsumo_available",
@@ -177,9 +180,19 @@ class EpisodeResult:
     collided: bool = False
     collisions: list = field(default_factory=list)
     overlaps: list = field(default_factory=list)
+    n_proceed: int = 0
     n_hesitate: int = 0
     n_abort: int = 0
+    n_invalid: int = 0
+    completion_time_s: float = np.nan
+    initial_safe: bool = False
+    f_aggressive: bool = False
+    f_connected: bool = True
+    assessed_aggressive: bool = True
+    assessment_time_s: float = np.nan
     breach: bool = False
+    breach_time_s: float = np.nan
+    breach_flags: tuple = ()
     promise_violations: int = 0
     v2x_sent: int = 0
     v2x_lost: int = 0
@@ -200,6 +213,61 @@ class EpisodeResult:
             "geometric_overlap": bool(self.overlaps), "n_hesitate": self.n_hesitate, "n_abort": self.n_abort,
             "breach": self.breach, "promise_violations": self.promise_violations, "wall_s": self.wall_s,
         }  # fmt: skip
+
+    def results_row(self, planner: str) -> dict:
+        """The row in the built-in simulator's results table layout (``safelane.sim.results.results_table``), for
+        the columns that apply: ``collision`` is the ego in SUMO's list, ``leader_collision`` a pair without the
+        ego; then SUMO's own columns."""
+        ego_hit = [c for c in self.collisions if "ego" in (c.get("collider"), c.get("victim"))]
+        others = [c for c in self.collisions if "ego" not in (c.get("collider"), c.get("victim"))]
+        first = self.collisions[0] if self.collisions else {}
+        flags = dict(zip(BREACH_KINDS, self.breach_flags or (False,) * len(BREACH_KINDS), strict=True))
+        return {
+            "scenario_id": self.scenario_id, "planner": planner, "n_leaders": self.n_leaders, "decel": self.decel,
+            "p_v": 0.0, "success": self.completed and not ego_hit, "collision": bool(ego_hit),
+            "leader_collision": bool(others), "completed": self.completed,
+            "completion_time_s": self.completion_time_s, "n_proceed": self.n_proceed, "n_hesitate": self.n_hesitate,
+            "n_abort": self.n_abort, "follower_connected": self.f_connected, "follower_aggressive": self.f_aggressive,
+            "assessed_aggressive": self.assessed_aggressive,
+            "assessment_correct": self.assessed_aggressive == self.f_aggressive,
+            "assessment_time_s": self.assessment_time_s, "n_invalid_proposals": self.n_invalid,
+            "assumption_breach": self.breach, "breach_time_s": self.breach_time_s,
+            **{f"breach_{kind}": flag for kind, flag in flags.items()}, "initial_safe": self.initial_safe,
+            "traffic": self.traffic, "shielded": self.shielded, "has_l0": self.has_l0, "steps": self.steps,
+            "sumo_collisions": len(self.collisions), "collider": first.get("collider", ""),
+            "victim": first.get("victim", ""), "lane": first.get("lane", ""), "phase": first.get("phase", ""),
+            "t_collision_s": first.get("t", np.nan), "geometric_overlap": bool(self.overlaps),
+            "promise_violations": self.promise_violations, "v2x_sent": self.v2x_sent, "v2x_lost": self.v2x_lost,
+            "wall_s": self.wall_s,
+        }  # fmt: skip
+
+
+class NominalPolicy:
+    """A nominal planner of the built-in simulator (:class:`safelane.planners.NominalPlanner`, e.g.
+    ``ExpertPlanner()``) as a SUMO policy: the :class:`~safelane.planners.Observation` is built as
+    ``safelane.sim.step.ClosedLoop.observe`` builds it — F and L1 as read from SUMO (the nearest behind / ahead in
+    the target lane), ``l1_plan`` L1's last commanded acceleration held over ``l1_plan_steps`` periods where the
+    variant uses the chain and L1 is connected, zeros otherwise."""
+
+    def __init__(self, planner, variant: str = "CV_all", l1_plan_steps: int = 10):
+        from ..planners.variants import get_variant
+
+        self.planner, self.l1_plan_steps = planner, int(l1_plan_steps)
+        self.uses_chain = bool(get_variant(variant).uses_chain)
+        self.__name__ = getattr(planner, "__name__", type(planner).__name__)
+
+    def observation(self, situation: Situation, l1_acc: float, l1_connected: bool, f_connected: bool,
+                    completed: bool, scenario_id: int):  # fmt: skip
+        from ..planners.base import Observation
+
+        plan = l1_acc if (self.uses_chain and l1_connected) else 0.0
+        return Observation(
+            p_x=situation.ego_x, p_y=situation.ego_y, v_x=situation.ego_vx, v_y=situation.ego_vy,
+            p_x_l=situation.chain_x[:, 0], v_x_l=situation.chain_v[:, 0], p_x_f=situation.f_x, v_x_f=situation.f_v,
+            l1_plan=np.full((1, self.l1_plan_steps), plan), l1_connected=np.array([l1_connected]),
+            f_connected=np.array([f_connected]), completed=np.array([completed]), t=situation.t,
+            scenario_id=np.array([scenario_id]),
+        )  # fmt: skip
 
 
 class SumoRunner:
@@ -266,7 +334,8 @@ class SumoRunner:
         config = self.config if shielded else self.config.model_copy(update={"enabled": False})
         shield = Shield(prm, variant=self.variant, config=config)
         res = EpisodeResult(sc.scenario_id, sc.n_connected, sc.decel_last, sc.own_x is not None, sc.own_decel,
-                            self.traffic, shielded)  # fmt: skip
+                            self.traffic, shielded, f_aggressive=sc.f_aggressive,
+                            f_connected=sc.f_connected)  # fmt: skip
 
         ex, ey, evx, evy = ROAD_X0 + sc.ego_x, 0.0, sc.ego_v, 0.0  # the ego: road x, shield-frame y (exact state)
         completed = False
@@ -282,12 +351,21 @@ class SumoRunner:
                                for vid in sorted(connected) if vid in state])  # fmt: skip
             link.receive(k)
             situation = self._situation(t, (ex, ey, evx, evy), tgt, own, connected, link)
-            proposal = self.policy(situation, prm)
+            if isinstance(self.policy, NominalPolicy):
+                l1 = tgt.ids[int(np.searchsorted(tgt.x, ex, side="right"))] if (tgt.x > ex).any() else ""
+                obs = self.policy.observation(situation, last_acc.get(l1, 0.0), l1 in connected, sc.f_connected,
+                                              completed, sc.scenario_id)  # fmt: skip
+                proposal = self.policy.planner(obs, prm)
+            else:
+                proposal = self.policy(situation, prm)
             if k == 0:
                 shield.reset(situation)
+                res.initial_safe = bool(shield.state.plan.feasible[0])
             d = shield.step(situation, proposal)
+            res.n_proceed += int(d.behaviour[0] == PROCEED)
             res.n_hesitate += int(d.behaviour[0] == HESITATE)
             res.n_abort += int(d.behaviour[0] == ABORT)
+            res.n_invalid += int(d.invalid[0])
             rows, _, px, vx, py, vy = d.abort_motion()
             if rows.size:  # the held plan's exact motion over the period
                 ex, evx, ey, evy = float(px[0, -1]), float(vx[0, -1]), float(py[0, -1]), float(vy[0, -1])
@@ -307,6 +385,8 @@ class SumoRunner:
             if "L0" in state:
                 a0 = profile_accel(t, sc.own_brake_start_s, sc.own_decel)
                 world.set_speed("L0", state["L0"][1] + a0 * dt)
+            if not completed and bool(d.completing[0]):
+                res.completion_time_s = t + dt
             completed = completed or bool(d.completing[0])
             world.place("ego", ex, origin + sign * ey, evx)
             world.step()
@@ -321,7 +401,12 @@ class SumoRunner:
             if res.collided and self.stop_on_collision:
                 break
         res.completed = completed
-        res.breach = bool(shield.state.breach.any[0])
+        state = shield.state
+        res.breach = bool(state.breach.any[0])
+        res.breach_time_s = float(state.breach.first_s[0])
+        res.breach_flags = tuple(bool(f) for f in state.breach.flags[0])
+        res.assessed_aggressive = bool(state.belief.aggressive[0])
+        res.assessment_time_s = float(state.belief.first_collaborative_s[0])
         res.promise_violations = traffic.violations
         res.v2x_sent, res.v2x_lost = link.sent, link.lost
         res.wall_s = time.perf_counter() - t_wall
