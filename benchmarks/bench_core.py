@@ -1,0 +1,171 @@
+"""The faster core (issue 13): the compiled evasion kernel beside the NumPy path, measured in one run on one thread.
+
+Prints, never asserts (timings depend on the machine and on what else runs on it):
+
+* the kernel's JIT compile time — a fresh process with an empty numba cache (``NUMBA_CACHE_DIR`` a new temporary
+  directory) imports :mod:`safelane.safety._fast`, then a second process loads it from that cache; ``import numba``
+  alone is timed too, since it is part of both;
+* ``evasion_exists`` checks/s at batch 10^6 (``bench_safety``'s realistic states) on the NumPy path
+  (``SAFELANE_NO_NUMBA=1``) and on the kernel, through the public function (input validation included), the two
+  interleaved, best of ``--repeat`` rounds each, with the verdicts compared; beside the wall-clock rate, the rate
+  per CPU second of this process (on a shared machine the wall clock also counts time the process waited);
+* the closed-loop simulator's vehicle-steps/s at N = 3, batch 10^4 (``bench_sim``'s setting), with and without
+  ``SAFELANE_NO_NUMBA`` interleaved (the simulator's shield calls ``evasion_core`` for its plans, not
+  ``evasion_exists``, so the two are expected to match).
+
+The pass/MISS words compare the rate per CPU second with the target (a one-core figure that a loaded machine
+does not halve); the wall-clock rate is printed beside it.
+
+One thread: ``OMP_NUM_THREADS=1`` (set here before NumPy loads) and ``threadpoolctl`` limits; the kernel itself is
+single-threaded. Run ``python benchmarks/bench_core.py [--repeat 5] [--quick]``.
+"""
+
+from __future__ import annotations
+
+import os
+
+os.environ.setdefault("OMP_NUM_THREADS", "1")  # before NumPy loads: one-core figures
+
+import argparse
+import platform
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+from threadpoolctl import threadpool_limits
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+
+from bench_safety import random_states
+from safelane import Params
+from safelane.safety import evasion_exists
+from safelane.safety.evasion import fast_kernel
+from safelane.sim import SimConfig, paper_scenarios, simulate_batch
+
+TARGET_CHECKS = 6e6  # checks/s at batch 1e6, one core
+TARGET_SIM = 15e6  # vehicle-steps/s at N = 3, batch 1e4, one core
+_COMPILE = """
+import time
+import safelane.safety
+t0 = time.perf_counter()
+import numba
+t1 = time.perf_counter()
+from safelane.safety import _fast
+t2 = time.perf_counter()
+print(t1 - t0, t2 - t1)
+"""
+
+
+def compile_times() -> tuple[float, float, float]:
+    """``(import numba, compile with an empty cache, load from the cache)`` in seconds, each in a fresh process."""
+    with tempfile.TemporaryDirectory() as cache:
+        env = dict(os.environ, NUMBA_CACHE_DIR=cache)
+        runs = []
+        for _ in range(2):
+            out = subprocess.run([sys.executable, "-c", _COMPILE], env=env, capture_output=True, text=True, check=True)
+            runs.append([float(x) for x in out.stdout.split()])
+    return runs[1][0], runs[0][1], runs[1][1]
+
+
+def timed(fn) -> tuple[float, float]:
+    """``(wall, cpu)`` seconds of one call."""
+    w, c = time.perf_counter(), time.process_time()
+    fn()
+    return time.perf_counter() - w, time.process_time() - c
+
+
+def interleaved(paths: dict, repeat: int) -> dict:
+    """Best ``(wall, cpu)`` of ``repeat`` rounds per path, the paths alternating within each round."""
+    best = {name: (float("inf"), float("inf")) for name in paths}
+    for _ in range(repeat):
+        for name, fn in paths.items():
+            w, c = timed(fn)
+            best[name] = (min(best[name][0], w), min(best[name][1], c))
+    return best
+
+
+def _same(a, b) -> bool:
+    a, b = np.asarray(a), np.asarray(b)
+    return np.array_equal(a, b, equal_nan=a.dtype.kind in "fc")
+
+
+def numpy_path(fn):
+    """``fn`` with ``SAFELANE_NO_NUMBA=1`` (the NumPy reference path)."""
+
+    def call():
+        os.environ["SAFELANE_NO_NUMBA"] = "1"
+        try:
+            return fn()
+        finally:
+            del os.environ["SAFELANE_NO_NUMBA"]
+
+    return call
+
+
+def main(argv=None) -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--repeat", type=int, default=5, help="rounds per figure (the best counts)")
+    ap.add_argument("--quick", action="store_true", help="batch 10^5 checks and 10^3 scenarios, 2 rounds")
+    args = ap.parse_args(argv)
+    os.environ.pop("SAFELANE_NO_NUMBA", None)
+    n_checks, n_sim = (100_000, 1_000) if args.quick else (1_000_000, 10_000)
+    repeat = 2 if args.quick else args.repeat
+    prm = Params()
+    print(
+        f"bench_core: {platform.processor() or platform.machine()}, {os.cpu_count()} logical CPUs, "
+        f"Python {platform.python_version()}, NumPy {np.__version__}, one thread, best of {repeat} (interleaved)"
+    )
+    kernel = fast_kernel()
+    if kernel is None:
+        print("numba is not installed (pip install 'safelane[fast]'): only the NumPy path can be timed")
+    else:
+        import numba
+
+        numba_import, cold, warm = compile_times()
+        print(
+            f"kernel (numba {numba.__version__}): compile {cold:.2f} s with an empty cache, {warm:.2f} s loaded from "
+            f"the cache (cache=True); import numba itself {numba_import:.2f} s"
+        )
+
+    with threadpool_limits(1):
+        states = random_states(np.random.default_rng(0), n_checks, prm)
+        check = lambda: evasion_exists(**states, params=prm)  # noqa: E731
+        same = bool((check() == numpy_path(check)()).all())
+        paths = {"NumPy path": numpy_path(check)}
+        if kernel is not None:
+            paths["kernel"] = check
+        best = interleaved(paths, repeat)
+        print(f"\nevasion_exists at batch {n_checks:,} (validation included); verdicts equal: {same}")
+        base = best["NumPy path"]
+        for name, (w, c) in best.items():
+            ratio = "" if name == "NumPy path" else f"   {base[0] / w:4.2f}x wall, {base[1] / c:4.2f}x CPU"
+            mark = "pass" if n_checks / c >= TARGET_CHECKS else "MISS"
+            print(
+                f"  {name:<11} {n_checks / w / 1e6:6.2f} M checks/s wall ({w * 1e3:7.1f} ms), "
+                f"{n_checks / c / 1e6:6.2f} M per CPU s{ratio}   target >= {TARGET_CHECKS / 1e6:g} M/s: {mark}"
+            )
+
+        cfg = SimConfig()
+        steps = round(cfg.horizon_s / prm.dt)
+        batch = paper_scenarios("CV_all", 3, 5.0, n_sim, np.random.default_rng(3))
+        work = (3 + 3) * steps * n_sim
+        run = lambda: simulate_batch(batch, seed=0, params=prm, config=cfg).table  # noqa: E731
+        tables = [run(), numpy_path(run)()]
+        identical = all(_same(tables[0][k], tables[1][k]) for k in tables[0])
+        best = interleaved({"NumPy path": numpy_path(run), "default": run}, repeat)
+        print(f"\nsimulate_batch, CV_all, N = 3, batch {n_sim:,}, {steps} steps; results identical: {identical}")
+        for name, (w, c) in best.items():
+            mark = "pass" if work / c >= TARGET_SIM else "MISS"
+            print(
+                f"  {name:<11} {work / w / 1e6:6.2f} M vehicle-steps/s wall ({w:5.2f} s), {work / c / 1e6:6.2f} M per "
+                f"CPU s   target >= {TARGET_SIM / 1e6:g} M: {mark}"
+            )
+    load = os.getloadavg()
+    print(f"\nload average at the end: {load[0]:.1f} {load[1]:.1f} {load[2]:.1f} on {os.cpu_count()} logical CPUs")
+
+
+if __name__ == "__main__":
+    main()
