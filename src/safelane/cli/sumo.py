@@ -2,7 +2,7 @@
 
 The cell's scenarios are ``safelane simulate``'s (the same seed gives the same initial states), run with the same
 planner variant, nominal planner (expert) and shield settings; SUMO integrates the vehicles and its own collision
-list is the referee (docs/integrations_sumo.md).
+list is the referee (docs/integrations.md, SUMO).
 """
 
 from __future__ import annotations
