@@ -52,6 +52,9 @@ GROUPS = {
     "sim": (("sim/checks.py", "sim/kinematics.py"), ("tests/test_sim_kinematics.py", "tests/test_sim_safety.py")),
     "v2x": (("v2x.py",), ("tests/test_v2x.py", "tests/test_shield.py", "tests/test_guarantee.py")),
     "claims": (("experiments/claims.py",), ("tests/test_claims.py", "tests/test_experiments.py")),
+    # Issue 17: the evasion with an own-lane leader, the sensing/delay corners and the simulated world.
+    "own_lane": (("safety/own_lane.py", "shield/realworld.py"), ("tests/test_own_lane.py", "tests/test_realworld.py")),
+    "realworld_sim": (("sim/realworld.py",), ("tests/test_realworld.py",)),
 }  # fmt: skip
 KILLED = {1, 3, 36, 24, -24, 152, 255, 37}  # tests failed (or pytest errored), timed out, or type check caught it
 SURVIVED = {0, 5, 33}  # tests passed, or no test reaches the function
