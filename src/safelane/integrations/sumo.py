@@ -39,6 +39,7 @@ from .._motion import advance
 from ..params import Params
 from ..shield import ABORT, HESITATE, PROCEED, Shield, ShieldConfig, Situation
 from ..shield.monitor import BREACH_KINDS
+from ..sim.realworld import executed_motion, issued
 from .sumo_traffic import TRAFFIC_MODES, TargetLaneTraffic, V2XLink, profile_accel
 from .sumo_world import SumoWorld, VehicleSpec, libsumo_available, net_file, overlaps
 
@@ -270,6 +271,16 @@ class NominalPolicy:
         )  # fmt: skip
 
 
+class _Cruise:
+    """A decision-shaped zero command: what acts before the first issued one under actuation delay."""
+
+    a_x = a_y = np.zeros(1)
+    completing = np.zeros(1, bool)
+
+    def abort_motion(self):
+        return (np.zeros(0, np.intp), None, None, None, None, None)
+
+
 class SumoRunner:
     """Runs episodes in one SUMO simulation (one per process: libsumo is a singleton; use processes for parallel
     episodes). ``traci=True`` runs SUMO as a separate process through TraCI (needs a SUMO binary), ``gui=True``
@@ -280,7 +291,7 @@ class SumoRunner:
                  traffic: str = "paper", v2x_loss: float = 0.0, v2x_latency_periods: int = 0,
                  v2x_max_age_s: float = v2x.MAX_AGE_S, horizon_s: float = 10.0, policy=reckless,
                  stop_on_collision: bool = True, traci: bool = False, gui: bool = False, fcd: str | None = None,
-                 seed: int = 0, world: SumoWorld | None = None):  # fmt: skip
+                 seed: int = 0, world: SumoWorld | None = None, sensing=None):  # fmt: skip
         if traffic not in TRAFFIC_MODES:
             raise ValueError(f"traffic must be one of {TRAFFIC_MODES}; got {traffic!r}")
         self.params = params or Params()
@@ -288,6 +299,10 @@ class SumoRunner:
         self.traffic, self.policy, self.horizon_s = traffic, policy, float(horizon_s)
         self.v2x = dict(loss=float(v2x_loss), latency_periods=int(v2x_latency_periods), max_age_s=float(v2x_max_age_s))
         self.stop_on_collision, self.seed = stop_on_collision, int(seed)
+        # Issue 17: error bounds the shield takes the worst case over (a SensingBounds, or None: SUMO's exact states)
+        # and the actuation delay of ``config`` (the ego executes each command that much later).
+        self.sensing = sensing
+        self.delay_periods = round(self.config.actuation_delay_s / self.params.dt)
         self._owns_world = world is None
         self.world = SumoWorld(self.params, traci=traci, gui=gui, fcd=fcd, seed=seed) if world is None else world
 
@@ -339,6 +354,9 @@ class SumoRunner:
 
         ex, ey, evx, evy = ROAD_X0 + sc.ego_x, 0.0, sc.ego_v, 0.0  # the ego: road x, shield-frame y (exact state)
         completed = False
+        in_flight = ()
+        if self.delay_periods:  # the commands acting when the episode starts: cruise
+            in_flight = (issued(_Cruise()),) * self.delay_periods
         last_acc = {vid: 0.0 for vid in slot_ids}
         steps = round(self.horizon_s / dt)
         t = 0.0
@@ -367,7 +385,15 @@ class SumoRunner:
             res.n_abort += int(d.behaviour[0] == ABORT)
             res.n_invalid += int(d.invalid[0])
             rows, _, px, vx, py, vy = d.abort_motion()
-            if rows.size:  # the held plan's exact motion over the period
+            completing = bool(d.completing[0])
+            if self.delay_periods:  # the oldest command in flight acts now; this one joins the queue
+                acting, in_flight = in_flight[0], (*in_flight[1:], issued(d))
+                ego1 = tuple(np.array([q], float) for q in (ex, ey, evx, evy))
+                lon, lat, plan = executed_motion(acting, ego1, dt)
+                (nx, nv), (ny, nvy) = (plan[1].end, plan[2].end) if plan is not None else (lon.end, lat.end)
+                ex, evx, ey, evy = float(nx[0]), float(nv[0]), float(ny[0]), float(nvy[0])
+                completing = bool(acting.completing[0])
+            elif rows.size:  # the held plan's exact motion over the period
                 ex, evx, ey, evy = float(px[0, -1]), float(vx[0, -1]), float(py[0, -1]), float(vy[0, -1])
             else:
                 nx, nv = advance(np.float64(ex), np.float64(evx), np.float64(d.a_x[0]), dt)
@@ -385,9 +411,9 @@ class SumoRunner:
             if "L0" in state:
                 a0 = profile_accel(t, sc.own_brake_start_s, sc.own_decel)
                 world.set_speed("L0", state["L0"][1] + a0 * dt)
-            if not completed and bool(d.completing[0]):
+            if not completed and completing:
                 res.completion_time_s = t + dt
-            completed = completed or bool(d.completing[0])
+            completed = completed or completing
             world.place("ego", ex, origin + sign * ey, evx)
             world.step()
             res.steps = k + 1
@@ -460,7 +486,7 @@ class SumoRunner:
             t=t, ego=(ex, ey, evx, evy), follower=(fx, fv), leaders=(chain.p[None, :], chain.v[None, :]),
             n_connected=chain.n_connected, promise_decel=chain.promise_decel[None, :],
             human_driven=chain.human_driven[None, :], f_connected=f_conn, f_collaborative=f_coll, params=prm,
-            own_leaders=own_lane_leaders(ex, own.x, own.v), own_n_connected=0,
+            own_leaders=own_lane_leaders(ex, own.x, own.v), own_n_connected=0, sensing=self.sensing,
         )  # fmt: skip
         stale = bool(chain.stale_ids) or (isinstance(f, v2x.V2XMessage) and not f_conn)
         return dataclasses.replace(situation, v2x_stale=np.array([stale]))
