@@ -5,13 +5,19 @@ Cases: the lane-change scene (``safelane/HighwayScene-v0``: F, a platoon L1..LN 
 braking suddenly at a ∈ {4, 6, 8} m/s²); the scene with an own-lane leader L0 that brakes as well (the shield with
 its own-lane check and, as an ablation, without it: ``ShieldConfig(own_lane=False)``, the shield before issue 17);
 random ``highway-v0`` traffic (20 vehicles, 10 s episodes, the ego merging into the lane on its left, or right from
-lane 0). The policy: full authority — ``a_x = a_x_a`` and the lateral acceleration saturated toward the target-lane
-centre (``a_y = clip(2 (w − y) − 2.5 v_y, ±a_y_m)``). Every crash is classified (partner, its lane, the ego's phase,
-who ran into whom), and every episode records whether the traffic broke the shield's assumptions by itself (another
-vehicle crashed — highway-env then brakes it at ``speed`` m/s², beyond ``a_x_d`` — or reversed).
+lane 0) on highway-env's default four lanes — where MOBIL may move a vehicle into the target lane ahead of the ego
+from the lane beyond it, outside the shield's assumptions — and inside them: two lanes (the paper's) and traffic
+that, until the ego lies wholly in the target lane, starts no lane change into the ego's target or original lane
+beside the ego or between it and its nearest leader there (``NoCutInIDMVehicle``; every other MOBIL decision is
+highway-env's). The policy: full authority — ``a_x = a_x_a`` and the lateral acceleration saturated toward the
+target-lane centre (``a_y = clip(2 (w − y) − 2.5 v_y, ±a_y_m)``). Every crash is classified (partner, its lane, the
+ego's phase, who ran into whom), and every episode records whether the traffic broke the shield's assumptions by
+itself (another vehicle crashed — highway-env then brakes it at ``speed`` m/s², beyond ``a_x_d`` — or reversed)
+and whether a vehicle cut in (``info["cut_in"]``).
 
     .venv/bin/python benchmarks/highway_campaign.py                      # the full campaign (2 workers)
     .venv/bin/python benchmarks/highway_campaign.py --episodes 10 --workers 1   # a quick look
+    .venv/bin/python benchmarks/highway_campaign.py --case "highway-v0, 2 lanes, no cut-ins"   # one case
 
 Observation type: LidarObservation (the policy reads the road, not the observation; highway-env's default
 Kinematics observation costs about half of a step with pandas).
@@ -32,7 +38,7 @@ OBS = {"type": "LidarObservation"}
 def make_env(case: dict, shield: bool, own_lane: bool = True):
     import gymnasium as gym
 
-    from safelane.integrations.highway import HIGHWAY_CONFIG, SCENE_ENV_ID, SafeLaneShield
+    from safelane.integrations.highway import HIGHWAY_CONFIG, NO_CUT_IN_CONFIG, SCENE_ENV_ID, SafeLaneShield
     from safelane.shield import ShieldConfig
 
     if case["env"] == "scene":
@@ -40,6 +46,10 @@ def make_env(case: dict, shield: bool, own_lane: bool = True):
         env = gym.make(SCENE_ENV_ID, config=config)
     else:
         config = {**HIGHWAY_CONFIG, "observation": OBS, "vehicles_count": 20, "duration": 10}
+        if case.get("lanes"):
+            config["lanes_count"] = case["lanes"]
+        if not case.get("cut_ins", True):
+            config.update(NO_CUT_IN_CONFIG)
         env = gym.make("highway-v0", config=config)
     return SafeLaneShield(env, shield=shield, config=ShieldConfig(own_lane=own_lane))
 
@@ -72,6 +82,7 @@ def run_chunk(job):
             "seed": int(seed), "crashed": bool(info["crashed"]), "crash": info.get("crash"),
             "success": bool(info["completed"] and not info["crashed"]), "interventions": interventions,
             "steps": env.unwrapped.steps, "others_crashed": others_crashed, "reversed": reversed_,
+            "cut_in": bool(info["cut_in"]),
         })  # fmt: skip
     return records, steps, time.perf_counter() - t0
 
@@ -82,6 +93,7 @@ CASES = {
     "scene a=8": {"env": "scene", "decel": [8.0]},
     "scene a∈{4,6,8} + braking L0": {"env": "scene", "decel": [4.0, 6.0, 8.0], "own_leader": "brake"},
     "highway-v0": {"env": "highway"},
+    "highway-v0, 2 lanes, no cut-ins": {"env": "highway", "lanes": 2, "cut_ins": False},
 }
 
 
@@ -92,10 +104,13 @@ def main() -> None:
     parser.add_argument("--workers", type=int, default=2)
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--ax", type=float, default=None, help="the policy's a_x (default a_x_a)")
+    parser.add_argument("--case", action="append", choices=list(CASES), help="run only this case (repeatable)")
     args = parser.parse_args()
 
     jobs, keys = [], []
     for name, case in CASES.items():
+        if args.case and name not in args.case:
+            continue
         n = args.highway_episodes if case["env"] == "highway" else args.episodes
         modes = ["shield", "off"] + (["shield, no own-lane check"] if case.get("own_leader") else [])
         seeds = np.arange(args.seed, args.seed + n)
@@ -142,6 +157,14 @@ def main() -> None:
             seeds = [r["seed"] for r in records if r["crashed"]]
             if seeds:
                 print(f"  {name} | {mode}: crashed seeds {seeds[:20]}")
+    print(
+        "\nEpisodes with a cut-in (info['cut_in']: before the ego lay wholly in the target lane, a vehicle began "
+        "moving into the target or the ego's lane beside the ego or between it and its nearest leader there):"
+    )
+    for (name, mode), (records, _, _) in merged.items():
+        if CASES[name]["env"] == "highway":
+            cut = [r for r in records if r["cut_in"]]
+            print(f"  {name} | {mode}: {len(cut)} of {len(records)}, crashed {sum(r['crashed'] for r in cut)}")
 
 
 if __name__ == "__main__":

@@ -14,7 +14,9 @@ import gymnasium as gym  # noqa: E402
 
 from safelane.integrations.highway import (  # noqa: E402
     HIGHWAY_CONFIG,
+    NO_CUT_IN_CONFIG,
     SCENE_ENV_ID,
+    NoCutInIDMVehicle,
     PointMassVehicle,
     SafeLaneShield,
     highway_params,
@@ -145,6 +147,32 @@ def test_shielded_reckless_policy_never_crashes_unshielded_does(decel):
     infos = [run(unshielded, seed) for seed in range(4)]
     assert sum(i["crashed"] for i in infos) > 0
     assert all("crash" in i and i["crash"]["partner"] != "none" for i in infos if i["crashed"])
+
+
+def highway(shield=True, **config):
+    base = {**HIGHWAY_CONFIG, **FAST, "vehicles_count": 20, "duration": 10}
+    return SafeLaneShield(gym.make("highway-v0", config={**base, **config}), shield=shield)
+
+
+def test_two_lane_highway_v0_without_cut_ins_shielded_never_crashes():
+    """Random highway-v0 traffic inside the shield's assumptions — two lanes, and during the manoeuvre no MOBIL lane
+    change into the ego's lanes beside it or between it and its nearest leader there: 6 shielded episodes, 0 crashes
+    by highway-env's flag; unshielded, the same traffic crashes (so this test can fail). The campaign runs 200."""
+    shielded = highway(lanes_count=2, **NO_CUT_IN_CONFIG)
+    infos = [run(shielded, seed) for seed in range(6)]
+    assert all(isinstance(v, NoCutInIDMVehicle) for v in shielded.unwrapped.road.vehicles if v is not shielded.ego)
+    assert [i["crashed"] for i in infos] == [False] * 6
+    assert not any(i["cut_in"] for i in infos)
+    unshielded = highway(shield=False, lanes_count=2, **NO_CUT_IN_CONFIG)
+    assert sum(run(unshielded, seed)["crashed"] for seed in range(3)) > 0
+
+
+def test_cut_in_is_reported_and_blocked():
+    """highway-v0 seed 88 (four lanes, MOBIL): a vehicle moves into the target lane ahead of the straddling ego from
+    the lane beyond it — ``info["cut_in"]``; with NoCutInIDMVehicle traffic the same seed has none."""
+    info = run(highway(), 88)
+    assert info["cut_in"]
+    assert not run(highway(**NO_CUT_IN_CONFIG), 88)["cut_in"]
 
 
 def test_import_hint_names_the_extra():

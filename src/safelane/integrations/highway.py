@@ -29,12 +29,16 @@ except ImportError as exc:  # pragma: no cover - exercised only without the extr
 
 from ..params import Params  # noqa: E402
 from ..shield import ABORT, COMPLETED, HESITATE, PROCEED, LaneFrame, Shield, ShieldConfig, Situation  # noqa: E402
-from .highway_vehicles import PointMassVehicle, SuddenBrakeVehicle  # noqa: E402
+from .highway_vehicles import NoCutInIDMVehicle, PointMassVehicle, SuddenBrakeVehicle, cuts_in  # noqa: E402
 
 SCENE_ENV_ID = "safelane/HighwayScene-v0"
 #: What a highway-env environment needs for the wrapper: the shield's period at both frequencies, continuous actions
 #: (the wrapper drives the ego itself; any action type works, this one keeps the host's action space a box).
 HIGHWAY_CONFIG = {"simulation_frequency": 10, "policy_frequency": 10, "action": {"type": "ContinuousAction"}}
+#: highway-env traffic inside the shield's assumptions about the lanes: while the ego changes lanes, MOBIL starts no
+#: lane change into the ego's target or original lane beside the ego or between it and its nearest leader there
+#: (:class:`~.highway_vehicles.NoCutInIDMVehicle`). Add ``lanes_count: 2`` for the paper's two lanes.
+NO_CUT_IN_CONFIG = {"other_vehicles_type": "safelane.integrations.highway_vehicles.NoCutInIDMVehicle"}
 BEHAVIOUR = {PROCEED: "proceed", HESITATE: "hesitate", ABORT: "abort", COMPLETED: "completed"}
 FAR_M = 1000.0  # where a missing F or L1 is put (behind / ahead of the ego)
 #: The Situation takes the ego's own-lane leaders (issue 17) where its ``from_arrays`` has ``own_leaders``.
@@ -43,7 +47,9 @@ OWN_LANE_SUPPORTED = "own_leaders" in inspect.signature(Situation.from_arrays).p
 __all__ = [
     "HIGHWAY_CONFIG",
     "INSTALL_HINT",
+    "NO_CUT_IN_CONFIG",
     "SCENE_ENV_ID",
+    "NoCutInIDMVehicle",
     "PointMassVehicle",
     "SafeLaneShield",
     "SuddenBrakeVehicle",
@@ -171,8 +177,12 @@ class SafeLaneShield(gym.Wrapper, gym.utils.RecordConstructorArgs):
     ``shield`` (``proceed``/``hesitate``/``abort``/``completed``, ``off`` without the shield), ``intervened``,
     ``nominal_action``, ``executed_action`` (``Δv/dt`` over the period, shield frame), ``reason``, ``cost`` (1.0 in the
     period the ego crashes or first comes closer than ``p_m`` to F or L1 while out of its lane, at period ends),
-    ``completed`` (the ego's centre has crossed into the target lane) and, on a crash, ``crash``
-    (:func:`classify_crash`); highway-env's ``crashed`` is kept.
+    ``completed`` (the ego's centre has crossed into the target lane), ``cut_in`` (in this episode, while the ego
+    was not yet wholly in the target lane, another vehicle began moving into the target lane or the ego's original
+    lane beside the ego or between it and its nearest leader there — :func:`~.highway_vehicles.cuts_in`: outside the
+    shield's assumptions) and, on a crash, ``crash`` (:func:`classify_crash`); highway-env's ``crashed`` is kept.
+    The manoeuvre is published as ``road.safelane_manoeuvre`` for :class:`~.highway_vehicles.NoCutInIDMVehicle`
+    (:data:`NO_CUT_IN_CONFIG`).
     """
 
     def __init__(self, env, shield: bool = True, variant: str | None = None, params: Params | None = None,
@@ -279,6 +289,9 @@ class SafeLaneShield(gym.Wrapper, gym.utils.RecordConstructorArgs):
         self.t = 0.0
         self.completed = False
         self.costed = False
+        self.cut_in = False
+        # until the ego lies wholly in the target lane: read by NoCutInIDMVehicle, and for info["cut_in"]
+        u.road.safelane_manoeuvre = (self.ego, (self.original_lane, self.target_lane))
         self.shield.reset(self.situation())
         obs = u.observation_type.observe()
         info.update(original_lane=lane[2], target_lane=tid, crashed=bool(self.ego.crashed))
@@ -313,11 +326,18 @@ class SafeLaneShield(gym.Wrapper, gym.utils.RecordConstructorArgs):
         self.t += prm.dt
         y, vy1 = (float(z) for z in frame.y(ego.position[1], ego.lateral_speed))
         self.completed = self.completed or y >= prm.y_boundary
+        road = self.env.unwrapped.road
+        if getattr(road, "safelane_manoeuvre", None) is not None:
+            self.cut_in = self.cut_in or any(
+                getattr(v, "target_lane_index", v.lane_index) != v.lane_index and cuts_in(v, v.target_lane_index)
+                for v in road.vehicles
+            )  # fmt: skip
+            if y >= prm.lane_width - prm.y_safe:
+                road.safelane_manoeuvre = None
         cost = 0.0
         if ego.crashed:
             cost = 1.0
         elif not self.costed and y > prm.y_safe:
-            road = self.env.unwrapped.road
             front, rear = road.neighbour_vehicles(ego, self.target_lane)
             close = (front is not None and front.position[0] - ego.position[0] < prm.p_m) or (
                 rear is not None and ego.position[0] - rear.position[0] < prm.p_m)  # fmt: skip
@@ -326,7 +346,7 @@ class SafeLaneShield(gym.Wrapper, gym.utils.RecordConstructorArgs):
         info.update(
             shield=name, intervened=intervened, nominal_action=a.copy(),
             executed_action=np.array([(ego.speed - vx0) / prm.dt, (vy1 - vy0) / prm.dt]), reason=reason, cost=cost,
-            completed=self.completed, crashed=bool(ego.crashed),
+            completed=self.completed, cut_in=self.cut_in, crashed=bool(ego.crashed),
         )  # fmt: skip
         if ego.crashed:
             info["crash"] = classify_crash(ego, self.env.unwrapped.road, self.roles, frame, prm, self.original_lane,

@@ -1,4 +1,5 @@
-"""highway-env vehicle classes of ours: the ego as an exact point mass, and a leader that brakes suddenly.
+"""highway-env vehicle classes of ours: the ego as an exact point mass, a leader that brakes suddenly, and IDM
+traffic that does not cut in beside or ahead of the ego while it changes lanes.
 
 highway-env's :class:`~highway_env.vehicle.kinematics.Vehicle` integrates the position with the period's *old* speed
 (explicit Euler: braking at 8 m/s² from 25 m/s for 3 s overshoots by 1.2 m at 10 Hz, the unsafe side for the ego)
@@ -10,6 +11,7 @@ at the lane's (0: a box aligned with the road, the shield's geometry). Importing
 from __future__ import annotations
 
 import numpy as np
+from highway_env.vehicle.behavior import IDMVehicle
 from highway_env.vehicle.kinematics import Vehicle
 
 from .._motion import advance
@@ -98,3 +100,42 @@ class SuddenBrakeVehicle(Vehicle):
             self.crashed = True
             self.impact = None
         self.on_state_update()
+
+
+class NoCutInIDMVehicle(IDMVehicle):
+    """highway-env's IDM/MOBIL vehicle, except that it starts no lane change that :func:`cuts_in` — into the ego's
+    target or original lane, beside the ego or between it and its nearest leader there — while the ego's lane change
+    is under way: the paper's assumption that F, L1 and L0 are the ego's neighbours throughout. Every other MOBIL
+    decision is highway-env's (lane changes behind the ego, beyond its leaders, between other lanes).
+
+    Use it as ``config["other_vehicles_type"]`` (:data:`~safelane.integrations.highway.NO_CUT_IN_CONFIG`).
+    :class:`~safelane.integrations.highway.SafeLaneShield` publishes the manoeuvre as ``road.safelane_manoeuvre``
+    (``(ego, (original_lane_index, target_lane_index))`` until the ego lies wholly in the target lane, then
+    ``None``); without it the vehicle is an ordinary ``IDMVehicle``.
+    """
+
+    def mobil(self, lane_index) -> bool:
+        if cuts_in(self, lane_index):
+            return False
+        return super().mobil(lane_index)
+
+
+def is_behind(vehicle, ego) -> bool:
+    """``vehicle`` lies wholly behind ``ego`` (its front bumper behind the ego's rear bumper)."""
+    return float(vehicle.position[0]) + 0.5 * vehicle.LENGTH < float(ego.position[0]) - 0.5 * ego.LENGTH
+
+
+def cuts_in(vehicle, lane_index) -> bool:
+    """Whether ``vehicle`` moving into ``lane_index`` cuts in on the ego's manoeuvre published on its road: the lane
+    is the ego's target or original lane, the vehicle is not wholly behind the ego, and it is not wholly ahead of
+    the ego's nearest leader in that lane (there is none, the vehicle is that leader, or it would come closer)."""
+    manoeuvre = getattr(vehicle.road, "safelane_manoeuvre", None)
+    if manoeuvre is None:
+        return False
+    ego, lanes = manoeuvre
+    if vehicle is ego or tuple(lane_index) not in lanes or is_behind(vehicle, ego):
+        return False
+    front, _ = vehicle.road.neighbour_vehicles(ego, lane_index)
+    if front is None or front is vehicle:
+        return True
+    return float(vehicle.position[0]) - 0.5 * vehicle.LENGTH <= float(front.position[0]) + 0.5 * front.LENGTH
