@@ -179,3 +179,21 @@ def test_import_hint_names_the_extra():
     from safelane.integrations import highway
 
     assert "safelane[highway]" in highway.INSTALL_HINT
+
+
+def test_actuation_delay_and_sensing_bounds():
+    """Issue 17 in highway-env: the wrapper's actuator executes each command 0.2 s late (the shield's config says
+    so) and the shield takes the worst case over SensingBounds: 0 crashes by highway-env's flag on the scene with
+    hard braking; the shield that does not know of the delay, on the same delayed actuator, crashes."""
+    from safelane.shield import SensingBounds, ShieldConfig
+
+    def delayed(config, **kw):
+        env = gym.make(SCENE_ENV_ID, config={**FAST, "duration": 8, "decel": [8.0]})
+        wrapper = SafeLaneShield(env, config=config, **kw)
+        wrapper.delay_periods = 2  # the host's actuator delays by 0.2 s whatever the shield assumes
+        return wrapper
+
+    aware = delayed(ShieldConfig(actuation_delay_s=0.2), sensing=SensingBounds())
+    assert sum(run(aware, seed)["crashed"] for seed in range(6)) == 0
+    unaware = delayed(ShieldConfig(own_lane=False, sensing=False))
+    assert sum(run(unaware, seed)["crashed"] for seed in range(6)) > 0

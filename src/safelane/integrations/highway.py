@@ -29,6 +29,7 @@ except ImportError as exc:  # pragma: no cover - exercised only without the extr
 
 from ..params import Params  # noqa: E402
 from ..shield import ABORT, COMPLETED, HESITATE, PROCEED, LaneFrame, Shield, ShieldConfig, Situation  # noqa: E402
+from ..sim.realworld import cruise, executed_motion, issued  # noqa: E402
 from .highway_vehicles import NoCutInIDMVehicle, PointMassVehicle, SuddenBrakeVehicle, cuts_in  # noqa: E402
 
 SCENE_ENV_ID = "safelane/HighwayScene-v0"
@@ -187,10 +188,10 @@ class SafeLaneShield(gym.Wrapper, gym.utils.RecordConstructorArgs):
 
     def __init__(self, env, shield: bool = True, variant: str | None = None, params: Params | None = None,
                  config: ShieldConfig | None = None, target: str = "auto", connected: bool = False,
-                 promise: float = 0.5, own_leaders: int = 1):  # fmt: skip
+                 promise: float = 0.5, own_leaders: int = 1, sensing=None):  # fmt: skip
         gym.utils.RecordConstructorArgs.__init__(self, shield=shield, variant=variant, params=params, config=config,
                                                  target=target, connected=connected, promise=promise,
-                                                 own_leaders=own_leaders)  # fmt: skip
+                                                 own_leaders=own_leaders, sensing=sensing)  # fmt: skip
         gym.Wrapper.__init__(self, env)
         if target not in ("left", "right", "auto"):
             raise ValueError(f"target must be 'left', 'right' or 'auto'; got {target!r}")
@@ -203,6 +204,11 @@ class SafeLaneShield(gym.Wrapper, gym.utils.RecordConstructorArgs):
         self.shield_on = bool(shield)
         self.variant = variant or ("CV_all" if connected else "No_agg_assess")
         self.shield = Shield(prm, variant=self.variant, config=config)
+        # Issue 17: error bounds the shield takes the worst case over (a SensingBounds; None: highway-env's exact
+        # states), and the actuation delay of the config, which the ego's actuator then applies.
+        self.sensing = sensing
+        self.delay_periods = round(self.shield.config.actuation_delay_s / prm.dt)
+        self.in_flight = ()
         self.target = target
         self.connected = bool(connected)
         self.promise = float(promise)
@@ -264,7 +270,7 @@ class SafeLaneShield(gym.Wrapper, gym.utils.RecordConstructorArgs):
             t=self.t, ego=(ex, ego.position[1], ego.speed, ego.lateral_speed), follower=(fx, fv),
             leaders=(lx[None, :], lv[None, :]), n_connected=n, promise_decel=promise[None, :] if promise.size else
             np.zeros((1, len(lx) - 1)), f_connected=bool(self.connected and getattr(f, "safelane_connected", False)),
-            frame=self.frame, params=prm, **kwargs,
+            frame=self.frame, params=prm, sensing=self.sensing, **kwargs,
         )  # fmt: skip
 
     # --- Gymnasium ------------------------------------------------------------------------------------------------
@@ -293,6 +299,7 @@ class SafeLaneShield(gym.Wrapper, gym.utils.RecordConstructorArgs):
         # until the ego lies wholly in the target lane: read by NoCutInIDMVehicle, and for info["cut_in"]
         u.road.safelane_manoeuvre = (self.ego, (self.original_lane, self.target_lane))
         self.shield.reset(self.situation())
+        self.in_flight = (cruise(1),) * self.delay_periods  # the commands acting at the start: cruise
         obs = u.observation_type.observe()
         info.update(original_lane=lane[2], target_lane=tid, crashed=bool(self.ego.crashed))
         return obs, info
@@ -309,7 +316,15 @@ class SafeLaneShield(gym.Wrapper, gym.utils.RecordConstructorArgs):
         if self.shield_on:
             decision = self.shield.step(situation, (a[:1], a[1:]))
             code = int(decision.behaviour[0])
-            if code == ABORT:
+            if self.delay_periods:  # the oldest command in flight acts now (exactly); this one joins the queue
+                acting, self.in_flight = self.in_flight[0], (*self.in_flight[1:], issued(decision))
+                ey, evy = frame.y(ego.position[1], ego.lateral_speed)
+                ego1 = tuple(np.array([float(q)]) for q in (ego.position[0], ey, ego.speed, evy))
+                lon, lat, plan = executed_motion(acting, ego1, prm.dt)
+                (nx, nv), (ny, nvy) = (plan[1].end, plan[2].end) if plan is not None else (lon.end, lat.end)
+                ysim = frame.origin_y + frame.sign * float(ny[0])
+                ego.command = ("state", float(nx[0]), float(nv[0]), ysim, frame.sign * float(nvy[0]))
+            elif code == ABORT:
                 _, _, px, vx, py, vy = decision.abort_motion()
                 ysim = frame.origin_y + frame.sign * float(py[0, -1])
                 ego.command = ("state", float(px[0, -1]), float(vx[0, -1]), ysim, frame.sign * float(vy[0, -1]))

@@ -39,7 +39,7 @@ from .._motion import advance
 from ..params import Params
 from ..shield import ABORT, HESITATE, PROCEED, Shield, ShieldConfig, Situation
 from ..shield.monitor import BREACH_KINDS
-from ..sim.realworld import executed_motion, issued
+from ..sim.realworld import cruise, executed_motion, issued
 from .sumo_traffic import TRAFFIC_MODES, TargetLaneTraffic, V2XLink, profile_accel
 from .sumo_world import SumoWorld, VehicleSpec, libsumo_available, net_file, overlaps
 
@@ -271,16 +271,6 @@ class NominalPolicy:
         )  # fmt: skip
 
 
-class _Cruise:
-    """A decision-shaped zero command: what acts before the first issued one under actuation delay."""
-
-    a_x = a_y = np.zeros(1)
-    completing = np.zeros(1, bool)
-
-    def abort_motion(self):
-        return (np.zeros(0, np.intp), None, None, None, None, None)
-
-
 class SumoRunner:
     """Runs episodes in one SUMO simulation (one per process: libsumo is a singleton; use processes for parallel
     episodes). ``traci=True`` runs SUMO as a separate process through TraCI (needs a SUMO binary), ``gui=True``
@@ -356,7 +346,7 @@ class SumoRunner:
         completed = False
         in_flight = ()
         if self.delay_periods:  # the commands acting when the episode starts: cruise
-            in_flight = (issued(_Cruise()),) * self.delay_periods
+            in_flight = (cruise(1),) * self.delay_periods
         last_acc = {vid: 0.0 for vid in slot_ids}
         steps = round(self.horizon_s / dt)
         t = 0.0

@@ -103,6 +103,12 @@ class Issued:
     completing: np.ndarray
 
 
+def cruise(batch: int) -> Issued:
+    """Zero acceleration, not completing: what acts before the first issued command under actuation delay."""
+    zero = np.zeros(batch)
+    return Issued(zero, zero, np.zeros(0, np.intp), None, None, None, np.zeros(batch, bool))
+
+
 def issued(decision) -> Issued:
     rows, knots, _, vx, _, vy = decision.abort_motion()
     ax_seg = ay_seg = None

@@ -26,7 +26,7 @@ from .checks import ego_checks, lane_checks, lane_pairs
 from .config import SimConfig
 from .kinematics import Fleet, Motion
 from .link import Link
-from .realworld import executed_motion, issued, l0_motion, measure, own_lane_checks, with_own_lane
+from .realworld import cruise, executed_motion, issued, l0_motion, measure, own_lane_checks, with_own_lane
 from .rng import counter_normal
 from .scenario import ScenarioBatch
 from .traffic import TrafficView, resolve_traffic
@@ -136,9 +136,7 @@ class ClosedLoop:
             start = measure(self.seed, b, -1, start, self.sensing, self.cfg.sensing_edge_share)
         in_flight = ()
         if self.delay_periods:  # the commands acting when the run starts: cruise
-            zero = np.zeros(n)
-            cruise = issued(_Cruise(zero, zero, np.zeros(n, bool)))
-            in_flight = (cruise,) * self.delay_periods
+            in_flight = (cruise(n),) * self.delay_periods
         start_state = shield.init(start, self.prm, self.shield_config, b.variant)
         return SimState(
             t=0.0,
@@ -375,18 +373,6 @@ def _check_finite(s: SimState, b: ScenarioBatch) -> None:
             f"non-finite simulator state at t = {s.t:.1f} s in scenario(s) {ids} ({int(bad.sum())} in all): a bug in "
             "a behaviour model or hook, not an outcome"
         )
-
-
-@dataclass(frozen=True)
-class _Cruise:
-    """A decision-shaped zero command (what acts before the first issued one, under actuation delay)."""
-
-    a_x: np.ndarray
-    a_y: np.ndarray
-    completing: np.ndarray
-
-    def abort_motion(self):
-        return (np.zeros(0, np.intp), None, None, None, None, None)
 
 
 def _columns(a):
