@@ -103,3 +103,27 @@ def run_folder(out: Path, label: str, info: dict) -> Iterator[tuple[Path, dict]]
                 os.rmdir(run_dir)
         else:
             write_run_json(run_dir, info)
+
+
+def outcome_table(title: str, table, rows, unit: str = "scenario"):
+    """A Rich table of outcome counts and rates with 95 % Wilson intervals (``rows``: ``(label, column)``), then the
+    mean completion time and the hesitate/abort steps per ``unit`` — the summary ``simulate`` and ``sumo`` print."""
+    from rich.table import Table
+
+    from ..sim import wilson_interval
+
+    n = len(table)
+    t = Table(title=title)
+    for col, justify in (("outcome", "left"), ("count", "right"), ("rate", "right"), ("95 % Wilson interval", "right")):
+        t.add_column(col, justify=justify)
+    for label, col in rows:
+        k = int(table[col].sum())
+        lo, hi = wilson_interval(k, n)
+        t.add_row(label, str(k), f"{k / n:.4f}", f"[{float(lo):.4f}, {float(hi):.4f}]")
+    done = table["completion_time_s"].dropna()
+    t.add_section()
+    t.add_row("mean completion time", str(len(done)), f"{done.mean():.2f} s" if len(done) else "-", "")
+    for label, col in ((f"hesitate steps / {unit}", "n_hesitate"), (f"abort steps / {unit}", "n_abort")):
+        t.add_row(label, str(int(table[col].sum())), f"{table[col].mean():.2f}", "")
+    return t
+

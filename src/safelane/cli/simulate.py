@@ -140,17 +140,11 @@ def simulate(
 
 def _print_summary(table, planner, leaders, decel, samples, seed, p_v, assessment) -> None:
     from rich.console import Console
-    from rich.table import Table
 
-    from ..sim import wilson_interval
+    from ._runs import outcome_table
 
-    n = len(table)
-    t = Table(
-        title=f"{planner}, N = {leaders}, a_x_N+1_d = {decel:g} m/s², p_v = {p_v:g}, {samples} scenarios, seed {seed}"
-        f", assessment {assessment}"
-    )
-    for col, justify in (("outcome", "left"), ("count", "right"), ("rate", "right"), ("95 % Wilson interval", "right")):
-        t.add_column(col, justify=justify)
+    title = (f"{planner}, N = {leaders}, a_x_N+1_d = {decel:g} m/s², p_v = {p_v:g}, {samples} scenarios, seed {seed}"
+             f", assessment {assessment}")  # fmt: skip
     rows = (
         ("success", "success"),
         ("collision", "collision"),
@@ -159,13 +153,4 @@ def _print_summary(table, planner, leaders, decel, samples, seed, p_v, assessmen
         ("leader margin violation", "leader_violation"),
         ("assessment correct", "assessment_correct"),
     )
-    for label, col in rows:
-        k = int(table[col].sum())
-        lo, hi = wilson_interval(k, n)
-        t.add_row(label, str(k), f"{k / n:.4f}", f"[{float(lo):.4f}, {float(hi):.4f}]")
-    done = table["completion_time_s"].dropna()
-    t.add_section()
-    t.add_row("mean completion time", str(len(done)), f"{done.mean():.2f} s" if len(done) else "-", "")
-    for label, col in (("hesitate steps / scenario", "n_hesitate"), ("abort steps / scenario", "n_abort")):
-        t.add_row(label, str(int(table[col].sum())), f"{table[col].mean():.2f}", "")
-    Console().print(t)
+    Console().print(outcome_table(title, table, rows))

@@ -198,25 +198,13 @@ def _summary(table):
 
 def _print_summary(table, n_list, planner, leaders, decel, episodes, seed, traffic, shielded, wall, workers) -> None:
     from rich.console import Console
-    from rich.table import Table
 
-    from ..sim import wilson_interval
+    from ._runs import outcome_table
 
     n = len(table)
     title = (f"SUMO, {planner}{'' if shielded else ' without the shield'}, N = {leaders}, a_x_N+1_d = {decel:g} m/s²,"
              f" traffic {traffic}, {episodes} episodes, seed {seed}")  # fmt: skip
-    t = Table(title=title)
-    for col, justify in (("outcome", "left"), ("count", "right"), ("rate", "right"), ("95 % Wilson interval", "right")):
-        t.add_column(col, justify=justify)
-    for label, col in RATES:
-        k = int(table[col].sum())
-        lo, hi = wilson_interval(k, n)
-        t.add_row(label, str(k), f"{k / n:.4f}", f"[{float(lo):.4f}, {float(hi):.4f}]")
-    done = table["completion_time_s"].dropna()
-    t.add_section()
-    t.add_row("mean completion time", str(len(done)), f"{done.mean():.2f} s" if len(done) else "-", "")
-    for label, col in (("hesitate steps / episode", "n_hesitate"), ("abort steps / episode", "n_abort")):
-        t.add_row(label, str(int(table[col].sum())), f"{table[col].mean():.2f}", "")
+    t = outcome_table(title, table, RATES, unit="episode")
     t.add_row("entries in SUMO's collision list", str(n_list), "", "")
     t.add_row("promise-violating periods", str(int(table["promise_violations"].sum())), "", "")
     t.add_row("episodes / s", f"{n / wall:.2f}", f"{workers} process(es)", "")
