@@ -110,3 +110,19 @@ def test_merged_streams_add_up_and_keep_the_worst():
     m = merge([a, b])
     assert (m.generated, m.simulated, m.counts["collision"], m.min_ratio) == (16, 7, 3, 1.1)
     assert m.worst is b.worst and m.by_method["random"]["failures"] == 3
+
+
+def test_realistic_worst_scenario_replays_exactly():
+    """The closest scenario of the million-scenario realistic-world search (docs/real_roads.md) replays to the same
+    gap, bit for bit: L0, the measurement errors (keyed by the spec) and the delay are part of the dump."""
+    import json
+    from pathlib import Path
+
+    from safelane.experiments import falsify as fz
+
+    path = Path(__file__).parent.parent / "docs" / "falsification" / "realistic_worst.json"
+    record = json.loads(path.read_text())
+    row = fz.replay(record).iloc[0]
+    assert "l0_present" in record["spec"] and "delay_periods" in record["spec"]
+    assert row["ratio"] == record["outcome"]["ratio"]
+    assert not row[list(fz.OUTCOMES)].any()
