@@ -14,6 +14,7 @@ lane-change scene ``safelane/HighwayScene-v0`` (:mod:`.highway_scene`).
 
 from __future__ import annotations
 
+import dataclasses
 import inspect
 
 import numpy as np
@@ -30,7 +31,14 @@ except ImportError as exc:  # pragma: no cover - exercised only without the extr
 from ..params import Params  # noqa: E402
 from ..shield import ABORT, COMPLETED, HESITATE, PROCEED, LaneFrame, Shield, ShieldConfig, Situation  # noqa: E402
 from ..sim.realworld import cruise, executed_motion, issued  # noqa: E402
-from .highway_vehicles import NoCutInIDMVehicle, PointMassVehicle, SuddenBrakeVehicle, cuts_in  # noqa: E402
+from ..v2x import MAX_AGE_S, SensedVehicle, V2XMessage, leader_arrays  # noqa: E402
+from .highway_vehicles import (  # noqa: E402
+    NoCutInIDMVehicle,
+    PointMassVehicle,
+    PromiseIDMVehicle,
+    SuddenBrakeVehicle,
+    cuts_in,
+)
 
 SCENE_ENV_ID = "safelane/HighwayScene-v0"
 #: What a highway-env environment needs for the wrapper: the shield's period at both frequencies, continuous actions
@@ -52,6 +60,7 @@ __all__ = [
     "SCENE_ENV_ID",
     "NoCutInIDMVehicle",
     "PointMassVehicle",
+    "PromiseIDMVehicle",
     "SafeLaneShield",
     "SuddenBrakeVehicle",
     "check_frequencies",
@@ -170,8 +179,16 @@ class SafeLaneShield(gym.Wrapper, gym.utils.RecordConstructorArgs):
         params: default :func:`highway_params`.
         config: the :class:`~safelane.shield.ShieldConfig`.
         target: ``"left"`` (lane id − 1), ``"right"`` or ``"auto"`` (left unless the ego is in lane 0).
-        connected: treat vehicles with a true ``safelane_connected`` attribute as connected leaders (their promise
-            in ``safelane_promise`` [m/s²], default ``promise``); their states are read exactly (an ideal V2X link).
+        connected: treat vehicles with a true ``safelane_connected`` attribute as connected (their promise in
+            ``safelane_promise`` [m/s²], default ``promise``): each period every connected vehicle of the chain (and
+            F) broadcasts a :class:`~safelane.v2x.V2XMessage` — its exact state, its acceleration of the last
+            period, its promise, the timestamp — and the chain is built from the received ones by
+            :func:`safelane.v2x.leader_arrays` (the first vehicle that is not connected, or whose latest message is
+            stale, becomes ``L(N+1)``). The scene's ``config={"connected": True}`` marks F and L1..LN and holds the
+            leaders to their promise (:class:`~.highway_vehicles.PromiseIDMVehicle`).
+        v2x_loss, v2x_seed: each message is lost independently with probability ``v2x_loss`` (default 0: an ideal
+            link), drawn from ``numpy.random.default_rng`` seeded by ``v2x_seed`` and the reset's seed; the latest
+            received message then stands in, extrapolated, until it is older than ``safelane.v2x.MAX_AGE_S``.
         own_leaders: how many own-lane leaders to read (used once the Situation takes them, issue 17).
 
     Actions: ``Box([-a_x_d, -a_y_m], [a_x_a, a_y_m])``; ``a_y > 0`` points to the target lane. ``info`` adds
@@ -188,10 +205,12 @@ class SafeLaneShield(gym.Wrapper, gym.utils.RecordConstructorArgs):
 
     def __init__(self, env, shield: bool = True, variant: str | None = None, params: Params | None = None,
                  config: ShieldConfig | None = None, target: str = "auto", connected: bool = False,
-                 promise: float = 0.5, own_leaders: int = 1, sensing=None):  # fmt: skip
+                 promise: float = 0.5, own_leaders: int = 1, sensing=None, v2x_loss: float = 0.0,
+                 v2x_seed: int | None = None):  # fmt: skip
         gym.utils.RecordConstructorArgs.__init__(self, shield=shield, variant=variant, params=params, config=config,
                                                  target=target, connected=connected, promise=promise,
-                                                 own_leaders=own_leaders, sensing=sensing)  # fmt: skip
+                                                 own_leaders=own_leaders, sensing=sensing, v2x_loss=v2x_loss,
+                                                 v2x_seed=v2x_seed)  # fmt: skip
         gym.Wrapper.__init__(self, env)
         if target not in ("left", "right", "auto"):
             raise ValueError(f"target must be 'left', 'right' or 'auto'; got {target!r}")
@@ -212,6 +231,12 @@ class SafeLaneShield(gym.Wrapper, gym.utils.RecordConstructorArgs):
         self.target = target
         self.connected = bool(connected)
         self.promise = float(promise)
+        if not 0.0 <= float(v2x_loss) <= 1.0:
+            raise ValueError(f"v2x_loss must lie in [0, 1]; got {v2x_loss!r}")
+        self.v2x_loss, self.v2x_seed = float(v2x_loss), v2x_seed
+        self.rng = np.random.default_rng(v2x_seed)
+        self.inbox: dict = {}  # the latest message received from each connected vehicle (id(vehicle) -> message)
+        self.chain_v2x = None  # the last LeaderChain (safelane.v2x.leader_arrays), with connected=True
         self.n_own = int(own_leaders)
         self.action_space = gym.spaces.Box(np.array([-prm.a_x_d, -prm.a_y_m], np.float32),
                                            np.array([prm.a_x_a, prm.a_y_m], np.float32), dtype=np.float32)  # fmt: skip
@@ -239,26 +264,70 @@ class SafeLaneShield(gym.Wrapper, gym.utils.RecordConstructorArgs):
             current = front
         return chain
 
+    def _message(self, vehicle):
+        """What ``vehicle`` broadcasts now: its exact state, last acceleration and promise (a V2XMessage)."""
+        prm = self.params
+        x, v = _longitudinal(vehicle)
+        accel = float(getattr(vehicle, "action", {}).get("acceleration", 0.0))
+        promise = min(max(float(getattr(vehicle, "safelane_promise", self.promise)), 0.0), prm.a_x_d)
+        return V2XMessage(vehicle_id=str(id(vehicle)), timestamp_s=self.t, position_m=x, speed_mps=v,
+                          accel_mps2=accel if np.isfinite(accel) else 0.0, promise_decel=promise,
+                          promise_accel=prm.a_x_a, human_driven=False)  # fmt: skip
+
+    def _received(self, vehicle):
+        """The latest message received from a connected ``vehicle`` (this period's unless lost), else what the ego
+        senses of it now (a SensedVehicle)."""
+        if self.v2x_loss <= 0.0 or self.rng.random() >= self.v2x_loss:
+            self.inbox[id(vehicle)] = self._message(vehicle)
+        message = self.inbox.get(id(vehicle))
+        if message is not None:
+            return message
+        x, v = _longitudinal(vehicle)
+        return SensedVehicle(vehicle_id=str(id(vehicle)), timestamp_s=self.t, position_m=x, speed_mps=v)
+
+    def _v2x_leaders(self, chain):
+        """The chain ``L1, L2, …`` as the ego receives it (:func:`safelane.v2x.leader_arrays`): ``(x, v, promise,
+        n, stale)``."""
+        leaders = []
+        for vehicle in chain:
+            if getattr(vehicle, "safelane_connected", False):
+                leaders.append(self._received(vehicle))
+            else:
+                x, v = _longitudinal(vehicle)
+                leaders.append(SensedVehicle(vehicle_id=str(id(vehicle)), timestamp_s=self.t, position_m=x,
+                                             speed_mps=v))  # fmt: skip
+        got = leader_arrays(leaders, self.t, self.params)
+        self.chain_v2x = got
+        return got.p, got.v, got.promise_decel, got.n_connected, bool(got.stale_ids)
+
     def situation(self) -> Situation:
-        """What the ego knows now, read from the road."""
+        """What the ego knows now, read from the road (and, with ``connected``, from the V2X messages)."""
         ego, road, prm = self.ego, self.env.unwrapped.road, self.params
         ex = float(ego.position[0])
         _, f = road.neighbour_vehicles(ego, self.target_lane)
         chain = self._chain(road)
         roles = {}
+        f_connected, stale = False, False
         if f is not None:
             fx, fv = _longitudinal(f)
             roles[id(f)] = "F"
+            if self.connected and getattr(f, "safelane_connected", False):
+                # F's message: fresh or not, it declares no intent (IDM yields to no one), so F stays aggressive
+                msg = self._received(f)
+                f_connected = isinstance(msg, V2XMessage) and self.t - msg.timestamp_s <= MAX_AGE_S + 1e-9
+                stale = stale or (isinstance(msg, V2XMessage) and not f_connected)
         else:
             fx, fv = ex - FAR_M, 0.0
-        if chain:
-            lx, lv = np.array([_longitudinal(v) for v in chain]).T
-            roles.update({id(v): f"L{i + 1}" for i, v in enumerate(chain)})
+        roles.update({id(v): f"L{i + 1}" for i, v in enumerate(chain)})
+        if chain and self.connected:
+            lx, lv, promise, n, chain_stale = self._v2x_leaders(chain)
+            stale = stale or chain_stale
+        elif chain:
+            lx, lv = np.array([_longitudinal(v) for v in chain[:1]]).T
+            n, promise = 0, np.zeros(0)
         else:
             lx, lv = np.array([ex + FAR_M]), np.array([ego.speed])
-        n = len(chain) - 1 if chain and self.connected else 0
-        promise = np.array([float(getattr(v, "safelane_promise", self.promise)) for v in chain[:-1]]) if n else \
-            np.zeros(len(lx) - 1)  # fmt: skip
+            n, promise = 0, np.zeros(0)
         ox, ov, own = own_lane_leaders(road, ego, self.original_lane, self.n_own)
         roles.update({id(v): f"L0{'' if i == 0 else f'+{i}'}" for i, v in enumerate(own)})
         scene_roles = getattr(self.env.unwrapped, "scene", {}).get("roles", {})
@@ -266,17 +335,23 @@ class SafeLaneShield(gym.Wrapper, gym.utils.RecordConstructorArgs):
         kwargs = {}
         if OWN_LANE_SUPPORTED:
             kwargs = {"own_leaders": (ox[None, :], ov[None, :]), "own_n_connected": 0, "own_promise": self.promise}
-        return Situation.from_arrays(
+        situation = Situation.from_arrays(
             t=self.t, ego=(ex, ego.position[1], ego.speed, ego.lateral_speed), follower=(fx, fv),
             leaders=(lx[None, :], lv[None, :]), n_connected=n, promise_decel=promise[None, :] if promise.size else
-            np.zeros((1, len(lx) - 1)), f_connected=bool(self.connected and getattr(f, "safelane_connected", False)),
-            frame=self.frame, params=prm, sensing=self.sensing, **kwargs,
+            np.zeros((1, len(lx) - 1)), f_connected=f_connected, frame=self.frame, params=prm,
+            sensing=self.sensing, **kwargs,
         )  # fmt: skip
+        if self.connected:
+            situation = dataclasses.replace(situation, v2x_stale=np.array([stale]))
+        return situation
 
     # --- Gymnasium ------------------------------------------------------------------------------------------------
     def reset(self, *, seed=None, options=None):
         obs, info = self.env.reset(seed=seed, options=options)
         u = self.env.unwrapped
+        self.inbox, self.chain_v2x = {}, None
+        if seed is not None:
+            self.rng = np.random.default_rng([seed] if self.v2x_seed is None else [self.v2x_seed, seed])
         check_frequencies(self.env, self.params)
         _check_road(u.road, self.params)
         old = u.vehicle

@@ -17,6 +17,12 @@ F to L1 is not forced; L1 is placed this far ahead of the ego), ``platoon_slack`
 desired gap between platoon vehicles), ``own_leader`` (``None``, ``"cruise"`` or ``"brake"``), ``own_gap`` ((lo,
 hi) m), ``traffic_lane_changes`` (MOBIL on for F and the platoon; off by default: highway-env's MOBIL may move F
 or L1 out of the lane mid-manoeuvre), ``duration`` (s).
+
+Connected traffic (issue 11): ``connected`` (default ``False``: highway-env's traffic is not connected) makes
+``L1..LN`` :class:`~.highway_vehicles.PromiseIDMVehicle` — IDM held to the promise ``promise`` [m/s²] (default 0.5)
+by the ``worst_case`` leader rule — with ``safelane_connected = True`` and ``safelane_promise``; F too is marked
+connected (its IDM unchanged, and it declares no intent: the shield still treats it as aggressive) unless
+``connected_follower`` is ``False``. ``L(N+1)`` (and ``L0``) stay non-connected and brake suddenly as before.
 """
 
 from __future__ import annotations
@@ -27,7 +33,7 @@ from highway_env.envs.highway_env import HighwayEnv
 from highway_env.road.road import Road, RoadNetwork
 from highway_env.vehicle.behavior import IDMVehicle
 
-from .highway_vehicles import SuddenBrakeVehicle
+from .highway_vehicles import PromiseIDMVehicle, SuddenBrakeVehicle
 
 TARGET_LANE, EGO_LANE = 0, 1
 
@@ -57,6 +63,9 @@ class LaneChangeScene(HighwayEnv):
                 "own_leader": None,
                 "own_gap": (25.0, 60.0),
                 "traffic_lane_changes": False,
+                "connected": False,
+                "promise": 0.5,
+                "connected_follower": True,
                 "x0": 200.0,
             },
         )
@@ -77,11 +86,13 @@ class LaneChangeScene(HighwayEnv):
             record_history=self.config["show_trajectories"],
         )
 
-    def _idm(self, lane: int, x: float, speed: float) -> IDMVehicle:
+    def _idm(self, lane: int, x: float, speed: float, held: bool = False) -> IDMVehicle:
+        """highway-env's IDM vehicle; ``held``: a connected :class:`PromiseIDMVehicle` with the config's promise."""
         lane_index = ("0", "1", lane)
-        vehicle = IDMVehicle(self.road, self.road.network.get_lane(lane_index).position(x, 0.0), 0.0, speed,
-                             target_lane_index=lane_index, target_speed=speed,
-                             enable_lane_change=bool(self.config["traffic_lane_changes"]))  # fmt: skip
+        cls, extra = (PromiseIDMVehicle, {"promise": float(self.config["promise"])}) if held else (IDMVehicle, {})
+        vehicle = cls(self.road, self.road.network.get_lane(lane_index).position(x, 0.0), 0.0, speed,
+                      target_lane_index=lane_index, target_speed=speed,
+                      enable_lane_change=bool(self.config["traffic_lane_changes"]), **extra)  # fmt: skip
         vehicle.randomize_behavior()
         return vehicle
 
@@ -102,12 +113,16 @@ class LaneChangeScene(HighwayEnv):
         self.road.vehicles.append(ego)
         self.scene = {"n_leaders": n, "decel": decel, "roles": {}}
 
+        connected = bool(self.config["connected"])
+        self.scene["connected"] = connected
         f = self._idm(TARGET_LANE, x_ego - self._draw("f_gap"), speed())
+        if connected and self.config["connected_follower"]:
+            f.safelane_connected, f.safelane_promise = True, float(self.config["promise"])
         self.road.vehicles.append(f)
         self.scene["roles"][id(f)] = "F"
         x = x_ego + self._draw("l1_offset")
         for i in range(1, n + 1):
-            leader = self._idm(TARGET_LANE, x, speed())
+            leader = self._idm(TARGET_LANE, x, speed(), held=connected)
             self.road.vehicles.append(leader)
             self.scene["roles"][id(leader)] = f"L{i}"
             x += leader.desired_gap(leader, leader) + self._draw("platoon_slack")  # IDM's gap at equal speeds

@@ -139,3 +139,100 @@ def cuts_in(vehicle, lane_index) -> bool:
     if front is None or front is vehicle:
         return True
     return float(vehicle.position[0]) - 0.5 * vehicle.LENGTH <= float(front.position[0]) + 0.5 * front.LENGTH
+
+
+class PromiseIDMVehicle(IDMVehicle):
+    """A connected highway-env IDM vehicle held to its V2X promise (the scene's ``L1..LN`` with ``connected``).
+
+    Each period it takes IDM's acceleration as its own driving task and filters it by the simulator's ``worst_case``
+    leader rule (:func:`safelane.sim.behaviours.leader_accels`): its *chain bound* — ``max(promise, needed)``
+    capped at ``a_x_d``, from :func:`safelane.safety.leader_chain` over its own lane's true states from itself up to
+    the first vehicle that is not connected (``a_x_d`` for that one) — is the hardest it ever brakes, and it brakes
+    beyond IDM's wish (up to that bound, past IDM's ±6 m/s² clip) where a safe distance to the vehicle ahead's own
+    bound needs it. So no connected leader brakes harder than the bound the ego's chain analysis gives it. With
+    nothing ahead it brakes at no more than its promise.
+
+    Its longitudinal motion is exact (piecewise-constant acceleration, stopping at 0) while it drives straight
+    (heading and steering 0, as in the scene without MOBIL); otherwise, or once crashed, highway-env's integration.
+    Attributes: ``safelane_connected`` (True), ``safelane_promise`` [m/s²], ``safelane_params`` (the
+    :class:`~safelane.params.Params` of the rule; default ``highway_params()``), ``safelane_bound`` (the bound of the
+    last period).
+    """
+
+    safelane_connected = True
+
+    def __init__(self, *args, promise: float = 0.5, params=None, **kwargs):
+        super().__init__(*args, **kwargs)
+        self.safelane_promise = float(promise)
+        self.safelane_params = params
+        self.safelane_bound = np.nan
+
+    def _params(self):
+        if self.safelane_params is None:
+            from .highway import highway_params  # the wrapper's defaults (highway imports this module)
+
+            self.safelane_params = highway_params()
+        return self.safelane_params
+
+    def platoon_ahead(self) -> list:
+        """This vehicle, the connected vehicles ahead of it in its lane, and the first one that is not (if any)."""
+        chain, current = [self], self
+        while len(chain) < 64:
+            front, _ = self.road.neighbour_vehicles(current, self.lane_index)
+            if front is None:
+                break
+            chain.append(front)
+            if not getattr(front, "safelane_connected", False):
+                break
+            current = front
+        return chain
+
+    def held_accel(self, task: float) -> float:
+        """``task`` filtered by the ``worst_case`` leader rule (see the class docstring); sets ``safelane_bound``."""
+        from ..safety import leader_chain
+        from ..sim.behaviours import leader_accels, leader_roles
+
+        prm = self._params()
+        promise = min(max(self.safelane_promise, 0.0), prm.a_x_d)
+        chain = self.platoon_ahead()
+        if len(chain) == 1:
+            self.safelane_bound = promise
+            return max(task, -promise)
+        x = np.array([float(v.position[0]) for v in chain])
+        v = np.array([max(float(v.speed * np.cos(v.heading)), 0.0) for v in chain])
+        promises = np.array([min(max(float(getattr(c, "safelane_promise", prm.a_x_d)), 0.0), prm.a_x_d)
+                             for c in chain[:-1]])  # fmt: skip
+        bounds = np.asarray(leader_chain(x, v, promises, prm).decel, float)
+        self.safelane_bound = float(bounds[0])
+        k = len(chain) + 1  # slot 0: a placeholder F (leader_accels' layout), then self, …, the non-connected one
+        xs = np.concatenate(([x[0] - 1e6], x))[None, :]
+        vs = np.concatenate(([0.0], v))[None, :]
+        valid = np.ones((1, k), bool)
+        roles = leader_roles(valid, valid, np.array([k - 2]))
+        task_row = np.zeros((1, k))
+        task_row[0, 1] = task
+        acc = leader_accels(xs, vs, np.full((1, k), prm.p_m), roles,
+                            np.concatenate(([prm.a_x_d], bounds))[None, :], task_row, np.zeros(1),
+                            np.array([prm.a_x_d]), None, None, prm)  # fmt: skip
+        return float(acc[0, 1])
+
+    def act(self, action=None) -> None:
+        super().act(action)
+        if self.crashed:
+            return
+        self.action["acceleration"] = self.held_accel(float(self.action["acceleration"]))
+
+    def step(self, dt: float) -> None:
+        straight = abs(float(self.heading)) < 1e-9 and abs(float(self.action.get("steering", 0.0))) < 1e-9
+        if not straight or self.crashed:
+            super().step(dt)
+            return
+        x, v = advance(float(self.position[0]), max(float(self.speed), 0.0), float(self.action["acceleration"]), dt)
+        self.timer += dt
+        self.position = np.array([float(x), float(self.position[1])])
+        self.speed = float(v)
+        if self.impact is not None:
+            self.position += self.impact
+            self.crashed = True
+            self.impact = None
+        self.on_state_update()
