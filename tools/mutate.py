@@ -40,7 +40,8 @@ SAFETY_TESTS = ("tests/test_safety_golden.py", "tests/test_safety_reference.py",
                 "tests/test_safety_shapes.py", "tests/test_safety_errors.py")  # fmt: skip
 #: group: (modules under src/safelane, test files)
 GROUPS = {
-    "decide": (("shield/decide.py",), ("tests/test_decide.py", "tests/test_shield.py")),
+    "decide": (("shield/decide.py",),
+               ("tests/test_decide.py", "tests/test_decide_own_lane.py", "tests/test_shield.py")),
     "evasion": (("safety/evasion.py",), (*SAFETY_TESTS, "tests/test_decide.py")),
     "safety": (("safety/chain.py", "safety/lateral.py", "safety/longitudinal.py", "safety/plan.py",
                 "safety/_checks.py", "safety/_backend.py"), SAFETY_TESTS),
