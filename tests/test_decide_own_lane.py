@@ -131,3 +131,86 @@ def test_with_l0_completion_needs_the_level_and_no_drift_back():
                             np.zeros(1), np.full(1, FAR), np.full(1, 30.0), np.zeros(1), np.full(1, -FAR),
                             np.zeros(1), np.zeros(1, bool), PRM)  # fmt: skip
     assert plain.completing[0]
+
+
+def test_target_lane_period_checks_still_apply_beside_l0_rows():
+    """A batch mixing a row without L0 whose F gap dips below p_m inside the period (refused by the target lane's
+    period check) with a row that has L0 far ahead: the L0 check adds to the target lane's checks, it does not
+    replace them."""
+    from test_decide import ORDER, follower_gap_dips_inside_the_period
+
+    dip = follower_gap_dips_inside_the_period(0.005)
+    state = {k: np.concatenate([v, v]) for k, v in dip.items()}
+    own = (np.array([np.inf, 500.0]), np.array([20.0, 20.0]), np.array([PRM.a_x_d, PRM.a_x_d]))
+    got = check_candidate(*(state[k] for k in ORDER), PRM, own=own)
+    assert not got.ok[0] and not got.ok[1]  # the dip is in both rows; L0 far ahead changes nothing
+
+
+def test_positions_are_relative_to_the_ego():
+    """The same situation shifted 1 km down the road decides the same."""
+    args = (np.full(1, 20.0), np.zeros(1), np.full(1, PRM.a_x_a), np.zeros(1), np.full(1, 9.0), np.full(1, 20.0),
+            np.full(1, PRM.a_x_d))  # fmt: skip
+    ve, vy, ax, ay, gap, v0, a0 = args
+    near = _run(np.zeros(1), np.zeros(1), ve, vy, ax, ay, gap, v0, a0)
+    far = _run(np.full(1, 1000.0), np.zeros(1), ve, vy, ax, ay, gap + 1000.0, v0, a0)
+    assert not near.ok[0] and not far.ok[0]
+    ok_near = _run(np.zeros(1), np.zeros(1), ve, vy, np.zeros(1), ay, np.full(1, 40.0), v0, a0)
+    ok_far = _run(np.full(1, 1000.0), np.zeros(1), ve, vy, np.zeros(1), ay, np.full(1, 1040.0), v0, a0)
+    assert ok_near.ok[0] and ok_far.ok[0]
+
+
+def test_l0_braking_inside_the_period_is_its_worst_case():
+    """The ego (braking at a_x_d) 0.2 m/s faster than L0 braking at 4: relative deceleration 4, the gap dips by
+    0.2²/(2·4) = 5 mm at t = 0.05 s and recovers by the period's end, from where the ego easily stays behind.
+    Starting 4 mm above p_m the dip goes 1 mm below: refused. (Were L0 predicted to *accelerate* at 4 the dip would
+    be 1.7 mm and the proposal accepted.)"""
+    for x0 in (0.0, 1000.0):  # anywhere on the road: the gap is L0's position minus the ego's
+        for extra, accepted in ((0.004, False), (0.008, True)):
+            got = _run(np.full(1, x0), np.zeros(1), np.full(1, 20.2), np.zeros(1), np.full(1, -PRM.a_x_d),
+                       np.zeros(1), np.full(1, x0 + PRM.p_m + extra), np.full(1, 20.0), np.full(1, 4.0))  # fmt: skip
+            assert got.ok[0] == accepted, (x0, extra)
+
+
+def test_an_own_lane_with_no_vehicle_in_any_row_decides_as_none():
+    rng = np.random.default_rng(5)
+    n = 16
+    ve = rng.uniform(5.0, 30.0, n)
+    args = (np.zeros(n), rng.uniform(0.0, 1.5, n), ve, rng.uniform(-0.5, 1.0, n), rng.uniform(-4.0, 2.5, n),
+            rng.uniform(-1.5, 1.5, n), rng.uniform(8.0, 40.0, n), ve, rng.uniform(0, 8, n), -rng.uniform(8.0, 40.0, n),
+            ve, rng.random(n) < 0.5)  # fmt: skip
+    plain = check_candidate(*args, PRM)
+    empty = check_candidate(*args, PRM, own=(np.full(n, np.inf), np.zeros(n), np.full(n, PRM.a_x_d)))
+    np.testing.assert_array_equal(empty.ok, plain.ok)
+    np.testing.assert_array_equal(empty.completing, plain.completing)
+
+
+def test_with_l0_the_boundary_alone_does_not_complete():
+    """Past the lane boundary but still within a car's width of L0's lane: not complete (without L0 it would be)."""
+    y_end = 0.5 * (PRM.y_boundary + PRM.vehicle_width)
+    assert PRM.y_boundary < y_end < own_completion_level(PRM)
+    got = _run(np.zeros(1), np.full(1, y_end - 0.05), np.full(1, 20.0), np.full(1, 0.5), np.zeros(1), np.zeros(1),
+               np.full(1, 300.0), np.full(1, 20.0), np.full(1, PRM.a_x_d))  # fmt: skip
+    assert not got.completing[0]
+
+
+def test_plans_of_l0_rows_continue_and_know_l0():
+    """The plan verified for a row with L0 goes on after t_y_f and carries L0's predicted state (an abort must keep
+    following or braking behind it); a row without L0 keeps the paper's plan."""
+    n = 2
+    got = _run(np.zeros(n), np.full(n, 0.2), np.full(n, 20.0), np.full(n, 0.3), np.zeros(n), np.zeros(n),
+               np.array([np.inf, 60.0]), np.full(n, 20.0), np.full(n, PRM.a_x_d))  # fmt: skip
+    assert got.ok.all()
+    plans = {int(r): (plan, i) for rows, plan in got.plans for i, r in enumerate(rows)}
+    plan, i = plans[1]
+    assert plan.continues[i] and np.isfinite(plan.own_p[i])
+    assert plan.own_p[i] == 60.0 + 20.0 * PRM.dt - 0.5 * PRM.a_x_d * PRM.dt**2
+    plan0, j = plans[0]
+    assert not plan0.continues[j] and np.isinf(plan0.own_p[j])
+
+
+def test_the_margin_to_l0_keeps_half_the_tolerance():
+    """docs/real_roads.md: the evasion keeps p_m plus half of the 1 nm tolerance to L0, leaving the other half to
+    the executor's round-off."""
+    from safelane.shield.decide import own_margin
+
+    assert abs((own_margin(PRM) - PRM.p_m) - 0.5 * FEASIBILITY_TOL_M) < 1e-14
