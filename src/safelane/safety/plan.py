@@ -191,3 +191,20 @@ def plan_from_core(xp, shape, args, exists, parts, lead_margin, follow_margin, p
             continues=f(np.ones(np.shape(exists), bool), np.bool_), min_gap_own=f(parts["own_gap"] + own[3]),
         )),
     )  # fmt: skip
+
+
+def set_rows(plan: EvasionPlan, pieces) -> EvasionPlan:
+    """``plan`` with the rows of each ``(rows, sub_plan)`` piece replaced by ``sub_plan`` (same order); each field
+    is copied once."""
+    pieces = [(rows, sub) for rows, sub in pieces if rows.size]
+    if not pieces:
+        return plan
+    out = {}
+    for f in dataclasses.fields(plan):
+        if f.name == "params":
+            continue
+        arr = getattr(plan, f.name).copy()
+        for rows, sub in pieces:
+            arr[rows] = getattr(sub, f.name)
+        out[f.name] = arr
+    return EvasionPlan(**out, params=plan.params)

@@ -25,18 +25,28 @@ import numpy as np
 from pydantic import BaseModel, ConfigDict, Field, field_validator
 
 from ..params import Params
-from ..safety._backend import ARRAY, FEASIBILITY_TOL_M
+from ..safety._backend import ARRAY
 from ..safety.chain import propagate_chain
 from ..safety.evasion import plan_evasion
-from ..safety.plan import EvasionPlan
+from ..safety.plan import EvasionPlan, set_rows
 from ..safety.responsible import responsible_accel, responsible_bound
 from . import assessment as assess
-from .decide import ABORT, COMPLETED, HESITATE, PROCEED, check_candidate, hesitate_lateral, own_margin, plan_motion
+from .decide import ABORT, COMPLETED, HESITATE, PROCEED, check_candidate, hesitate_lateral, plan_motion
 from .decision import Decision
 from .monitor import Breach, Snapshot, observe_breaches
 from .policies import ASSESSMENTS, COMPLETION_RULES, check_policy, variant_flags
 from .proposals import check_proposal
-from .realworld import Pending, carry_worst, chain_bounds, knots_piece, own_lane_decel, worst_corners
+from .realworld import (
+    Pending,
+    carry_worst,
+    chain_bounds,
+    delay_periods,
+    in_flight_checked,
+    issued_piece,
+    own_lane_decel,
+    own_plan,
+    worst_corners,
+)
 from .rules import RuleInputs, rule_rows
 from .situation import Situation
 
@@ -130,10 +140,10 @@ def init(situation: Situation, params: Params, config: ShieldConfig | None = Non
     # the plan alone is what init needs (the first step verifies every proposal).
     plan = plan_evasion(ex, ey, evx, evy, l1x, l1v, params.a_x_d, fx, fv, True, params)
     if own is not None and np.isfinite(own[0]).any():
-        plan = _own_plan(plan, (ex, ey, evx, evy, l1x, l1v, np.full(n, params.a_x_d), fx, fv, np.ones(n, bool)),
+        plan = own_plan(plan, (ex, ey, evx, evy, l1x, l1v, np.full(n, params.a_x_d), fx, fv, np.ones(n, bool)),
                          own, params)  # fmt: skip
     if pending is not None:  # nothing verified the commands acting at the start: check their window now
-        plan = _in_flight_checked(plan, s, own_now, delay, params)
+        plan = in_flight_checked(plan, s, own_now, delay, params)
     return ShieldState(
         t=situation.t,
         plan=plan,
@@ -147,36 +157,6 @@ def init(situation: Situation, params: Params, config: ShieldConfig | None = Non
     )
 
 
-def _in_flight_checked(plan: EvasionPlan, s: Situation, own, delay: float, prm: Params) -> EvasionPlan:
-    """``plan`` marked infeasible where the commands acting at the start (cruise, :meth:`Pending.idle`) break a
-    worst-case gap during the delay: to L1 and F while the ego is in the conflict zone, to L0 throughout."""
-    from .._motion import free_max
-    from ..safety.lateral import LATERAL_TOL_M
-    from ..safety.responsible import pair_min_gap
-
-    tol = FEASIBILITY_TOL_M
-    ex, evx = s.ego_x, s.ego_vx
-    zero = np.zeros(len(s))
-    conflict = free_max(s.ego_y, s.ego_vy, zero, delay) > prm.y_safe + LATERAL_TOL_M
-    gap_l = pair_min_gap(s.chain_x[:, 0] - ex - prm.p_m, evx, zero, s.chain_v[:, 0], -prm.a_x_d + zero, delay)
-    gap_f = pair_min_gap(ex - s.f_x - prm.p_m, s.f_v, prm.a_x_a + zero, evx, zero, delay)
-    ok = ~conflict | ((gap_l >= -tol) & (gap_f >= -tol))
-    if own is not None:
-        has = np.isfinite(own[0])
-        slack = np.where(has, own[0] - ex - prm.p_m, 0.0)
-        ok &= ~has | (pair_min_gap(slack, evx, zero, np.where(has, own[1], 0.0), -own[2], delay) >= -0.5 * tol)
-    return dataclasses.replace(plan, feasible=plan.feasible & ok)
-
-
-def delay_periods(cfg: ShieldConfig, prm: Params) -> int:
-    """The actuation delay in control periods; a delay that is not a whole number of periods is refused."""
-    d = round(cfg.actuation_delay_s / prm.dt)
-    if abs(d * prm.dt - cfg.actuation_delay_s) > 1e-9:
-        raise ValueError(f"ShieldConfig.actuation_delay_s={cfg.actuation_delay_s} must be a whole number of control "
-                         f"periods (dt={prm.dt} s)")  # fmt: skip
-    return d
-
-
 def _exact(s: Situation) -> Situation:
     return dataclasses.replace(s, err_f=None, err_chain=None, err_own=None)
 
@@ -186,22 +166,6 @@ def _own(s: Situation, cfg: ShieldConfig, prm: Params, informed, broken):
     if not cfg.own_lane or not s.has_own_lane:
         return None
     return s.own_x[:, 0], s.own_v[:, 0], own_lane_decel(s, prm, informed, broken)
-
-
-def _own_plan(plan: EvasionPlan, args, own, prm: Params) -> EvasionPlan:
-    """``plan`` with the rows that have an own-lane leader replanned with it (:mod:`safelane.safety.own_lane`)."""
-    from ..safety.own_lane import own_lane_core
-    from ..safety.plan import plan_from_core
-
-    rows = np.flatnonzero(np.isfinite(own[0]))
-    sub = tuple(np.broadcast_to(a, plan.feasible.shape)[rows] for a in args)
-    own_r = tuple(np.broadcast_to(a, plan.feasible.shape)[rows] for a in own)
-    with np.errstate(all="ignore"):
-        margin = own_margin(prm)
-        exists, parts = own_lane_core(*sub, *own_r, prm.p_m, prm.p_m, margin, prm)
-        piece = plan_from_core(ARRAY, rows.shape, (*sub, prm.p_m, prm.p_m), exists, parts, prm.p_m, prm.p_m, prm,
-                               own=(*own_r, margin))  # fmt: skip
-    return _set_rows(plan, [(rows, piece)])
 
 
 def step(
@@ -323,7 +287,7 @@ def step(
                                   invalid, l1_decel, uses_chain & ~unsafe, state.completed, bounds, s.n_connected)))
             behaviour[idx], ax_cmd[idx], ay_cmd[idx], completing[idx] = rule.decide(inputs, prm)
 
-    new_plan = _set_rows(state.plan, accepted)
+    new_plan = set_rows(state.plan, accepted)
     replanned = (behaviour == PROCEED) | (behaviour == HESITATE)
     plan_f_aggr = state.plan_f_aggr.copy()
     for rows_acc, _ in accepted:
@@ -353,7 +317,7 @@ def step(
         breach=breach,
         completed=state.completed | completing,
         last=last,
-        pending=None if state.pending is None else state.pending.push(_issued(ax_cmd, ay_cmd, abort, dt)),
+        pending=None if state.pending is None else state.pending.push(issued_piece(ax_cmd, ay_cmd, abort, dt)),
     )
     decision = Decision(
         behaviour=behaviour, a_x=ax_cmd, a_y=ay_cmd, completing=completing & active, invalid=invalid & active,
@@ -361,18 +325,6 @@ def step(
         nominal_x=nominal_x, nominal_y=nominal_y, _abort=abort,
     )  # fmt: skip
     return new_state, decision
-
-
-def _issued(ax_cmd, ay_cmd, abort, dt: float):
-    """The command issued this period as a piecewise-constant acceleration (7 segments: an abort's knots)."""
-    n = len(ax_cmd)
-    dur = np.zeros((n, 7))
-    dur[:, 0] = dt
-    ax, ay = np.repeat(ax_cmd[:, None], 7, 1), np.repeat(ay_cmd[:, None], 7, 1)
-    rows, knots, _, vx, _, vy = abort
-    if rows.size:
-        dur[rows], ax[rows], ay[rows] = knots_piece(knots, vx, vy)
-    return dur, ax, ay
 
 
 def observe(state: ShieldState, situation: Situation, params: Params) -> ShieldState:
@@ -395,23 +347,6 @@ def _with_stale(breach: Breach, stale, t: float) -> Breach:
     flags[:, col] |= stale
     first = np.where(np.isnan(breach.first_s) & new, t, breach.first_s)
     return Breach(flags=flags, first_s=first)
-
-
-def _set_rows(plan: EvasionPlan, pieces) -> EvasionPlan:
-    """``plan`` with the rows of each ``(rows, sub_plan)`` piece replaced by ``sub_plan`` (same order); each field
-    is copied once."""
-    pieces = [(rows, sub) for rows, sub in pieces if rows.size]
-    if not pieces:
-        return plan
-    out = {}
-    for f in dataclasses.fields(plan):
-        if f.name == "params":
-            continue
-        arr = getattr(plan, f.name).copy()
-        for rows, sub in pieces:
-            arr[rows] = getattr(sub, f.name)
-        out[f.name] = arr
-    return EvasionPlan(**out, params=plan.params)
 
 
 class Shield:

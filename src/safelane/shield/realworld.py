@@ -22,10 +22,15 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .._motion import advance
+from .._motion import advance, free_max
 from ..params import Params
-from ..safety._backend import ARRAY
+from ..safety._backend import ARRAY, FEASIBILITY_TOL_M
 from ..safety.chain import min_follow_decel
+from ..safety.lateral import LATERAL_TOL_M
+from ..safety.own_lane import own_lane_core
+from ..safety.plan import EvasionPlan, plan_from_core, set_rows
+from ..safety.responsible import pair_min_gap
+from .decide import own_margin
 from .situation import Situation
 
 
@@ -130,3 +135,55 @@ def carry_worst(x, v, decel, horizon: float):
     """A vehicle's state after ``horizon`` along its worst-case trajectory: constant acceleration ``-decel``
     (``decel`` may be negative: an aggressive F accelerates), stopping at rest."""
     return advance(x, v, -np.asarray(decel, float), horizon)
+
+
+def delay_periods(cfg, prm: Params) -> int:
+    """The actuation delay of ``cfg`` (a ``ShieldConfig`` or ``SimConfig``) in control periods; a delay that is not
+    a whole number of periods is refused."""
+    d = round(cfg.actuation_delay_s / prm.dt)
+    if abs(d * prm.dt - cfg.actuation_delay_s) > 1e-9:
+        raise ValueError(f"{type(cfg).__name__}.actuation_delay_s={cfg.actuation_delay_s} must be a whole number of "
+                         f"control periods (dt={prm.dt} s)")  # fmt: skip
+    return d
+
+
+def in_flight_checked(plan: EvasionPlan, s: Situation, own, delay: float, prm: Params) -> EvasionPlan:
+    """``plan`` marked infeasible where the commands acting at the start (cruise, :meth:`Pending.idle`) break a
+    worst-case gap during the delay: to L1 and F while the ego is in the conflict zone, to L0 throughout."""
+    tol = FEASIBILITY_TOL_M
+    ex, evx = s.ego_x, s.ego_vx
+    zero = np.zeros(len(s))
+    conflict = free_max(s.ego_y, s.ego_vy, zero, delay) > prm.y_safe + LATERAL_TOL_M
+    gap_l = pair_min_gap(s.chain_x[:, 0] - ex - prm.p_m, evx, zero, s.chain_v[:, 0], -prm.a_x_d + zero, delay)
+    gap_f = pair_min_gap(ex - s.f_x - prm.p_m, s.f_v, prm.a_x_a + zero, evx, zero, delay)
+    ok = ~conflict | ((gap_l >= -tol) & (gap_f >= -tol))
+    if own is not None:
+        has = np.isfinite(own[0])
+        slack = np.where(has, own[0] - ex - prm.p_m, 0.0)
+        ok &= ~has | (pair_min_gap(slack, evx, zero, np.where(has, own[1], 0.0), -own[2], delay) >= -0.5 * tol)
+    return dataclasses.replace(plan, feasible=plan.feasible & ok)
+
+
+def own_plan(plan: EvasionPlan, args, own, prm: Params) -> EvasionPlan:
+    """``plan`` with the rows that have an own-lane leader replanned with it (:mod:`safelane.safety.own_lane`)."""
+    rows = np.flatnonzero(np.isfinite(own[0]))
+    sub = tuple(np.broadcast_to(a, plan.feasible.shape)[rows] for a in args)
+    own_r = tuple(np.broadcast_to(a, plan.feasible.shape)[rows] for a in own)
+    with np.errstate(all="ignore"):
+        margin = own_margin(prm)
+        exists, parts = own_lane_core(*sub, *own_r, prm.p_m, prm.p_m, margin, prm)
+        piece = plan_from_core(ARRAY, rows.shape, (*sub, prm.p_m, prm.p_m), exists, parts, prm.p_m, prm.p_m, prm,
+                               own=(*own_r, margin))  # fmt: skip
+    return set_rows(plan, [(rows, piece)])
+
+
+def issued_piece(ax_cmd, ay_cmd, abort, dt: float):
+    """The command issued this period as a piecewise-constant acceleration (7 segments: an abort's knots)."""
+    n = len(ax_cmd)
+    dur = np.zeros((n, 7))
+    dur[:, 0] = dt
+    ax, ay = np.repeat(ax_cmd[:, None], 7, 1), np.repeat(ay_cmd[:, None], 7, 1)
+    rows, knots, _, vx, _, vy = abort
+    if rows.size:
+        dur[rows], ax[rows], ay[rows] = knots_piece(knots, vx, vy)
+    return dur, ax, ay

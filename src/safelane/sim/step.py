@@ -22,6 +22,7 @@ from ..safety.chain import propagate_chain
 from ..safety.lateral import LATERAL_TOL_M
 from ..shield import ABORT, HESITATE, PROCEED, ShieldConfig, ShieldState, Situation
 from ..shield import core as shield
+from ..shield.realworld import delay_periods
 from .checks import ego_checks, lane_checks, lane_pairs
 from .config import SimConfig
 from .kinematics import Fleet, Motion
@@ -105,10 +106,7 @@ class ClosedLoop:
             actuation_delay_s=cfg.actuation_delay_s if cfg.shield_delay else 0.0, own_lane=cfg.shield_own_lane,
             sensing=cfg.shield_sensing,
         )  # fmt: skip
-        self.delay_periods = round(cfg.actuation_delay_s / prm.dt)
-        if abs(self.delay_periods * prm.dt - cfg.actuation_delay_s) > 1e-9:
-            raise ValueError(f"SimConfig.actuation_delay_s={cfg.actuation_delay_s} must be a whole number of control "
-                             f"periods (dt={prm.dt} s)")  # fmt: skip
+        self.delay_periods = delay_periods(cfg, prm)
         self.sensing = cfg.sensing_bounds() if cfg.sensing_error else None
         self.planner_name = getattr(nominal, "__name__", type(nominal).__name__)
         k = batch.x.shape[1]
