@@ -10,7 +10,7 @@ records, per mutated function, which of the group's tests reach it, and runs eac
     python tools/mutate.py table [--strict]           # the table of docs/testing.md from the cached results
 
 Exit status of ``run --sample``: 1 if a sampled mutant survives. Reviewed equivalent mutants
-(``tools/mutation_equivalent.txt``) are counted apart and never sampled. Timeouts count as killed; "no tests" (no
+(``tools/mutation/<group>.toml``, with the group's modules and tests) are counted apart and never sampled. Timeouts count as killed; "no tests" (no
 test of the group reaches the function) as survived.
 """
 
@@ -33,42 +33,33 @@ except ImportError:  # Python 3.10: mutmut brings `toml`
 
 ROOT = Path(__file__).resolve().parents[1]
 WORK = ROOT / "mutants"
-EQUIVALENT_FILE = ROOT / "tools" / "mutation_equivalent.txt"
 
-SAFETY_TESTS = ("tests/test_safety_golden.py", "tests/test_safety_reference.py", "tests/test_safety_optimality.py",
-                "tests/test_safety_api.py",
-                "tests/test_safety_shapes.py", "tests/test_safety_errors.py")  # fmt: skip
-#: group: (modules under src/safelane, test files)
-GROUPS = {
-    "decide": (("shield/decide.py",),
-               ("tests/test_decide.py", "tests/test_decide_own_lane.py", "tests/test_shield.py")),
-    "evasion": (("safety/evasion.py",), (*SAFETY_TESTS, "tests/test_decide.py")),
-    "safety": (("safety/chain.py", "safety/lateral.py", "safety/longitudinal.py", "safety/plan.py",
-                "safety/_checks.py", "safety/_backend.py"), SAFETY_TESTS),
-    "responsible": (("safety/responsible.py",), ("tests/test_sim_responsible.py", "tests/test_decide.py")),
-    "shield": (("shield/core.py", "shield/decision.py", "shield/monitor.py", "shield/assessment.py",
-                "shield/proposals.py"),
-               ("tests/test_shield.py", "tests/test_sim_assessment.py", "tests/test_sim_variants.py",
-                "tests/test_guarantee.py")),
-    "sim": (("sim/checks.py", "sim/kinematics.py"), ("tests/test_sim_kinematics.py", "tests/test_sim_safety.py")),
-    "v2x": (("v2x.py",), ("tests/test_v2x.py", "tests/test_shield.py", "tests/test_guarantee.py")),
-    "claims": (("experiments/claims.py",), ("tests/test_claims.py", "tests/test_experiments.py")),
-    # Issue 17: the evasion with an own-lane leader, the sensing/delay corners and the simulated world.
-    "own_lane": (("safety/own_lane.py", "shield/realworld.py"), ("tests/test_own_lane.py", "tests/test_realworld.py")),
-    "realworld_sim": (("sim/realworld.py",), ("tests/test_realworld.py",)),
-}  # fmt: skip
+GROUP_DIR = ROOT / "tools" / "mutation"
+#: Lines never mutated (mutmut's ``do_not_mutate_patterns``; the whole statement a matching line starts): raising
+#: an error and warning. Their *conditions* are mutated like any other code; what is skipped is the exception's
+#: class and message text, whose mutants (``"XX" + text + "XX"``) no ``pytest.raises(match=...)`` can tell apart.
+#: The messages are tested by the bad-input tests, not by mutation.
+DO_NOT_MUTATE = (r"^\s*raise\s", r"^\s*warnings\.warn\(")
+
+
+def _groups() -> dict[str, tuple[tuple[str, ...], tuple[str, ...], dict[str, str]]]:
+    """``{group: (modules under src/safelane, test files, {equivalent mutant: one-line argument})}`` from
+    ``tools/mutation/<group>.toml``."""
+    out = {}
+    for path in sorted(GROUP_DIR.glob("*.toml")):
+        spec = toml_loads(path.read_text(encoding="utf-8"))
+        out[path.stem] = (tuple(spec["modules"]), tuple(spec["tests"]), dict(spec.get("equivalent", {})))
+    return out
+
+
+GROUPS = _groups()
 KILLED = {1, 3, 36, 24, -24, 152, 255, 37}  # tests failed (or pytest errored), timed out, or type check caught it
 SURVIVED = {0, 5, 33}  # tests passed, or no test reaches the function
 
 
-def equivalents(path: Path = EQUIVALENT_FILE) -> dict[str, str]:
-    """``{mutant name: one-line argument}`` from the reviewed list (``name  # argument`` per line)."""
-    out = {}
-    for line in path.read_text(encoding="utf-8").splitlines():
-        if line.strip() and not line.lstrip().startswith("#"):
-            name, _, why = line.partition("#")
-            out[name.strip()] = why.strip()
-    return out
+def equivalents() -> dict[str, str]:
+    """``{mutant name: one-line argument}``: the reviewed equivalent mutants of every group."""
+    return {name: why for *_, eq in GROUPS.values() for name, why in eq.items()}
 
 
 def _toml_list(values) -> str:
@@ -83,7 +74,7 @@ def prepare(group: str, fresh: bool, sample: bool = False) -> Path:
     """The group's scratch project (``mutants/<group>``, or ``mutants/<group>-sample`` for a sample, so that CI's
     sample never touches ``make mutate``'s cache): a fresh copy of src/ and tests/, its pyproject (the
     repository's pytest settings, the group's mutmut settings). Cached verdicts stay unless ``fresh``."""
-    modules, tests = GROUPS[group]
+    modules, tests, _ = GROUPS[group]
     work = WORK / (f"{group}-sample" if sample else group)
     if fresh:
         shutil.rmtree(work, ignore_errors=True)
@@ -98,6 +89,7 @@ def prepare(group: str, fresh: bool, sample: bool = False) -> Path:
               f"only_mutate = {_toml_list('src/safelane/' + m for m in modules)}",
               'pytest_add_cli_args = ["-p", "no:cacheprovider"]',
               f"pytest_add_cli_args_test_selection = {_toml_list(tests)}",
+              f"do_not_mutate_patterns = {_toml_list(DO_NOT_MUTATE)}",
               "use_git_change_detection = false"]  # fmt: skip
     (work / "pyproject.toml").write_text("\n".join(lines) + "\n")
     return work
@@ -162,7 +154,7 @@ def run(groups: list[str], sample: int | None, seed: int, fresh: bool, children:
 def table(strict: bool) -> int:
     eq = equivalents()
     rows = []
-    for group, (modules, _) in GROUPS.items():
+    for group, (modules, *_) in GROUPS.items():
         work = WORK / group
         for module in modules:
             meta = work / "mutants" / "src" / "safelane" / (module + ".meta")
