@@ -10,8 +10,8 @@ records, per mutated function, which of the group's tests reach it, and runs eac
     python tools/mutate.py table [--strict]           # the table of docs/testing.md from the cached results
 
 Exit status of ``run --sample``: 1 if a sampled mutant survives. Reviewed equivalent mutants
-(``tools/mutation/<group>.toml``, with the group's modules and tests) are counted apart and never sampled. Timeouts count as killed; "no tests" (no
-test of the group reaches the function) as survived.
+(``tools/mutation/<group>.toml``, with the group's modules and tests) are counted apart and never sampled.
+Timeouts count as killed; "no tests" (no test of the group reaches the function) as survived.
 """
 
 from __future__ import annotations
