@@ -1,0 +1,156 @@
+"""The gap minima of the own-lane evasion (``safelane.safety.own_lane``: :func:`leader_gap`, :func:`follower_gap`)
+and every part :func:`own_lane_core` returns, against the independent time-stepped reference
+(``tests/reference_own_lane.py``: simulated kinematics, the meeting instant by bisection, no engine closed forms).
+
+The engine's family member ``G(u, k)`` is the reference's ``Profile(u, 0, a_x_d, k)``: for random switch times
+``u`` (including 0, ``t_y_f`` and beyond), both followed leaders, stopped and never-stopping vehicles, the engine's
+minimum gap to ``L0`` over ``[0, ∞)`` (``-inf`` where the ego ends faster), to ``L1`` and from the worst-case ``F``
+over ``[0, T]`` must equal the reference's, margin subtracted. Seeded, a few hundred rows per case: fast.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from reference_own_lane import Profile, Scene, _events, profile_gaps
+from safelane import Params
+from safelane.safety.own_lane import INF, follower_gap, leader_gap, own_lane_core
+from test_own_lane import random_params, random_states, scene_of
+
+#: Agreement of two exact computations (closed form vs time stepping), in metres / seconds.
+ATOL = 1e-6
+N = 400
+
+
+def _rows(seed: int, kind: str):
+    """``(prm, kw, T, u)``: random own-lane states (``test_own_lane.random_states``), a horizon ``T`` per row (a
+    tenth 0), and switch times ``u`` in ``[0, 1.2 T]`` (a tenth exactly 0, a tenth exactly ``T``)."""
+    rng = np.random.default_rng(seed)
+    prm = Params() if kind == "default" else random_params(rng)
+    kw = random_states(rng, prm, N)
+    # Extra corners: L1 never stopping (decel 0) or stopped, F stopped, the ego stopped, L0 stopped.
+    kw["l1_decel"][::9] = 0.0
+    kw["l1_v"][::11] = 0.0
+    kw["f_v"][::13] = 0.0
+    kw["ego_vx"][::17] = 0.0
+    kw["l0_v"][::19] = 0.0
+    T = np.where(rng.random(N) < 0.1, 0.0, rng.uniform(0.2, 6.0, N))
+    u = rng.uniform(0.0, 1.2, N) * T
+    u[::10] = 0.0
+    u[5::10] = T[5::10]
+    return prm, kw, T, u
+
+
+def _leaders(kw):
+    l1 = (kw["l1_p"], kw["l1_v"], kw["l1_decel"])
+    l0 = (kw["l0_p"], kw["l0_v"], kw["l0_decel"])
+    return l1, l0
+
+
+def _assert_gap(engine, ref, what):
+    engine, ref = np.asarray(engine, float), np.asarray(ref, float)
+    same_inf = np.isinf(engine) & np.isinf(ref) & (np.sign(engine) == np.sign(ref))
+    close = np.isclose(engine, ref, rtol=1e-9, atol=ATOL)
+    bad = np.flatnonzero(~(same_inf | close))
+    assert bad.size == 0, f"{what}: rows {bad[:5]}: engine {engine[bad[:5]]}, reference {ref[bad[:5]]}"
+
+
+@pytest.mark.parametrize("kind", ["default", "random"])
+@pytest.mark.parametrize("seed", range(3))
+@pytest.mark.parametrize("k", [0, 1])
+def test_gap_minima_equal_the_time_stepped_reference(seed, kind, k):
+    """Each gap of ``G(u, k)`` (the followed leader ``k``: 0 = L0, 1 = L1) equals the reference's exact minimum,
+    margin subtracted: to L0 over ``[0, ∞)`` (and over ``[0, T]`` when following it), to L1 and from F over
+    ``[0, T]`` (per-row and scalar ``T``)."""
+    prm, kw, T, u = _rows(100 * seed + k, kind)
+    l1, l0 = _leaders(kw)
+    lead = l0 if k == 0 else l1
+    p, v = kw["ego_px"], kw["ego_vx"]
+    scene = Scene(p, v, *l1, *l0, kw["f_p"], kw["f_v"], np.asarray(kw["aggressive"], bool), T)
+    ref = profile_gaps(scene, Profile(u, np.zeros(N), np.full(N, prm.a_x_d), np.full(N, k)), prm)
+    om, lm, fm = kw["own_margin"], kw["lead_margin"], kw["follow_margin"]
+    _assert_gap(leader_gap(u, p, v, lead, l0, om, INF, prm), ref.own - om, "L0 over [0, inf)")
+    _assert_gap(leader_gap(u, p, v, lead, l1, lm, T, prm), ref.l1 - lm, "L1 over [0, T]")
+    _assert_gap(follower_gap(u, p, v, lead, kw["f_p"], kw["f_v"], kw["aggressive"], fm, T, prm), ref.f - fm,
+                "F over [0, T]")  # fmt: skip
+    # L0 over the finite horizon [0, T]: the reference's L1 gap with L0 put in L1's place (following L0 = k 1).
+    scene0 = Scene(p, v, *l0, *l0, kw["f_p"], kw["f_v"], np.asarray(kw["aggressive"], bool), T)
+    ref0 = profile_gaps(scene0, Profile(u, np.zeros(N), np.full(N, prm.a_x_d), np.full(N, 1 if k == 0 else -1)), prm)
+    if k == 0:
+        _assert_gap(leader_gap(u, p, v, l0, l0, om, T, prm), ref0.l1 - om, "L0 over [0, T]")
+    # Scalar horizons broadcast like per-row ones.
+    T_one = 2.5
+    one = Scene(p, v, *l1, *l0, kw["f_p"], kw["f_v"], np.asarray(kw["aggressive"], bool), np.full(N, T_one))
+    ref1 = profile_gaps(one, Profile(np.minimum(u, T_one), np.zeros(N), np.full(N, prm.a_x_d), np.full(N, k)), prm)
+    _assert_gap(leader_gap(np.minimum(u, T_one), p, v, lead, l1, lm, T_one, prm), ref1.l1 - lm, "L1, scalar T")
+
+
+def test_the_gap_to_l0_is_minus_infinity_exactly_when_the_ego_ends_faster():
+    """Following L1 that never stops (decel 0) at 20 m/s behind a stopping L0: the ego ends faster, the gap to L0
+    shrinks forever (``-inf``). Following L1 at 20 m/s behind L0 cruising at 20.5 m/s (decel 0 is outside L0's
+    range, so L0 brakes at 1e-12: it ends slower by round-off only after ~2e13 s — the reference says the same):
+    finite. And an ego ending slower than L0 by 0.5 m/s: finite (a speed excess of 0.5 m/s is not round-off)."""
+    prm = Params()
+    one = lambda x: np.atleast_1d(np.asarray(x, float))  # noqa: E731
+    p, v = one(0.0), one(20.0)
+    l1 = (one(100.0), one(20.0), one(0.0))
+    # L0 stops (20 m/s at 8 m/s²): the ego, following L1 forever at 20 m/s, runs into it.
+    g = leader_gap(one(0.0), p, v, l1, (one(50.0), one(20.0), one(8.0)), one(7.0), INF, prm)
+    assert g[0] == -np.inf
+    # L1 at 19.5 m/s never stopping, L0 at 20 m/s braking at 8: the ego still ends faster (L0 stops).
+    l1_slow = (one(100.0), one(19.5), one(0.0))
+    g = leader_gap(one(0.0), p, v, l1_slow, (one(50.0), one(20.0), one(8.0)), one(7.0), INF, prm)
+    assert g[0] == -np.inf
+    # Following L0 itself: the ego ends at L0's speed, never faster: the minimum is finite.
+    l0 = (one(30.0), one(15.0), one(3.0))
+    g = leader_gap(one(0.0), p, v, l0, l0, one(7.0), INF, prm)
+    assert np.isfinite(g[0])
+    # The ego brakes to rest (no leader to follow is moving) behind a stopped L0: the gap ends constant, finite.
+    l0_stopped = (one(60.0), one(0.0), one(8.0))
+    g = leader_gap(one(0.0), p, v, l0_stopped, l0_stopped, one(7.0), INF, prm)
+    assert g[0] == pytest.approx(60.0 - 20.0**2 / (2 * 8.0) - 7.0, abs=1e-9)
+
+
+@pytest.mark.parametrize("kind", ["default", "random"])
+@pytest.mark.parametrize("seed", range(3))
+def test_every_part_of_the_core_matches_the_reference(seed, kind):
+    """``own_lane_core``'s parts describe the profile it chose, as the reference simulates it: ``v_switch`` is the
+    speed after accelerating for ``t_x1``, ``t_brake_end`` the end of braking (the meeting by bisection, or the
+    stop), ``follows_leader`` whether it follows, and ``lead_gap``, ``follow_gap``, ``own_gap`` the reference's
+    gap minima of that profile minus the margins (L1 and F only where there is something to evade)."""
+    rng = np.random.default_rng(1000 + seed)
+    prm = Params() if kind == "default" else random_params(rng)
+    kw = random_states(rng, prm, N)
+    kw["ego_vx"][::17] = 0.0
+    kw["l1_v"][::11] = 0.0
+    with np.errstate(all="raise"):  # no floating-point warning on valid states (every division is guarded)
+        exists, parts = own_lane_core(**kw, prm=prm)
+    T = np.broadcast_to(np.asarray(parts["t_y_f"], float), (N,)).copy()
+    u = parts["t_x1"]
+    k = np.where(parts["follows_own"], 0, 1)
+    scene = scene_of(kw, T)
+    prof = Profile(u, np.zeros(N), np.full(N, prm.a_x_d), k)
+    gaps = profile_gaps(scene, prof, prm)
+    _, brake_end, match, _, _ = _events(scene, prof, prm)
+    np.testing.assert_allclose(parts["v_switch"], kw["ego_vx"] + prm.a_x_a * u, rtol=1e-12, atol=1e-12)
+    # The meeting instant: where the reference and the engine disagree on "follows", the speeds meet at the end.
+    agree = parts["follows_leader"] == match
+    assert agree.mean() > 0.99
+    np.testing.assert_allclose(parts["t_brake_end"][agree], brake_end[agree], rtol=1e-9, atol=1e-6)
+    evading = T > 0.0
+    assert np.array_equal(parts["nothing"], ~evading)
+    _assert_gap(parts["own_gap"], gaps.own - kw["own_margin"], "own_gap")
+    _assert_gap(parts["lead_gap"][evading], (gaps.l1 - kw["lead_margin"])[evading], "lead_gap")
+    _assert_gap(parts["follow_gap"][evading], (gaps.f - kw["follow_margin"])[evading], "follow_gap")
+    assert np.all(parts["lead_gap"][~evading] == np.inf) and np.all(parts["follow_gap"][~evading] == np.inf)
+    # The verdicts are the gaps' (tolerance 1e-9 m).
+    tol = 1e-9
+    assert np.array_equal(parts["lead_ok"], np.minimum(parts["own_gap"], parts["lead_gap"]) >= -tol)
+    assert np.array_equal(parts["follow_ok"], parts["follow_gap"] >= -tol)
+    assert np.array_equal(exists, parts["lead_ok"] & parts["follow_ok"])
+    # Follows L0 only where following L1 fails and following L0 succeeds: never when exists is false.
+    assert not (parts["follows_own"] & ~exists).any()
+    assert parts["follows_own"].any() and (exists & ~parts["follows_own"]).any() and (~exists).any()
+    for name in ("t_y_switch", "y_acc_1", "y_acc_2", "t_y_end"):
+        assert np.shape(parts[name]) in ((), (N,))
