@@ -306,3 +306,50 @@ def test_in_flight_checked_by_hand():
     # The L0 check uses L0's own decel: braking at 0 it keeps every gap.
     got = in_flight_checked(plan, far, (ox, ov, np.zeros(b)), delay, prm).feasible
     assert got.all()
+
+
+def test_in_flight_checked_at_the_boundaries():
+    """Gaps exactly ``-tol`` (``FEASIBILITY_TOL_M`` = 1e-9 m; ``-tol/2`` to L0) count as kept, a lateral position
+    exactly ``y_s + LATERAL_TOL_M`` is out of the conflict zone, and only positions relative to the ego count (the
+    ego at x = 100 m). The exact gaps: L1 stopped exactly at the margin, the ego creeping at ``1e-9/0.3`` m/s
+    (``fl(v·0.3)`` = 1e-9 exactly) closes 1e-9 m over δ = 0.3 s; F at rest exactly at the margin, accelerating at
+    ``a_x_a`` = 2.5 over δ = sqrt(1e-9/1.25) s, closes ``1.25 δ²`` = 1e-9 m (exactly, in floats, for this δ); L0
+    stopped at the margin with the ego at ``0.5e-9/0.3`` m/s closes 0.5e-9 m."""
+    from safelane.safety.lateral import LATERAL_TOL_M
+
+    prm = Params()
+    x0 = 100.0
+    y_in = prm.y_safe + 0.5
+    creep = 1e-9 / 0.3
+    assert creep * 0.3 == 1e-9
+    b = 4
+    # rows: L1 exactly -tol in the zone; L1 1e-9 m further in (3e-9/0.3 m/s); exactly on the zone's edge, L1
+    # closing 0.5 m; in the zone, L1 far and still.
+    ey = np.array([y_in, y_in, prm.y_safe + LATERAL_TOL_M, y_in])
+    ev = np.array([creep, 2.0 * creep, 0.0, 0.0])
+    l1x = np.array([x0 + prm.p_m, x0 + prm.p_m, x0 + prm.p_m - 0.5, x0 + 50.0])
+    plan = plan_evasion(np.full(b, x0), ey, ev, np.zeros(b), x0 + 50.0, 0.0, 0.0, x0 - 50.0, 0.0, False, prm)
+    plan = dataclasses.replace(plan, feasible=np.ones(b, bool))
+    s = Situation.from_arrays(
+        t=0.0, ego=(np.full(b, x0), ey, ev, np.zeros(b)), follower=(np.full(b, x0 - 50.0), np.zeros(b)),
+        leaders=(l1x[:, None], np.zeros((b, 1))), n_connected=0, params=prm,
+    )  # fmt: skip
+    np.testing.assert_array_equal(in_flight_checked(plan, s, None, 0.3, prm).feasible, [True, False, True, True])
+    # F exactly -tol after δ.
+    delay = float(np.sqrt(1e-9 / 1.25))
+    f_far = Situation.from_arrays(
+        t=0.0, ego=(np.full(b, x0), np.full(b, y_in), np.zeros(b), np.zeros(b)),
+        follower=(np.array([x0 - prm.p_m, x0 - prm.p_m + 1e-9, x0 - 50.0, x0 - 50.0]), np.zeros(b)),
+        leaders=(np.full((b, 1), x0 + 50.0), np.zeros((b, 1))), n_connected=0, params=prm,
+    )  # fmt: skip
+    np.testing.assert_array_equal(in_flight_checked(plan, f_far, None, delay, prm).feasible, [True, False, True, True])
+    # L0 exactly -tol/2 after δ = 0.3 s (out of the zone: L0 counts throughout), and 1e-9 m further.
+    half = 0.5e-9 / 0.3
+    assert half * 0.3 == 0.5e-9
+    out = Situation.from_arrays(
+        t=0.0, ego=(np.full(b, x0), np.zeros(b), np.array([half, 2 * half, 0.0, 0.0]), np.zeros(b)),
+        follower=(np.full(b, x0 - 50.0), np.zeros(b)), leaders=(np.full((b, 1), x0 + 50.0), np.zeros((b, 1))),
+        n_connected=0, params=prm,
+    )  # fmt: skip
+    own = (np.array([x0 + prm.p_m, x0 + prm.p_m, np.inf, x0 + 20.0]), np.zeros(b), np.full(b, prm.a_x_d))
+    np.testing.assert_array_equal(in_flight_checked(plan, out, own, 0.3, prm).feasible, [True, False, True, True])
