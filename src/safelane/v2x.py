@@ -343,8 +343,8 @@ def received_chain(t_msg, p_msg, v_msg, a_msg, connected, now_s: float, params: 
     age = np.maximum(now_s - t_msg, 0.0)
     stale = connected & (age > max_age_s + _TIME_TOL_S)
     chain = connected & ~stale
-    chain[:, -1] = False
-    n = np.where(chain.all(1), k - 1, np.argmin(chain, 1))  # consecutive fresh senders from L1
+    chain[:, -1] = False  # so that every row has a slot out of the chain: L(N+1), the last slot at most
+    n = np.argmin(chain, 1)  # consecutive fresh senders from L1: the first slot out of the chain
     slots = np.arange(k)[None, :]
     fresh_sender = connected & ~stale  # extrapolated with what it reported; anything else at the worst case
     p, v = extrapolate(p_msg, v_msg, np.where(fresh_sender, a_msg, -params.a_x_d), age)
