@@ -102,6 +102,10 @@ def test_the_gap_to_l0_is_minus_infinity_exactly_when_the_ego_ends_faster():
     l1_slow = (one(100.0), one(19.5), one(0.0))
     g = leader_gap(one(0.0), p, v, l1_slow, (one(50.0), one(20.0), one(8.0)), one(7.0), INF, prm)
     assert g[0] == -np.inf
+    # A crawling L1 (0.5 m/s, never stopping) behind a stopped L0: the ego ends 0.5 m/s faster, not round-off.
+    l1_crawl = (one(100.0), one(0.5), one(0.0))
+    g = leader_gap(one(0.0), p, v, l1_crawl, (one(80.0), one(0.0), one(8.0)), one(7.0), INF, prm)
+    assert g[0] == -np.inf
     # Following L0 itself: the ego ends at L0's speed, never faster: the minimum is finite.
     l0 = (one(30.0), one(15.0), one(3.0))
     g = leader_gap(one(0.0), p, v, l0, l0, one(7.0), INF, prm)

@@ -353,3 +353,23 @@ def test_in_flight_checked_at_the_boundaries():
     )  # fmt: skip
     own = (np.array([x0 + prm.p_m, x0 + prm.p_m, np.inf, x0 + 20.0]), np.zeros(b), np.full(b, prm.a_x_d))
     np.testing.assert_array_equal(in_flight_checked(plan, out, own, 0.3, prm).feasible, [True, False, True, True])
+
+
+def test_chain_bounds_empty_slots_and_the_exact_unsafe_boundary():
+    """Hand cases (default Params: ``a_x_d`` = 8, ``p_m`` = 7). Row 0: L0 at 8 m/s, the next vehicle stopped 4 m
+    beyond the margin: it needs ``8²/(2·4)`` = 8 = ``a_x_d`` exactly, which is still safe (unsafe is *beyond*
+    ``a_x_d``); the slot after it is empty (``+inf``), which leaves that vehicle free (its promise, 2). Row 1: both
+    slots ahead empty: each vehicle's bound is its promise. Row 2: nobody connected: ``a_x_d`` throughout. No
+    floating-point warning (``inf − inf`` of two empty slots is handled)."""
+    prm = Params()
+    x = np.array([[0.0, prm.p_m + 4.0, np.inf], [0.0, np.inf, np.inf], [0.0, prm.p_m + 4.0, prm.p_m + 100.0]])
+    v = np.array([[8.0, 0.0, 0.0], [20.0, 0.0, 0.0], [8.0, 0.0, 0.0]])
+    promise = np.array([[1.0, 2.0], [1.0, 2.0], [3.0, 3.0]])
+    with np.errstate(all="raise"):
+        bounds, unsafe = chain_bounds(x, v, promise, np.array([2, 2, 0]), np.zeros((3, 2), bool), None, prm)
+    np.testing.assert_array_equal(bounds, [[8.0, 2.0, 8.0], [1.0, 2.0, 8.0], [8.0, 8.0, 8.0]])
+    np.testing.assert_array_equal(unsafe, [False, False, False])
+    # 1 cm closer, the same pair needs more than a_x_d: unsafe.
+    x[0, 1] -= 0.01
+    bounds, unsafe = chain_bounds(x, v, promise, np.array([2, 2, 0]), np.zeros((3, 2), bool), None, prm)
+    np.testing.assert_array_equal(unsafe, [True, False, False])
