@@ -110,7 +110,7 @@ class Fleet:
         # The first segment ends at the switch: the state there, then the second segment to the period's end.
         ts1 = np.minimum(first.t_stop, t_switch)
         x_sw = x + v * ts1 + 0.5 * first.acc * ts1 * ts1
-        v_sw = np.where(first.t_stop < t_switch, 0.0, np.maximum(v + first.acc * ts1, 0.0))
+        v_sw = np.where(first.t_stop <= t_switch, 0.0, np.maximum(v + first.acc * ts1, 0.0))  # stopped: exactly 0
         rest = np.maximum(dt - t_switch, 0.0)
         ts2 = stop_time(v_sw, a2, rest)
         at_rest = ts2 <= 0.0

@@ -1,0 +1,201 @@
+"""``sim/kinematics.py`` against independent references: the switched fleet and its knots against segment-by-segment
+integration (``trajectory`` of ``test_sim_checks_reference``), the acceleration bounds against a brute-force maximum,
+crossing instants against the quadratic formula's defining property, extrema against dense sampling."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from safelane import Params
+from safelane.sim.kinematics import Fleet, Motion, crossing_knots, extrema, gap_extrema, windowed_gap_extrema
+from test_sim_checks_reference import trajectory
+
+PARAMS = Params()
+DT = PARAMS.dt
+TQ = np.linspace(0.0, DT, 1001)
+
+
+def _switched_draws(seed, n=250):
+    rng = np.random.default_rng(seed)
+    x = rng.uniform(-50.0, 50.0, n)
+    v = rng.uniform(0.0, 30.0, n)
+    v[rng.uniform(size=n) < 0.2] = 0.0  # at rest: stays unless a2 > 0
+    v[rng.uniform(size=n) < 0.2] = 0.3  # stops inside the period when braking
+    a1 = rng.uniform(-8.0, 2.5, n)
+    a2 = rng.uniform(-8.0, 2.5, n)
+    a1[rng.uniform(size=n) < 0.1] = 0.0
+    t_sw = np.where(rng.uniform(size=n) < 0.7, rng.uniform(0.0, DT, n), rng.choice([DT, 2 * DT], n))
+    t_sw[:5] = 0.0  # a switch at the period's start
+    return x, v, a1, t_sw, a2
+
+
+@pytest.mark.parametrize("seed", [0, 1])
+def test_switched_fleet_matches_segment_by_segment_integration(seed):
+    x, v, a1, t_sw, a2 = _switched_draws(seed)
+    fleet = Fleet.switched(x, v, a1, t_sw, a2, DT)
+    assert fleet.switching is fleet.switch.mask
+    np.testing.assert_array_equal(fleet.switching, t_sw < DT)
+    m = fleet.motion(...)
+    assert m.t.shape == (len(x), 5) and (np.diff(m.t, axis=-1) >= 0.0).all()
+    assert (m.t[:, 0] == 0.0).all() and (m.t[:, -1] == DT).all()
+    xq, vq = m.at(np.broadcast_to(TQ, (len(x), TQ.size)))
+    for i in range(len(x)):
+        segs = ([0.0, t_sw[i]], [a1[i], a2[i]]) if t_sw[i] < DT else ([0.0], [a1[i]])
+        ref_x, ref_v = trajectory(x[i], v[i], *segs, TQ)
+        np.testing.assert_allclose(xq[i], ref_x, rtol=0, atol=1e-9, err_msg=str(i))
+        np.testing.assert_allclose(vq[i], ref_v, rtol=0, atol=1e-9, err_msg=str(i))
+        assert fleet.x_end[i] == pytest.approx(ref_x[-1], abs=1e-9)
+        assert fleet.v_end[i] == pytest.approx(ref_v[-1], abs=1e-9)
+        assert (fleet.v_end[i] == 0.0) == (ref_v[-1] <= 1e-12)
+    assert (vq >= 0.0).all()
+    np.testing.assert_array_equal(fleet.end[0], fleet.x_end)
+    np.testing.assert_array_equal(fleet.end[1], fleet.v_end)
+    # Some at rest start moving after the switch, some stop in either segment.
+    assert ((v == 0.0) & (t_sw < DT) & (a2 > 0.0)).any() and (fleet.v_end == 0.0).sum() > 20
+
+
+def test_switched_without_any_switch_is_constant():
+    x, v, a1, _, a2 = _switched_draws(3, 50)
+    fleet = Fleet.switched(x, v, a1, np.full(50, DT), a2, DT)
+    const = Fleet.constant(x, v, a1, DT)
+    assert fleet.switch is None and fleet.switching is None
+    for f in ("x", "v", "acc", "t_stop", "x_end", "v_end"):
+        np.testing.assert_array_equal(getattr(fleet, f), getattr(const, f))
+
+
+def test_acceleration_bounds_are_the_largest_magnitude_in_any_segment():
+    x, v, a1, t_sw, a2 = _switched_draws(4, 60)
+    x, v, a1, t_sw, a2 = (q.reshape(6, 10) for q in (x, v, a1, t_sw, a2))
+    fleet = Fleet.switched(x, v, a1, t_sw, a2, DT)
+    # Brute force over what each vehicle actually does: the acceleration at every sampled instant (0 at rest).
+    _, vq = fleet.motion(...).at(np.broadcast_to(TQ, (6, 10, TQ.size)))
+    seen = np.abs(np.diff(vq, axis=-1) / np.diff(TQ)).max(-1)  # ≈ |a| on each vehicle's segments
+    row = fleet.row_max_abs_acc()
+    assert row.shape == (6,)
+    np.testing.assert_array_less(seen.max(1) - 1e-6, row)  # an upper bound of what is driven …
+    acc_on = np.where(v > 0.0, np.abs(a1), np.where(a1 > 0.0, a1, 0.0))
+    acc_on = np.maximum(acc_on, np.where(t_sw < DT, np.abs(fleet.switch.acc), 0.0))
+    np.testing.assert_allclose(row, acc_on.max(1), rtol=0, atol=0)  # … and exactly the largest one used
+    assert fleet.max_abs_acc == row.max()
+    const = Fleet.constant(x, v, a1, DT)
+    np.testing.assert_array_equal(const.row_max_abs_acc(), np.abs(const.acc).max(1))
+    assert const.max_abs_acc == np.abs(const.acc).max()
+    empty = Fleet.constant(np.zeros((2, 0)), np.zeros((2, 0)), np.zeros((2, 0)), DT)
+    np.testing.assert_array_equal(empty.row_max_abs_acc(), [0.0, 0.0])
+    assert empty.max_abs_acc == 0.0
+
+
+def test_switch_of_a_vehicle_at_rest_only_by_a_positive_acceleration():
+    # At rest, braking, then a2: it stays at rest for a2 <= 0 and starts from rest at the switch for a2 > 0.
+    x, v = np.zeros(3), np.zeros(3)
+    fleet = Fleet.switched(x, v, np.full(3, -8.0), np.full(3, 0.04), np.array([-3.0, 0.0, 2.0]), DT)
+    np.testing.assert_array_equal(fleet.x_end[:2], 0.0)
+    assert fleet.x_end[2] == pytest.approx(0.5 * 2.0 * 0.06**2, abs=1e-15)
+    assert fleet.v_end[2] == pytest.approx(0.12, abs=1e-15)
+    assert fleet.max_abs_acc == 2.0  # the braking of a vehicle at rest is not driven: only the 2 m/s² after
+
+
+def test_a_vehicle_that_stops_before_or_at_its_switch_is_exactly_at_rest():
+    """``v + a (v / −a)`` rounds to +6.9e-18 for this pair: a stop inside the first segment must still leave the
+    vehicle exactly at rest (speed 0.0, which the lane checks' "at rest all period" test relies on), whether the
+    switch comes after the stop or exactly at it."""
+    v, a = np.array([0.05991188490091204]), np.array([-7.002845080054524])
+    assert v + a * (v / -a) != 0.0
+    t_stop = Fleet.constant(np.zeros(1), v, a, DT).t_stop
+    for t_sw in (np.array([0.05]), t_stop):
+        fleet = Fleet.switched(np.zeros(1), v, a, t_sw, np.zeros(1), DT)
+        assert fleet.switch.v[0] == 0.0 and fleet.v_end[0] == 0.0
+        assert fleet.x_end[0] == pytest.approx(v[0] ** 2 / (-2.0 * a[0]), rel=1e-12)
+
+
+def test_from_samples_with_repeated_knots():
+    """Zero-length segments (repeated knots) get acceleration 0; the motion between the others is exact."""
+    t = np.array([[0.0, 0.03, 0.03, 0.07, DT]])
+    accs = [1.5, -4.0, 2.0]  # on [0, .03), [.03, .07), [.07, dt]
+    xk, vk = trajectory(2.0, 10.0, [0.0, 0.03, 0.07], accs, t[0])
+    m = Motion.from_samples(t, xk[None], vk[None])
+    np.testing.assert_allclose(m.acc[0], [1.5, 0.0, -4.0, 2.0], rtol=0, atol=1e-9)
+    ref = trajectory(2.0, 10.0, [0.0, 0.03, 0.07], accs, TQ)
+    xq, vq = m.at(TQ[None, :])
+    np.testing.assert_allclose(xq[0], ref[0], rtol=0, atol=1e-9)
+    np.testing.assert_allclose(vq[0], ref[1], rtol=0, atol=1e-9)
+    np.testing.assert_array_equal(m.end[0], xk[None, -1])
+    np.testing.assert_array_equal(m.end[1], vk[None, -1])
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_crossing_knots_split_the_period_where_the_sign_changes(seed):
+    """Between consecutive returned knots ``x − level`` keeps one sign (checked on a dense grid inside each
+    interval), and every returned instant that is not one of the motion's knots is a root."""
+    rng = np.random.default_rng(seed)
+    n, level = 300, 1.0
+    y0 = level + rng.uniform(-0.12, 0.12, n)
+    y0[:10] = level  # starting on the level
+    vy = rng.uniform(-1.5, 1.5, n)
+    vy[10:20] = 0.0  # parallel: a linear or no crossing
+    ay = rng.uniform(-1.5, 1.5, n)
+    ay[20:40] = 0.0
+    m = Motion.free(y0, vy, ay, DT)
+    knots = crossing_knots(m, level)
+    assert knots.shape == (n, 4) and (np.diff(knots, axis=-1) >= 0.0).all()
+    assert (knots[:, 0] == 0.0).all() and (knots[:, -1] == DT).all()
+    found = 0
+    for i in range(n):
+        for t0, t1 in zip(knots[i, :-1], knots[i, 1:], strict=True):
+            if t1 - t0 < 1e-9:
+                continue
+            tq = np.linspace(t0, t1, 51)[1:-1]
+            y = y0[i] + vy[i] * tq + 0.5 * ay[i] * tq * tq - level
+            assert (y > -1e-12).all() or (y < 1e-12).all(), (i, t0, t1)
+        for t in knots[i, 1:-1]:
+            if 0.0 < t < DT:
+                assert abs(y0[i] + vy[i] * t + 0.5 * ay[i] * t * t - level) < 1e-12
+                found += 1
+    assert found > 50
+
+
+def test_crossing_knots_of_a_multi_segment_motion():
+    """Up through 1.0 on the first piece (0.97 + t = 1 at t = 0.03); on the second, from y = 1.02 at 0.05 with
+    speed 1 and −60 m/s², back down where 30 t'² − t' − 0.02 = 0, t' = (1 + √3.4) / 60."""
+    t = np.array([[0.0, 0.05, DT]])
+    x, v = trajectory(0.97, 1.0, [0.0, 0.05], [0.0, -60.0], t[0], clamp=False)
+    m = Motion.from_samples(t, x[None], v[None])
+    knots = crossing_knots(m, 1.0)[0]
+    assert np.isclose(knots, 0.03, rtol=0, atol=1e-12).sum() == 1
+    assert np.isclose(knots, 0.05 + (1.0 + np.sqrt(3.4)) / 60.0, rtol=0, atol=1e-12).sum() == 1
+    assert knots.shape == (7,)
+
+
+def test_extrema_match_dense_sampling_of_multi_segment_motions():
+    rng = np.random.default_rng(9)
+    n = 300
+    t = np.concatenate([np.zeros((n, 1)), np.sort(rng.uniform(0, DT, (n, 3)), 1), np.full((n, 1), DT)], 1)
+    t[:30, 2] = t[:30, 1]  # repeated knots
+    accs = rng.uniform(-3.0, 3.0, (n, 4))
+    y0, vy = rng.uniform(-1, 1, n), rng.uniform(-0.3, 0.3, n)
+    lo, hi = np.empty(n), np.empty(n)
+    dense = np.empty((n, TQ.size))
+    ms = []
+    for i in range(n):
+        y, vv = trajectory(y0[i], vy[i], list(t[i, :-1]), list(accs[i]), t[i], clamp=False)
+        ms.append((y, vv))
+        dense[i] = trajectory(y0[i], vy[i], list(t[i, :-1]), list(accs[i]), TQ, clamp=False)[0]
+    m = Motion.from_samples(t, np.stack([q[0] for q in ms]), np.stack([q[1] for q in ms]))
+    lo, hi = extrema(m)
+    assert (lo <= dense.min(1) + 1e-12).all() and (hi >= dense.max(1) - 1e-12).all()
+    step = TQ[1] - TQ[0]
+    np.testing.assert_allclose(lo, dense.min(1), rtol=0, atol=3.0 * step * step / 8 + 1e-12)
+    np.testing.assert_allclose(hi, dense.max(1), rtol=0, atol=3.0 * step * step / 8 + 1e-12)
+    # The gap of a motion to itself shifted by a constant is that constant, exactly at the extrema.
+    shifted = Motion(t=m.t, x=m.x + 5.0, v=m.v, acc=m.acc)
+    g_lo, g_hi = gap_extrema(m, shifted)
+    np.testing.assert_allclose(g_lo, 5.0, atol=1e-12)
+    np.testing.assert_allclose(g_hi, 5.0, atol=1e-12)
+    # A window that always holds gives the unwindowed extrema; one that never does gives (inf, -inf).
+    always = Motion.free(np.full(n, 10.0), np.zeros(n), np.zeros(n), DT)
+    w_lo, w_hi = windowed_gap_extrema(m, shifted, always, crossing_knots(always, 0.0), 0.0)
+    np.testing.assert_allclose(w_lo, 5.0, atol=1e-12)
+    np.testing.assert_allclose(w_hi, 5.0, atol=1e-12)
+    n_lo, n_hi = windowed_gap_extrema(m, shifted, always, crossing_knots(always, 20.0), 20.0)
+    assert (n_lo == np.inf).all() and (n_hi == -np.inf).all()
