@@ -158,3 +158,33 @@ def test_every_part_of_the_core_matches_the_reference(seed, kind):
     assert parts["follows_own"].any() and (exists & ~parts["follows_own"]).any() and (~exists).any()
     for name in ("t_y_switch", "y_acc_1", "y_acc_2", "t_y_end"):
         assert np.shape(parts[name]) in ((), (N,))
+
+
+@pytest.mark.parametrize("target", [0.0, -0.3e-9, -1.2e-9, -1e-6])
+def test_the_search_keeps_the_best_feasible_switch_time_at_its_tolerance(target):
+    """The hand case of ``test_own_lane.test_l0_caps_the_acceleration_phase_of_an_intruding_ego`` (L1 and F far,
+    L0 at 20 m/s braking at 8, the ego intruding 1 m at 20 m/s: ``t_y_f = 2·sqrt(1/1.5)``), with L0 placed so that
+    the gap to it at ``u = t_y_f/2`` (the bisection's first midpoint) is ``target``: the gap after accelerating for
+    ``u`` is ``slack − 26.25 u − 1.640625 u²``. The search's contract: the switch time it returns keeps the gap
+    ``>= −tol/2`` (``tol`` = 1e-9 m) — so the evasion exists — and is short of the largest such ``u`` (the root of
+    ``26.25 u + 1.640625 u² = slack + tol/2``, by the quadratic formula) by at most ``t_y_f·2⁻¹⁶``, on the grid of
+    the module's documented 16 halvings of ``[0, t_y_f]``."""
+    T = 2.0 * np.sqrt(1.0 / 1.5)
+    m = 0.5 * T
+    slack = 26.25 * m + 1.640625 * m * m + target
+    kw = {k: np.atleast_1d(np.asarray(v, bool if k == "aggressive" else float)) for k, v in dict(
+        ego_px=0.0, ego_py=0.85 + 1.0, ego_vx=20.0, ego_vy=0.0, l1_p=200.0, l1_v=30.0, l1_decel=0.0, f_p=-100.0,
+        f_v=0.0, aggressive=False, l0_p=7.0 + slack, l0_v=20.0, l0_decel=8.0, lead_margin=7.0, follow_margin=7.0,
+        own_margin=7.0).items()}  # fmt: skip
+    exists, parts = own_lane_core(**kw, prm=Params())
+    assert parts["t_y_f"][0] == pytest.approx(T, rel=1e-12)
+    assert exists[0]
+    assert parts["own_gap"][0] >= -0.5e-9
+    a, b, c = 1.640625, 26.25, -(slack + 0.5e-9)
+    u_best = (-b + np.sqrt(b * b - 4 * a * c)) / (2 * a)
+    assert parts["t_x1"][0] <= u_best + 1e-12
+    assert parts["t_x1"][0] >= u_best - T * 2.0**-16
+    # Where the search ran (u below the closed form's T), u is on its documented grid: 16 halvings of [0, T].
+    if parts["t_x1"][0] < T:
+        k = parts["t_x1"][0] / T * 2.0**16
+        assert abs(k - round(k)) < 1e-6, k
