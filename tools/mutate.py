@@ -20,6 +20,7 @@ import argparse
 import json
 import os
 import random
+import resource
 import shutil
 import subprocess
 import sys
@@ -121,11 +122,19 @@ def _mutmut(work: Path, *args: str, **kw) -> subprocess.CompletedProcess:
     return subprocess.run([str(mutmut), *args], cwd=work, env=_env(), text=True, **kw)
 
 
+def _cpu_seconds() -> float:
+    """CPU time (user + system) of this process and every finished child process (mutmut and the pytest processes
+    it forked and waited for). On a machine shared with other work the wall time inflates; the CPU time does not:
+    CPU seconds / cores is what the run costs on an idle machine."""
+    own, kids = resource.getrusage(resource.RUSAGE_SELF), resource.getrusage(resource.RUSAGE_CHILDREN)
+    return own.ru_utime + own.ru_stime + kids.ru_utime + kids.ru_stime
+
+
 def run(groups: list[str], sample: int | None, seed: int, fresh: bool, children: int) -> int:
     eq = equivalents()
     bad = 0
     for group in groups:
-        start = time.perf_counter()
+        start, cpu = time.perf_counter(), _cpu_seconds()
         work = prepare(group, fresh, sample=bool(sample))
         names = [n for n in mutant_names(work, group) if n not in eq]
         chosen = sorted(random.Random(seed).sample(names, min(sample, len(names)))) if sample else []
@@ -140,7 +149,7 @@ def run(groups: list[str], sample: int | None, seed: int, fresh: bool, children:
         checked = chosen or names
         survivors = [n for n in checked if codes.get(n) not in KILLED]
         print(f"[{group}] killed {len(checked) - len(survivors)} of {len(checked)} in "
-              f"{time.perf_counter() - start:.0f} s", flush=True)  # fmt: skip
+              f"{time.perf_counter() - start:.0f} s wall, {_cpu_seconds() - cpu:.0f} CPU s", flush=True)  # fmt: skip
         if survivors:
             bad += 1
             if all(codes.get(n) is None for n in survivors):
