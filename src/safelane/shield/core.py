@@ -278,13 +278,18 @@ def step(
         age = np.maximum(s.t + delay - state.plan_t0[abort_rows], 0.0)  # (round-off of the summed periods)
         knots, px, vx, py, vy = plan_motion(state.plan.take(abort_rows), age, dt)
         abort = (abort_rows, knots, px, vx, py, vy)
-        span = np.maximum(knots[:, 1] - knots[:, 0], 1e-300)
-        ax_cmd[abort_rows] = np.where(knots[:, 1] > 0.0, (vx[:, 1] - vx[:, 0]) / span, 0.0)
-        ay_cmd[abort_rows] = np.where(knots[:, 1] > 0.0, (vy[:, 1] - vy[:, 0]) / span, 0.0)
+        # The accelerations at the period's start: the first segment of positive length (switches already past
+        # leave zero-length segments at the front; the knots span the period, so one segment has length dt > 0).
+        first = np.argmax(np.diff(knots, axis=1) > 0.0, axis=1)
+        r = np.arange(abort_rows.size)
+        span = knots[r, first + 1] - knots[r, first]
+        ax_cmd[abort_rows] = (vx[r, first + 1] - vx[r, first]) / span
+        ay_cmd[abort_rows] = (vy[r, first + 1] - vy[r, first]) / span
     if cfg.enabled:  # the rows of another rule: its decision (an RSS response is an abort without a held plan)
         for rule, idx in ruled:
-            inputs = RuleInputs(*(arr[idx] for arr in (ex, ey, evx, evy, s.chain_x, s.chain_v, fx, fv, a_x, a_y, a_yh,
-                                  invalid, l1_decel, uses_chain & ~unsafe, state.completed, bounds, s.n_connected)))
+            fields = (ex, ey, evx, evy, s.chain_x, s.chain_v, fx, fv, a_x, a_y, a_yh, invalid, l1_decel,
+                      uses_chain & ~unsafe, state.completed, bounds, s.n_connected)  # fmt: skip
+            inputs = RuleInputs(*(arr[idx] for arr in fields))
             behaviour[idx], ax_cmd[idx], ay_cmd[idx], completing[idx] = rule.decide(inputs, prm)
 
     new_plan = set_rows(state.plan, accepted)
