@@ -36,6 +36,8 @@ def test_switched_fleet_matches_segment_by_segment_integration(seed):
     fleet = Fleet.switched(x, v, a1, t_sw, a2, DT)
     assert fleet.switching is fleet.switch.mask
     np.testing.assert_array_equal(fleet.switching, t_sw < DT)
+    assert fleet.switch.t.dtype == np.float64
+    np.testing.assert_array_equal(fleet.switch.t, np.where(t_sw < DT, t_sw, DT))  # "dt where none"
     m = fleet.motion(...)
     assert m.t.shape == (len(x), 5) and (np.diff(m.t, axis=-1) >= 0.0).all()
     assert (m.t[:, 0] == 0.0).all() and (m.t[:, -1] == DT).all()
@@ -74,8 +76,13 @@ def test_acceleration_bounds_are_the_largest_magnitude_in_any_segment():
     row = fleet.row_max_abs_acc()
     assert row.shape == (6,)
     np.testing.assert_array_less(seen.max(1) - 1e-6, row)  # an upper bound of what is driven …
-    acc_on = np.where(v > 0.0, np.abs(a1), np.where(a1 > 0.0, a1, 0.0))
-    acc_on = np.maximum(acc_on, np.where(t_sw < DT, np.abs(fleet.switch.acc), 0.0))
+    # What is driven: a1 unless at rest and not accelerating; after a switch, a2 unless at rest there (speed from
+    # the reference integration) and not accelerating.
+    draws = zip(x.ravel(), v.ravel(), a1.ravel(), t_sw.ravel(), strict=True)
+    v_at_switch = np.array([trajectory(x0, v0, [0.0], [a], np.array([min(ts, DT)]))[1][0] for x0, v0, a, ts in draws])
+    v_at_switch = v_at_switch.reshape(v.shape)
+    acc_on = np.where((v > 0.0) | (a1 > 0.0), np.abs(a1), 0.0)
+    acc_on = np.maximum(acc_on, np.where((t_sw < DT) & ((v_at_switch > 0.0) | (a2 > 0.0)), np.abs(a2), 0.0))
     np.testing.assert_allclose(row, acc_on.max(1), rtol=0, atol=0)  # … and exactly the largest one used
     assert fleet.max_abs_acc == row.max()
     const = Fleet.constant(x, v, a1, DT)
@@ -107,6 +114,10 @@ def test_a_vehicle_that_stops_before_or_at_its_switch_is_exactly_at_rest():
         fleet = Fleet.switched(np.zeros(1), v, a, t_sw, np.zeros(1), DT)
         assert fleet.switch.v[0] == 0.0 and fleet.v_end[0] == 0.0
         assert fleet.x_end[0] == pytest.approx(v[0] ** 2 / (-2.0 * a[0]), rel=1e-12)
+    # The same stop in the second segment (cruising until 0.01 s, then braking).
+    fleet = Fleet.switched(np.zeros(1), v, np.zeros(1), np.array([0.01]), a, DT)
+    assert fleet.v_end[0] == 0.0
+    assert fleet.x_end[0] == pytest.approx(v[0] * 0.01 + v[0] ** 2 / (-2.0 * a[0]), rel=1e-12)
 
 
 def test_from_samples_with_repeated_knots():
@@ -165,6 +176,23 @@ def test_crossing_knots_of_a_multi_segment_motion():
     assert np.isclose(knots, 0.03, rtol=0, atol=1e-12).sum() == 1
     assert np.isclose(knots, 0.05 + (1.0 + np.sqrt(3.4)) / 60.0, rtol=0, atol=1e-12).sum() == 1
     assert knots.shape == (7,)
+
+
+def test_gap_extrema_broadcast_batches():
+    """Motions with different batch shapes broadcast like arrays: ``(3, 1)`` behind ``(1, 4)`` gives ``(3, 4)``
+    pairs, each equal to the dense sampling of its gap (and to the pair alone)."""
+    rng = np.random.default_rng(12)
+    behind = Motion.constant(rng.uniform(-10, 0, (3, 1)), rng.uniform(0, 30, (3, 1)), rng.uniform(-8, 2.5, (3, 1)), DT)
+    ahead = Motion.constant(rng.uniform(0, 10, (1, 4)), rng.uniform(0, 30, (1, 4)), rng.uniform(-8, 2.5, (1, 4)), DT)
+    lo, hi = gap_extrema(behind, ahead)
+    assert lo.shape == hi.shape == (3, 4)
+    for i in range(3):
+        for j in range(4):
+            d = ahead.at(TQ[None, None, :])[0][0, j] - behind.at(TQ[None, None, :])[0][i, 0]
+            assert d.min() - 1e-4 <= lo[i, j] <= d.min() + 1e-12 and d.max() - 1e-12 <= hi[i, j] <= d.max() + 1e-4
+            one = gap_extrema(Motion(*(getattr(behind, f)[i, 0] for f in ("t", "x", "v", "acc"))),
+                              Motion(*(getattr(ahead, f)[0, j] for f in ("t", "x", "v", "acc"))))  # fmt: skip
+            assert (one[0], one[1]) == pytest.approx((lo[i, j], hi[i, j]), abs=1e-12)
 
 
 def test_extrema_match_dense_sampling_of_multi_segment_motions():
