@@ -188,3 +188,28 @@ def test_the_search_keeps_the_best_feasible_switch_time_at_its_tolerance(target)
     if parts["t_x1"][0] < T:
         k = parts["t_x1"][0] / T * 2.0**16
         assert abs(k - round(k)) < 1e-6, k
+
+
+@pytest.mark.parametrize("offset, exists", [(-0.4e-9, True), (-0.75e-9, True), (-1.2e-9, False), (1e-3, True)])
+def test_braking_at_once_within_the_tolerance_is_an_evasion(offset, exists):
+    """Regression (found by mutation testing): L0 at the ego's 20 m/s, braking at 2, ``offset`` beyond its margin;
+    L1 at 10 m/s braking at 8, 28 m ahead; F far behind at rest; the ego intruding 1 m. Braking at ``a_x_d`` from
+    t = 0 (``G(0, L1)``) keeps the gap to L0 at its initial ``offset`` (the ego brakes harder), the gap to L1 ≥ 12 m
+    (the reference's simulation, below) and F's: so an evasion exists iff ``offset >= −tol`` (``tol`` = 1e-9 m,
+    gaps within it count as kept). Before the fix, an L0 gap at 0 in ``[−tol, −tol/2)`` skipped the search and kept
+    the closed form's (infeasible) switch time: no evasion at −0.75 nm, one at −0.4 nm."""
+    prm = Params()
+    kw = {k: np.atleast_1d(np.asarray(v, bool if k == "aggressive" else float)) for k, v in dict(
+        ego_px=0.0, ego_py=0.85 + 1.0, ego_vx=20.0, ego_vy=0.0, l1_p=28.0, l1_v=10.0, l1_decel=8.0, f_p=-100.0,
+        f_v=0.0, aggressive=False, l0_p=7.0 + offset, l0_v=20.0, l0_decel=2.0, lead_margin=7.0, follow_margin=7.0,
+        own_margin=7.0).items()}  # fmt: skip
+    got, parts = own_lane_core(**kw, prm=prm)
+    T = np.atleast_1d(parts["t_y_f"])
+    scene = Scene(kw["ego_px"], kw["ego_vx"], kw["l1_p"], kw["l1_v"], kw["l1_decel"], kw["l0_p"], kw["l0_v"],
+                  kw["l0_decel"], kw["f_p"], kw["f_v"], kw["aggressive"], T)  # fmt: skip
+    at_once = profile_gaps(scene, Profile(np.zeros(1), np.zeros(1), np.full(1, prm.a_x_d), np.array([1])), prm)
+    assert at_once.own[0] - 7.0 == pytest.approx(offset, abs=1e-12)
+    assert at_once.l1[0] - 7.0 > 5.0 and at_once.f[0] - 7.0 > 50.0
+    assert bool(got[0]) == exists
+    if exists:
+        assert parts["own_gap"][0] >= -1e-9 and parts["lead_gap"][0] >= -1e-9

@@ -117,9 +117,10 @@ def follower_gap(u, p, v, lead, f_p, f_v, aggressive, margin, horizon, prm: Para
 
 def _search(fixed, u_hi, prm: Params, tol: float):
     """The feasible end of a ``SEARCH_STEPS``-step bisection of ``[0, u_hi]`` for the largest ``u`` whose leader gaps
-    stay ``>= -tol/2`` (feasible at 0, infeasible at ``u_hi``; the gaps are non-increasing in ``u``). Sound: the
-    returned ``u`` is verified; it is short of the family's optimum by at most ``u_hi · 2^-SEARCH_STEPS``. (The gap
-    is not continuous in ``u`` where the profile stops following a leader, so a secant method gains nothing.)"""
+    stay ``>= -tol/2`` (within ``tol`` at 0, infeasible at ``u_hi``; the gaps are non-increasing in ``u``); where no
+    midpoint does, 0, whose gaps are within ``tol``. Sound: the returned ``u`` is verified; it is short of the
+    family's optimum by at most ``u_hi · 2^-SEARCH_STEPS``. (The gap is not continuous in ``u`` where the profile
+    stops following a leader, so a secant method gains nothing.)"""
     p, v, lead, l0, l1, nothing, T, lead_margin, own_margin = fixed
     lo, hi = np.zeros_like(u_hi), u_hi.copy()
     for _ in range(SEARCH_STEPS):
@@ -165,7 +166,7 @@ def own_lane_core(
     g_hi = leaders_gap(u_k)[0]
     g_lo = leaders_gap(0.0 * u_k)[0]
     u = u_k.copy()
-    rows = np.flatnonzero((g_hi < -tol) & (g_lo >= -0.5 * tol))
+    rows = np.flatnonzero((g_hi < -tol) & (g_lo >= -tol))
     if rows.size:  # where the closed form breaks the other leader: search [0, u_k], keeping a feasible lower end
         fixed = (p[rows], v[rows], tuple(a[rows] for a in lead), tuple(a[rows] for a in l0),
                  tuple(a[rows] for a in l1), nothing[rows], T2[rows], lm[rows], om[rows])  # fmt: skip
