@@ -233,3 +233,56 @@ def test_paper_evasion_accepts_every_crossing_row_and_asks_for_the_evasion_check
         assert out.dtype == bool and out.shape == (n,) and out.all()
     assert policies.paper_evasion.needs_evasion is True
     assert not getattr(commit_guard, "needs_evasion", False)
+
+
+def _key_drawing_zero(salt: int, v0: float = 25.0) -> float:
+    """A key ``x0`` whose draw is exactly 0.0: the finaliser maps 0 to 0, so ``bits(x0)·φ = bits(v0) + salt``
+    (mod 2⁶⁴), solved with φ's inverse; ``v0`` is nudged until ``x0`` is a finite float."""
+    phi_inv = pow(0x9E3779B97F4A7C15, -1, 1 << 64)
+    while True:
+        bits = ((_bits(v0) + salt) * phi_inv) & MASK
+        x0 = struct.unpack("<d", struct.pack("<Q", bits))[0]
+        if np.isfinite(x0):
+            return x0, v0
+        v0 = float(np.nextafter(v0, np.inf))
+
+
+def test_a_zero_miss_rate_never_misses_even_a_zero_draw():
+    """P(miss) = assess_miss exactly: a draw u₂ uniform on [0, 1) misses where u₂ < assess_miss, so at
+    assess_miss = 0 nothing is missed — also the one key whose draw is exactly 0.0."""
+    x0, v0 = _key_drawing_zero(2)
+    assert _ref_uniform(x0, v0, 2) == 0.0 and policies._scenario_uniform(np.array([x0]), np.array([v0]), 2)[0] == 0.0
+    cfg = ShieldConfig(assessment="slow", assess_delay_s=0.0, assess_miss=0.0, assess_window=2)
+    slow = policies.ASSESSMENTS["slow"]
+    state = slow.start(1, cfg)
+    for k in range(4):  # F yields: collaborative from the first full window on, released at once
+        sit = _situation(0.1 * k, np.array([x0]), np.array([0.0]), np.array([v0 - 0.5 * k]))
+        state = slow.update(state, sit, 0.1, cfg)
+    assert not state.missed[0] and not slow.aggressive(state, sit)[0]
+    cfg_all = ShieldConfig(assessment="slow", assess_delay_s=0.0, assess_miss=1e-300, assess_window=2)
+    state = slow.update(slow.start(1, cfg_all), _situation(0.0, np.array([x0]), np.array([0.0]), np.array([v0])), 0.1,
+                        cfg_all)  # fmt: skip
+    assert state.missed[0]  # the zero draw is below any positive rate
+
+
+def test_the_draw_depends_on_the_value_not_the_dtype_of_the_key():
+    x = [-20.0, -31.5, -7.25]
+    v = [25.0, 30.0, 12.0]
+    ref = policies._scenario_uniform(np.array(x), np.array(v), 1)
+    for xs, vs in ((x, v), ([-20, -31.5, -7.25], [25, 30, 12]), (np.array(x, np.float32), np.array(v, np.float32))):
+        np.testing.assert_array_equal(policies._scenario_uniform(xs, vs, 1), ref)
+    ints = policies._scenario_uniform(np.array([-20, -31, -7]), np.array([25, 30, 12]), 1)
+    np.testing.assert_array_equal(ints, policies._scenario_uniform(np.array([-20.0, -31.0, -7.0]), np.array(v), 1))
+
+
+def test_slow_states_are_boolean_beliefs():
+    cfg = ShieldConfig(assessment="slow", assess_miss=0.5)
+    slow = policies.ASSESSMENTS["slow"]
+    start = slow.start(5, cfg)
+    sit = _situation(0.0, np.linspace(-30, -10, 5), np.zeros(5), np.full(5, 25.0))
+    assert slow.aggressive(start, sit).dtype == bool and start.missed.dtype == bool
+    np.testing.assert_array_equal(start.first_collaborative_s, np.full(5, np.nan))
+    state = start
+    for k in range(3):
+        state = slow.update(state, _situation(0.1 * k, sit.f_x, sit.ego_x, sit.observed_f_speed), 0.1, cfg)
+        assert state.aggressive.dtype == bool and state.missed.dtype == bool and state.delay_s.dtype == float

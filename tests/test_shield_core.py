@@ -585,3 +585,31 @@ def test_init_holds_the_most_conservative_plan_from_where_the_commands_in_flight
     assert state.t == 2.0 and state.last is None and not state.completed.any() and state.completed.shape == (b,)
     assert not state.breach.flags.any() and state.breach.flags.shape == (b, len(BREACH_KINDS))
     assert state.belief.history.shape == (b, cfg.assess_window) and state.belief.aggressive.all()
+
+
+def test_a_bad_proposal_names_the_planner_and_a_given_chain_analysis_is_used():
+    rng = np.random.default_rng(40)
+    s = _situations(rng, 4)
+    state = init(s, PRM, ShieldConfig())
+    with pytest.raises(TypeError, match="nominal planner the nominal planner must return a pair"):
+        step(state, s, np.zeros((2, 4)), PRM)
+    with pytest.raises(ValueError, match=r"nominal planner expert returned a_x of shape \(3,\)"):
+        step(state, s, (np.zeros(3), np.zeros(4)), PRM, planner_name="expert")
+    # chain: the caller's analysis of this very situation is taken as given (here: a deliberately different one).
+    bounds, unsafe = chain_analysis(s, PRM)
+    other = np.full_like(bounds, 0.25)
+    _, d = step(state, s, (np.zeros(4), np.zeros(4)), PRM, chain=(other, np.zeros(4, bool)))
+    _, plain = step(state, s, (np.zeros(4), np.zeros(4)), PRM)
+    np.testing.assert_array_equal(d.l1_decel, 0.25)
+    np.testing.assert_array_equal(plain.l1_decel, np.where(unsafe, PRM.a_x_d, bounds[:, 0]))
+
+
+def test_chain_analysis_of_l1_alone_is_the_mechanical_worst_case():
+    rng = np.random.default_rng(41)
+    s = _situations(rng, 5, m=1)
+    bounds, unsafe = chain_analysis(s, PRM)
+    assert bounds.shape == (5, 1) and (bounds == PRM.a_x_d).all()
+    assert unsafe.shape == (5,) and unsafe.dtype == bool and not unsafe.any()
+    state = init(s, PRM, ShieldConfig(), "CV_all")
+    _, d = step(state, s, (np.zeros(5), np.zeros(5)), PRM, ShieldConfig(), "CV_all")
+    assert (d.l1_decel == PRM.a_x_d).all()

@@ -73,13 +73,13 @@ class TruthAssessment(ObservedAssessment):
 
 def _scenario_uniform(x0, v0, salt: int) -> np.ndarray:
     """A uniform draw in ``[0, 1)`` per row, keyed by the bits of F's first observed state (so a scenario's draw does
-    not depend on the batch it is simulated in, and needs no id); splitmix64 finaliser. Array arithmetic on uint64
-    wraps modulo 2⁶⁴ without a floating-point-error check: nothing to silence (the keys are ``(B,)`` arrays)."""
-    h = np.asarray(x0, np.float64).view(np.uint64) * np.uint64(0x9E3779B97F4A7C15)
-    h ^= np.asarray(v0, np.float64).view(np.uint64) + np.uint64(salt)
-    for shift, mult in ((30, 0xBF58476D1CE4E5B9), (27, 0x94D049BB133111EB)):
-        h = (h ^ (h >> np.uint64(shift))) * np.uint64(mult)
-    h ^= h >> np.uint64(31)
+    not depend on the batch it is simulated in, and needs no id); splitmix64 finaliser."""
+    with np.errstate(over="ignore"):
+        h = np.asarray(x0, np.float64).view(np.uint64) * np.uint64(0x9E3779B97F4A7C15)
+        h ^= np.asarray(v0, np.float64).view(np.uint64) + np.uint64(salt)
+        for shift, mult in ((30, 0xBF58476D1CE4E5B9), (27, 0x94D049BB133111EB)):
+            h = (h ^ (h >> np.uint64(shift))) * np.uint64(mult)
+        h ^= h >> np.uint64(31)
     return (h >> np.uint64(11)).astype(np.float64) * (1.0 / 2**53)
 
 

@@ -34,8 +34,9 @@ def check_proposal(planner, proposal, batch: int, prm: Params):
             raise ValueError(f"nominal planner {name} returned {axis} of shape {arr.shape}; expected ({batch},)")
         out.append(arr.astype(float))
     a_x, a_y = out
-    ok = np.isfinite(a_x) & np.isfinite(a_y)  # comparisons with NaN and inf are False or exact: no warning to silence
-    ok &= (a_x >= -prm.a_x_d - _RANGE_TOL) & (a_x <= prm.a_x_a + _RANGE_TOL)
-    ok &= np.abs(a_y) <= prm.a_y_m + _RANGE_TOL
+    with np.errstate(invalid="ignore"):
+        ok = np.isfinite(a_x) & np.isfinite(a_y)
+        ok &= (a_x >= -prm.a_x_d - _RANGE_TOL) & (a_x <= prm.a_x_a + _RANGE_TOL)
+        ok &= np.abs(a_y) <= prm.a_y_m + _RANGE_TOL
     invalid = ~ok
     return np.where(ok, a_x, 0.0), np.where(ok, a_y, 0.0), invalid
