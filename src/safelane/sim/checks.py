@@ -218,8 +218,8 @@ def lane_checks(b, prm: Params, others: Fleet, pairs=None):
     slack = (others.row_max_abs_acc() * dt * dt + 1e-6)[:, None]
     near = valid & (gap0 - np.abs(v0[:, 1:] - v0[:, :-1]) * dt < margin + slack)
     # Vehicles at rest all period keep their gap: such a pair at or beyond its margin needs no exact check (its gap
-    # at the period's ends is exact).
-    resting = (others.v_end == 0.0) & (v0 == 0.0)
+    # at the period's ends is exact). At rest at both ends is not enough: a switch can start and stop it in between.
+    resting = (others.v_end == 0.0) & (v0 == 0.0) & (others.x_end == x0)
     near &= ~(resting[:, 1:] & resting[:, :-1] & (gap0 >= margin))
     sampled = np.where(valid & ~near, np.minimum(gap0, gap1) / margin, np.inf)
     c, r = np.nonzero(near.T)  # the (B, K) masks are column-major: scan them vehicle by vehicle
