@@ -85,10 +85,11 @@ def _accel(rng, shape, lo=-PARAMS.a_x_d, hi=PARAMS.a_x_a):
     return np.where(pick < 0.1, 0.0, np.where(pick < 0.2, lo, np.where(pick < 0.25, hi, a)))
 
 
-def _plan_segments(rng, x0, v0, y0, vy0):
+def _plan_segments(rng, x0, v0, y0, vy0, knots=None):
     """A plan over the period: 4 segments between random knots; longitudinal accelerations within the ego's
     limits, with a stop exactly at a knot where a segment would reverse; lateral accelerations within ±a_y_m."""
-    knots = np.concatenate([[0.0], np.sort(rng.uniform(0.0, DT, 3)), [DT]])
+    if knots is None:
+        knots = np.concatenate([[0.0], np.sort(rng.uniform(0.0, DT, 3)), [DT]])
     ax = list(_accel(rng, 4))
     ay = list(rng.uniform(-PARAMS.a_y_m, PARAMS.a_y_m, 4))
     v = v0

@@ -1,0 +1,202 @@
+"""``sim/realworld.py`` unit by unit against independent references: the ego's checks against an own-lane leader
+``L0`` (dense-time reference of ``test_sim_checks_reference``: the window is ``y < w_v``), the execution of an issued
+command (segment-by-segment integration), the drawn L0 (its documented ranges), and L0's profile over a period."""
+
+from __future__ import annotations
+
+import dataclasses
+from types import SimpleNamespace
+
+import numpy as np
+import pytest
+
+from safelane import Params
+from safelane.sim import SimConfig
+from safelane.sim.kinematics import Fleet, Motion
+from safelane.sim.realworld import cruise, executed_motion, issued, l0_motion, own_lane_checks, with_own_lane
+from safelane.sim.scenario import paper_scenarios
+from test_sim_checks_reference import GRID, _plan_segments, scenarios, trajectory
+
+PARAMS = Params()
+DT = PARAMS.dt
+LEVEL = PARAMS.vehicle_width
+
+
+def _crossings(y0, vy0, starts, accs, level):
+    out, y, vy = [], y0, vy0
+    for start, end, a in zip(starts, [*starts[1:], DT], accs, strict=True):
+        c = y - level
+        if a == 0.0:
+            roots = [-c / vy] if vy != 0.0 else []
+        else:
+            disc = vy * vy - 2.0 * a * c
+            roots = [] if disc < 0.0 else [(-vy - np.sqrt(disc)) / a, (-vy + np.sqrt(disc)) / a]
+        out += [start + r for r in roots if 0.0 < r < end - start]
+        h = end - start
+        y, vy = y + vy * h + 0.5 * a * h * h, vy + a * h
+    return out
+
+
+@pytest.mark.parametrize(("seed", "planned"), [(21, False), (22, True)])
+def test_own_lane_checks_match_the_dense_reference(seed, planned):
+    """Collision: ``|x0 − x| < length`` while ``y < w_v``; violation: ``|x0 − x| < p_m`` at those instants, until the
+    lane change completes; the reported minimum gap is the exact minimum of ``x0 − x`` over those instants."""
+    _, _, lon, lat, _, plan, world = scenarios(seed, bsz=300, planned=planned)
+    rng = np.random.default_rng(seed)
+    n = len(world["ex"])
+    world["ey"][:] = LEVEL + rng.uniform(-0.3, 0.3, n)  # around the own lane's edge
+    lat = Motion.free(world["ey"], world["evy"], lat.acc[:, 0], DT)
+    if plan is not None:  # the planned rows' lateral motion moved by the same offset
+        rows, plan_lon, plan_lat = plan
+        shift = world["ey"][rows] - plan_lat.x[:, 0]
+        plan = (rows, plan_lon, Motion(t=plan_lat.t, x=plan_lat.x + shift[:, None], v=plan_lat.v, acc=plan_lat.acc))
+    x0 = world["ex"] + rng.uniform(-3.0, 12.0, n)
+    v0 = np.maximum(world["evx"] + rng.normal(0.0, 3.0, n), 0.0)
+    a1, a2 = rng.uniform(-8.0, 2.5, n), rng.uniform(-8.0, 2.5, n)
+    t_sw = np.where(rng.uniform(size=n) < 0.4, rng.uniform(0.0, DT, n), DT)
+    l0 = Fleet.switched(x0, v0, a1, t_sw, a2, DT).motion(...)
+    present = rng.uniform(size=n) < 0.9
+    completed = rng.uniform(size=n) < 0.3
+    collided, violated, min_gap = own_lane_checks(PARAMS, lon, lat, plan, l0, present, completed)
+    counts = dict(collided=0, violated=0, completed_close=0, skipped=0, empty=0)
+    for i in range(n):
+        if not present[i]:
+            assert not collided[i] and not violated[i] and min_gap[i] == np.inf
+            continue
+        (sx, ax), (sy, ay) = world["ego"][i]
+        cross = _crossings(world["ey"][i], world["evy"][i], sy, ay, LEVEL)
+        t = np.unique(np.concatenate([GRID, cross]))
+        ex = trajectory(world["ex"][i], world["evx"][i], sx, ax, t)[0]
+        ey = trajectory(world["ey"][i], world["evy"][i], sy, ay, t, clamp=False)[0]
+        segs = ([0.0, t_sw[i]], [a1[i], a2[i]]) if t_sw[i] < DT else ([0.0], [a1[i]])
+        gap = trajectory(x0[i], v0[i], *segs, t)[0] - ex
+        win = (ey < LEVEL) | np.isin(t, cross)
+        lo, hi = gap[win].min(initial=np.inf), gap[win].max(initial=-np.inf)
+        counts["empty"] += lo == np.inf
+        assert min_gap[i] == pytest.approx(lo, abs=1e-7), i
+        edges = (lo - PARAMS.vehicle_length, hi + PARAMS.vehicle_length, lo - PARAMS.p_m, hi + PARAMS.p_m)
+        if min(abs(e) for e in edges) < 1e-7:
+            counts["skipped"] += 1
+            continue
+        col = lo < PARAMS.vehicle_length and hi > -PARAMS.vehicle_length
+        close = lo < PARAMS.p_m and hi > -PARAMS.p_m
+        assert (bool(collided[i]), bool(violated[i])) == (col, close and not completed[i]), i
+        counts["collided"] += col
+        counts["violated"] += close and not completed[i]
+        counts["completed_close"] += close and completed[i] and not col
+    assert counts["collided"] >= 5 and counts["violated"] >= 5 and counts["completed_close"] >= 3
+    assert counts["empty"] >= 5 and counts["skipped"] <= 3, counts
+
+
+def test_executing_an_issued_plan_from_its_own_start_reproduces_it():
+    """``issued`` turns a decision's abort knots into per-segment accelerations; ``executed_motion`` integrates them
+    from the ego's state (stopping at rest): from the plan's own start state it reproduces the plan's knots, and its
+    motion matches segment-by-segment integration between them. The other rows drive their constant command."""
+    rng = np.random.default_rng(3)
+    n, rows = 12, np.array([1, 4, 5, 9])
+    ex, evx = rng.uniform(-5, 5, n), rng.uniform(0.0, 30.0, n)
+    evx[4] = 0.2  # stops inside the plan (at a knot: the plans' stops are knots)
+    ey, evy = rng.uniform(0, 3.5, n), rng.uniform(-1, 1, n)
+    parts = [_plan_segments(rng, ex[r], evx[r], ey[r], evy[r]) for r in rows]
+    knots = np.stack([p[0] for p in parts])
+    knots[0, 2] = knots[0, 1]  # a repeated knot: a zero-length segment
+    parts[0] = _plan_segments(np.random.default_rng(0), ex[1], evx[1], ey[1], evy[1], knots[0])
+    ax, ay = np.array([p[1] for p in parts]), np.array([p[2] for p in parts])
+    px, vx, py, vy = (np.stack([p[i] for p in parts]) for i in (3, 4, 5, 6))
+    a_x, a_y = rng.uniform(-8.0, 2.5, n), rng.uniform(-1.5, 1.5, n)
+    decision = SimpleNamespace(
+        a_x=a_x, a_y=a_y, completing=np.arange(n) % 3 == 0, abort_motion=lambda: (rows, knots, px, vx, py, vy)
+    )
+    cmd = issued(decision)
+    np.testing.assert_array_equal(cmd.rows, rows)
+    np.testing.assert_array_equal(cmd.completing, decision.completing)
+    assert (cmd.ax_seg[0, 1] == 0.0) and (cmd.ay_seg[0, 1] == 0.0)  # the zero-length segment
+    lon, lat, plan = executed_motion(cmd, (ex, ey, evx, evy), DT)
+    ref_lon, ref_lat = Motion.constant(ex, evx, a_x, DT), Motion.free(ey, evy, a_y, DT)
+    for f in ("t", "x", "v", "acc"):
+        np.testing.assert_array_equal(getattr(lon, f), getattr(ref_lon, f))
+        np.testing.assert_array_equal(getattr(lat, f), getattr(ref_lat, f))
+    got_rows, plan_lon, plan_lat = plan
+    np.testing.assert_array_equal(got_rows, rows)
+    np.testing.assert_allclose(plan_lon.x, px, rtol=0, atol=1e-9)
+    np.testing.assert_allclose(plan_lon.v, vx, rtol=0, atol=1e-9)
+    np.testing.assert_allclose(plan_lat.x, py, rtol=0, atol=1e-9)
+    np.testing.assert_allclose(plan_lat.v, vy, rtol=0, atol=1e-9)
+    xq = plan_lon.at(np.broadcast_to(GRID, (4, GRID.size)))[0]
+    yq = plan_lat.at(np.broadcast_to(GRID, (4, GRID.size)))[0]
+    for k, r in enumerate(rows):
+        np.testing.assert_allclose(xq[k], trajectory(ex[r], evx[r], list(knots[k, :-1]), list(ax[k]), GRID)[0],
+                                   rtol=0, atol=1e-9)  # fmt: skip
+        ref_y = trajectory(ey[r], evy[r], list(knots[k, :-1]), list(ay[k]), GRID, clamp=False)[0]
+        np.testing.assert_allclose(yq[k], ref_y, rtol=0, atol=1e-9)
+    assert (vx[1:2, 1:] == 0.0).any()  # the plan that stops
+
+
+def test_cruise_and_a_decision_without_aborts():
+    c = cruise(3)
+    np.testing.assert_array_equal(c.a_x, 0.0)
+    np.testing.assert_array_equal(c.a_y, 0.0)
+    assert c.rows.size == 0 and c.rows.dtype == np.intp and not c.completing.any() and c.completing.shape == (3,)
+    assert c.knots is None and c.ax_seg is None and c.ay_seg is None
+    lon, lat, plan = executed_motion(c, (np.zeros(3), np.ones(3), np.full(3, 20.0), np.zeros(3)), DT)
+    assert plan is None
+    np.testing.assert_allclose(lon.x[:, -1], 2.0)
+    np.testing.assert_allclose(lat.x[:, -1], 1.0)
+    empty = np.zeros(0, np.intp)
+    decision = SimpleNamespace(a_x=np.ones(2), a_y=np.zeros(2), completing=np.ones(2, bool),
+                               abort_motion=lambda: (empty, np.zeros((0, 5)), *(np.zeros((0, 5)),) * 4))  # fmt: skip
+    cmd = issued(decision)
+    assert cmd.ax_seg is None and cmd.ay_seg is None and cmd.completing.all()
+
+
+def _batch(samples=400):
+    return paper_scenarios("CV_all", 3, 4.0, samples, np.random.default_rng(0))
+
+
+def test_drawn_l0_lies_in_its_documented_ranges():
+    batch, cfg = _batch(), SimConfig()
+    out = with_own_lane(batch, 7, cfg, PARAMS)
+    gap = out.l0_x - batch.ego_x
+    assert (gap >= cfg.l0_gap_min_m).all() and (gap <= cfg.l0_gap_max_m).all()
+    assert gap.min() < cfg.l0_gap_min_m + 2.0 and gap.max() > cfg.l0_gap_max_m - 2.0  # spread over the range
+    spread = out.l0_v - batch.ego_vx
+    assert (spread >= 0.0).all() and (spread <= cfg.l0_speed_spread_mps).all() and spread.max() > 2.5
+    np.testing.assert_array_equal(out.l0_profile_t[:, 0], 0.0)
+    assert (out.l0_profile_t[:, 1] >= 0.0).all() and (out.l0_profile_t[:, 1] <= cfg.l0_brake_window_s).all()
+    assert out.l0_profile_t[:, 1].max() > cfg.l0_brake_window_s - 0.1
+    np.testing.assert_array_equal(out.l0_profile_a, np.stack([np.zeros(len(gap)), np.full(len(gap), -PARAMS.a_x_d)], 1))
+    # Deterministic per (seed, scenario); another seed draws otherwise; a given L0 is kept.
+    again = with_own_lane(batch, 7, cfg, PARAMS)
+    np.testing.assert_array_equal(again.l0_x, out.l0_x)
+    assert not np.array_equal(with_own_lane(batch, 8, cfg, PARAMS).l0_x, out.l0_x)
+    assert with_own_lane(out, 9, cfg, PARAMS) is out
+    soft = with_own_lane(batch, 7, SimConfig(l0_decel_mps2=3.0), PARAMS)
+    np.testing.assert_array_equal(soft.l0_profile_a[:, 1], -3.0)
+    # The falsifier's world key replaces the scenario id as the draws' key.
+    keyed = dataclasses.replace(batch, world_key=batch.scenario_id[::-1].copy())
+    np.testing.assert_array_equal(with_own_lane(keyed, 7, cfg, PARAMS).l0_x - batch.ego_x, gap[::-1])
+
+
+def test_l0_motion_follows_its_profile_over_a_period():
+    """L0 cruises, then brakes from its profile's instant: the period's motion against segment-by-segment
+    integration, for periods before, across and after the switch."""
+    batch = with_own_lane(_batch(50), 3, SimConfig(l0_brake_window_s=0.3), PARAMS)
+    x, v = batch.l0_x, batch.l0_v
+    t_brake = batch.l0_profile_t[:, 1]
+    for t in (0.0, 0.1, 0.2, 0.3):
+        motion, (x1, v1) = l0_motion(batch, t, x, v, DT)
+        xq, vq = motion.at(np.broadcast_to(GRID, (len(x), GRID.size)))
+        for i in range(len(x)):
+            rel = t_brake[i] - t
+            segs = (
+                ([0.0], [-PARAMS.a_x_d])
+                if rel <= 1e-9
+                else ([0.0, rel], [0.0, -PARAMS.a_x_d])
+                if rel < DT
+                else ([0.0], [0.0])
+            )
+            ref_x, ref_v = trajectory(x[i], v[i], *segs, GRID)
+            np.testing.assert_allclose(xq[i], ref_x, rtol=0, atol=1e-9)
+            np.testing.assert_allclose(vq[i], ref_v, rtol=0, atol=1e-9)
+            assert x1[i] == pytest.approx(ref_x[-1], abs=1e-9) and v1[i] == pytest.approx(ref_v[-1], abs=1e-9)
+        x, v = x1, v1
