@@ -200,3 +200,93 @@ def test_l0_motion_follows_its_profile_over_a_period():
             np.testing.assert_allclose(vq[i], ref_v, rtol=0, atol=1e-9)
             assert x1[i] == pytest.approx(ref_x[-1], abs=1e-9) and v1[i] == pytest.approx(ref_v[-1], abs=1e-9)
         x, v = x1, v1
+
+
+def _situation(b=300, m=5, k=3):
+    from test_realworld import measured
+
+    s = measured(np.random.default_rng(11), PARAMS, b, m, k)
+    return dataclasses.replace(s, err_f=None, err_chain=None, err_own=None)
+
+
+def _normalized(meas, true, bound):
+    """The drawn error as a share of its bound, in [-1, 1] (nan where the bound is 0)."""
+    with np.errstate(invalid="ignore", divide="ignore"):
+        return (meas - true) / bound
+
+
+def test_measurement_errors_lie_inside_their_bounds_and_are_independent():
+    """Each position and speed is off by a uniform share of its bound (speeds kept >= 0), drawn afresh for every
+    vehicle, coordinate, step and scenario key: no two coordinates share a draw; the bounds are those of
+    ``SensingBounds.apply`` (by connectivity)."""
+    from safelane.shield import SensingBounds
+    from safelane.sim.realworld import measure
+
+    s = _situation()
+    bounds = SensingBounds()
+    batch = SimpleNamespace(scenario_id=np.arange(len(s.f_x)) + 100, world_key=None)
+    out = measure(5, batch, 3, s, bounds)
+    want = bounds.apply(s)
+    for f in ("err_f", "err_chain", "err_own"):
+        np.testing.assert_array_equal(getattr(out, f), getattr(want, f))
+    present = np.isfinite(s.own_x)
+    shares = {
+        "f_x": _normalized(out.f_x, s.f_x, want.err_f[:, 0]),
+        "chain_x": _normalized(out.chain_x, s.chain_x, want.err_chain[..., 0]),
+        "own_x": _normalized(out.own_x[present], s.own_x[present], want.err_own[..., 0][present]),
+    }
+    for name, (meas, true, err) in {
+        "f_v": (out.f_v, s.f_v, want.err_f[:, 1]),
+        "chain_v": (out.chain_v, s.chain_v, want.err_chain[..., 1]),
+        "own_v": (out.own_v[present], s.own_v[present], want.err_own[..., 1][present]),
+    }.items():
+        assert (meas >= 0.0).all()
+        unclipped = meas > 0.0
+        shares[name] = np.where(unclipped, _normalized(meas, true, err), np.nan)
+        assert (true[~unclipped] <= err[~unclipped] + 1e-12).all()  # clipped only where the bound reaches 0
+    for name, share in shares.items():
+        share = share[np.isfinite(share)]
+        assert share.size > 100, name
+        assert (np.abs(share) <= 1.0 + 1e-9).all(), name
+        assert share.min() < -0.9 and share.max() > 0.9 and abs(share.mean()) < 0.15, name
+    # Absent own-lane leaders stay absent (inf, speed 0).
+    assert (out.own_x[~present] == np.inf).all() and (out.own_v[~present] == 0.0).all()
+    # No two coordinates share their draws: the shares of different coordinates / vehicles / kinds differ.
+    cols = [shares["f_x"], shares["f_v"], *(shares["chain_x"].T), *(shares["chain_v"].T)]
+    for i in range(len(cols)):
+        for j in range(i + 1, len(cols)):
+            both = np.isfinite(cols[i]) & np.isfinite(cols[j])
+            assert not np.allclose(cols[i][both], cols[j][both]), (i, j)
+    own_x = _normalized(out.own_x, s.own_x, want.err_own[..., 0])
+    for c in range(own_x.shape[1]):
+        both = present[:, c]
+        for other in (shares["f_x"], *(shares["chain_x"].T)):
+            assert not np.allclose(own_x[both, c], other[both])
+    # Another step, seed or key draws otherwise; the same ones draw the same.
+    same = measure(5, batch, 3, s, bounds)
+    np.testing.assert_array_equal(same.chain_x, out.chain_x)
+    for other in (measure(5, batch, 4, s, bounds), measure(6, batch, 3, s, bounds),
+                  measure(5, SimpleNamespace(scenario_id=batch.scenario_id, world_key=batch.scenario_id + 1), 3, s,
+                          bounds)):  # fmt: skip
+        assert not np.allclose(other.chain_x, out.chain_x) and not np.allclose(other.f_v, out.f_v)
+    keyed = measure(5, SimpleNamespace(scenario_id=np.zeros(len(s.f_x), int), world_key=batch.scenario_id), 3, s,
+                    bounds)  # fmt: skip
+    np.testing.assert_array_equal(keyed.chain_x, out.chain_x)
+
+
+@pytest.mark.parametrize("share", [0.0, 0.5, 1.0])
+def test_edge_share_puts_that_share_of_the_draws_at_the_bounds_ends(share):
+    from safelane.shield import SensingBounds
+    from safelane.sim.realworld import measure
+
+    s = _situation(400)
+    bounds = SensingBounds()
+    batch = SimpleNamespace(scenario_id=np.arange(len(s.f_x)), world_key=None)
+    out = measure(1, batch, 0, s, bounds, edge_share=share)
+    err = bounds.apply(s).err_chain[..., 0]
+    frac = _normalized(out.chain_x, s.chain_x, err)
+    at_end = np.isclose(np.abs(frac), 1.0, rtol=0, atol=1e-9)
+    assert at_end.mean() == pytest.approx(share, abs=0.05)
+    assert (np.abs(frac) <= 1.0 + 1e-9).all()
+    if share == 1.0:  # both ends, evenly
+        assert (frac > 0).mean() == pytest.approx(0.5, abs=0.06)
