@@ -1,0 +1,77 @@
+"""``ego_checks`` at the edges of its shortcuts, each expected outcome derived by hand from constant-acceleration
+kinematics: the near-pair filter at its bound, an ego exactly on a lateral level (the windows are ``y > level``,
+strict), a pair that stops inside the period while the ego stays beyond both levels."""
+
+from __future__ import annotations
+
+from types import SimpleNamespace
+
+import numpy as np
+import pytest
+
+from safelane import Params
+from safelane.sim.checks import ego_checks
+from safelane.sim.kinematics import Fleet, Motion
+
+PARAMS = Params()
+DT = PARAMS.dt
+CONFLICT = PARAMS.y_safe + 1e-9
+OVERLAP = PARAMS.lane_width - PARAMS.vehicle_width
+
+
+def _run(ego_x, ego_v, ego_a, ego_y, others_x, others_v, others_a, vy=0.0, ay=0.0):
+    lon = Motion.constant(np.array([ego_x]), np.array([ego_v]), np.array([ego_a]), DT)
+    lat = Motion.free(np.array([ego_y]), np.array([vy]), np.array([ay]), DT)
+    x = np.asfortranarray([others_x], float)
+    v = np.asfortranarray([others_v], float)
+    others = Fleet.constant(x, v, np.asfortranarray([others_a], float), DT)
+    b = SimpleNamespace(valid=np.ones(x.shape, bool))
+    s = SimpleNamespace(x=x, v=v, ego=(np.array([ego_x]), np.array([ego_y]), np.array([ego_v]), np.array([vy])),
+                        min_gap_f=np.full(1, np.inf), min_gap_l1=np.full(1, np.inf))  # fmt: skip
+    collided, violated, gap_f, gap_l1 = ego_checks(b, PARAMS, s, lon, lat, others, CONFLICT, OVERLAP)
+    return bool(collided[0]), bool(violated[0]), float(gap_f[0]), float(gap_l1[0])
+
+
+def test_a_follower_closing_at_the_filters_bound_is_still_checked():
+    """The ego brakes at a_x_d = 8, F (1 m/s faster) accelerates at 2.5, the row's largest |acceleration|: the gap
+    ego − F shrinks by exactly the filter's bound, |Δv| dt + (8 + 2.5) dt²/2 = 0.1525 m, to its minimum at dt. From
+    0.1525 m − 5e-7 m above the margin's edge it ends 5e-7 m inside: a violation the filter must not drop."""
+    gap0 = PARAMS.p_m - 1e-9 + 0.1525 - 5e-7
+    collided, violated, gap_f, gap_l1 = _run(0.0, 20.0, -8.0, 3.5, [-gap0, 60.0], [21.0, 20.0], [2.5, 0.0])
+    assert (collided, violated) == (False, True)
+    assert gap_f == pytest.approx(gap0 - 0.1525, abs=1e-12)
+    # L1 stayed far: its gap is sampled at the period's ends, 60 m and 60 m + what the braking ego lost: 0.04 m.
+    assert gap_l1 == 60.0
+
+
+@pytest.mark.parametrize(
+    ("ego_y", "expect"),
+    [
+        (OVERLAP + 1e-6, (True, True)),  # beyond both levels: contact and violation count
+        (OVERLAP, (False, True)),  # exactly on the overlap level: beyond the conflict level only
+        (CONFLICT, (False, False)),  # exactly on the conflict level: nothing counts
+    ],
+)
+@pytest.mark.parametrize("l1_v", [30.0, 0.3])  # L1 cruising, or stopping inside the period (the stop knots' path)
+def test_an_ego_exactly_on_a_level_is_not_beyond_it(ego_y, expect, l1_v):
+    """The ego holds its lateral position; L1 is 3 m ahead (overlapping footprints, inside p_m) all period."""
+    collided, violated, _, gap_l1 = _run(
+        0.0, l1_v, 0.0, ego_y, [-40.0, 3.0], [l1_v, l1_v], [0.0, -8.0 if l1_v < 1 else 0.0]
+    )
+    assert (collided, violated) == expect
+    if expect[1]:
+        assert gap_l1 <= 3.0
+    else:
+        assert gap_l1 == np.inf
+
+
+def test_a_stop_inside_the_period_with_the_ego_settled_in_the_target_lane():
+    """Ego at 1 m/s braking at 8: stops after 0.125 s > dt, covering 0.1 − 0.04 = 0.06 m. L1 at 0.4 m/s braking at 8
+    stops after 0.05 s, covering 0.01 m, from 7.04 m ahead: the gap falls from 7.04 to 7.04 + 0.01 − 0.06 = 6.99 m,
+    monotonically (the ego is always the faster), so its minimum 6.99 m < p_m = 7 is a violation, not a contact."""
+    collided, violated, _, gap_l1 = _run(0.0, 1.0, -8.0, 3.5, [-40.0, 7.04], [0.0, 0.4], [0.0, -8.0])
+    assert (collided, violated) == (False, True)
+    assert gap_l1 == pytest.approx(6.99, abs=1e-12)
+    collided, violated, _, gap_l1 = _run(0.0, 1.0, -8.0, 3.5, [-40.0, 7.06], [0.0, 0.4], [0.0, -8.0])
+    assert (collided, violated) == (False, False)
+    assert gap_l1 == pytest.approx(7.01, abs=1e-12)
