@@ -2,11 +2,20 @@
 
 A straightforward re-implementation of :mod:`safelane.sim.engine`'s step — assessment, worst case by variant,
 expert planner, supervisor (proceed / hesitate / abort with the completion guard and the within-period check),
-leader and follower behaviours, exact integration, per-period checks — calling ``worst_case_leader_decel``,
-``plan_evasion`` and ``EvasionPlan.state`` with Python floats per step, as one would without batching. It is
-the baseline of ``benchmarks/bench_sim.py`` and, in ``tests/test_sim_scalar_loop.py``, an independent check of
-the engine's decisions. Its checks are exact pair minima over each period, lateral-windowed only during an abort
-(where they are sampled at 11 instants), so near-misses may be counted differently from the engine.
+leader and follower behaviours, exact integration, per-period checks — in Python floats, one scenario at a time.
+Its checks are exact pair minima over each period, lateral-windowed only during an abort (where they are sampled
+at 11 instants), so near-misses may be counted differently from the engine.
+
+The loop (:func:`scenario_loop`) is a generator: the safety maths it needs — L1's worst case from the chain, an
+evasion plan (verdict and motion), a follower's least deceleration (Eq. 3), a responsible acceleration — it asks
+for by yielding a request ``(kind, args)`` and is sent the answer. Two oracles answer:
+
+* :func:`loop_scenario` — the library's scalar API (``worst_case_leader_decel``, ``plan_evasion``) and the closed
+  forms below, one call per request, as one would write without batching: the baseline of
+  ``benchmarks/bench_sim.py``, and in ``tests/test_sim_scalar_loop.py`` a check of the engine's batching;
+* ``scalar_loop_reference.reference_loop`` — the independent numeric reference (``tests/reference.py``:
+  time stepping and bisection, no closed form of the library), with many scenarios run in lockstep so that each
+  round of requests is one batched reference call: a check of the maths as well.
 """
 
 from __future__ import annotations
@@ -106,8 +115,53 @@ def _responsible_accel(a_wanted, slack, v_f, v_l, lead_decel, prm, dt):
     return a_wanted if bound > a_wanted else max(bound - 1e-9, -prm.a_x_d)
 
 
-def loop_scenario(b, i: int, prm: Params, steps: int, open_decel=0.5, open_gap=3.0, window=5, thr=0.2) -> dict:
-    """One scenario of the batch ``b`` through the closed loop, one Python float at a time."""
+def _leader_accel(task, slack, v_f, v_l, d, own, prm, dt):
+    """A connected leader's acceleration: its task while responsible (braking at ``own`` against the vehicle
+    ahead at ``d``), else the largest responsible one, else ``-own``."""
+    want = min(task, _responsible_bound(slack, v_f, v_l, d, prm, dt, own) - 1e-9)
+    xf, vf = _advance(0.0, v_f, want, dt)
+    xl, vl = _advance(slack, v_l, -d, dt)
+    ok = _pair_min_gap(slack, v_f, want, v_l, -d, dt) >= -1e-9
+    ok = ok and _min_follow_decel(xl - xf, vf, vl, d) <= own
+    return max(want if ok else -own, -own)
+
+
+def library_answer(prm: Params, kind: str, args):
+    """One request of :func:`scenario_loop` answered by the library's scalar API and the closed forms above."""
+    if kind == "chain":  # L1's worst case from the connected chain (Eqs. 1-3), and every link's bound
+        x, v, promise, human = args
+        bounds = [prm.a_x_d]
+        for j in range(len(promise) - 1, -1, -1):  # the chain scan, written out: Eq. 3 link by link
+            margin = prm.p_m_human if human[j] else prm.p_m
+            z = _min_follow_decel(x[j + 1] - x[j] - margin, v[j], v[j + 1], bounds[0])
+            bounds.insert(0, min(max(promise[j], z), prm.a_x_d))
+        return float(worst_case_leader_decel(x, v, promise, prm, human_driven=human)), bounds
+    if kind == "plan":  # an evasion plan (Eqs. 4-9): .feasible and .state(t)
+        return plan_evasion(*args, prm)
+    if kind == "follow":  # least deceleration keeping the margin (slack) to a leader braking at a_l (Eq. 3)
+        return _min_follow_decel(*args)
+    if kind == "responsible":  # the largest responsible acceleration up to `wanted` (braking at a_x_d after)
+        return _responsible_accel(*args, prm, prm.dt)
+    if kind == "leaders":  # each connected leader's acceleration (braking at its own bound after)
+        return [_leader_accel(*leader, prm, prm.dt) for leader in args]
+    raise ValueError(f"unknown request {kind!r}")
+
+
+def loop_scenario(b, i: int, prm: Params, steps: int, **behaviour) -> dict:
+    """One scenario of the batch ``b`` through the closed loop on the library's scalar API."""
+    loop = scenario_loop(b, i, prm, steps, **behaviour)
+    answer = None
+    while True:
+        try:
+            kind, args = loop.send(answer)
+        except StopIteration as done:
+            return done.value
+        answer = library_answer(prm, kind, args)
+
+
+def scenario_loop(b, i: int, prm: Params, steps: int, open_decel=0.5, open_gap=3.0, window=5, thr=0.2):
+    """One scenario of the batch ``b`` through the closed loop, one Python float at a time; a generator yielding
+    the requests listed in the module docstring and returning the outcome row."""
     dt = prm.dt
     variant = VARIANTS[VARIANT_NAMES[int(b.variant[i])]]
     n = int(b.n_connected[i])
@@ -120,7 +174,7 @@ def loop_scenario(b, i: int, prm: Params, steps: int, open_decel=0.5, open_gap=3
     f_conn, f_aggr_true, decel_last = bool(b.connected[i, 0]), bool(b.follower_aggressive[i]), float(b.decel_last[i])
     ex, ey, evx, evy = float(b.ego_x[i]), float(b.ego_y[i]), float(b.ego_vx[i]), float(b.ego_vy[i])
     gap0 = ex - x[0]
-    plan = plan_evasion(ex, ey, evx, evy, x[1], v[1], prm.a_x_d, x[0], v[0], True, prm)
+    plan = yield "plan", (ex, ey, evx, evy, x[1], v[1], prm.a_x_d, x[0], v[0], True)
     plan_t0, t, completed, t_complete = 0.0, 0.0, False, math.nan
     history, aggressive, latched = [], True, False
     collided = violated = leader_collided = False
@@ -135,12 +189,13 @@ def loop_scenario(b, i: int, prm: Params, steps: int, open_decel=0.5, open_gap=3
             slope = sum(h * s for h, s in zip(history, times, strict=True)) / norm
             latched = latched or slope >= thr
             aggressive = latched or (aggressive and slope > -thr)
-        # Worst case by variant.
-        if variant.uses_chain and n >= 1:
-            chain = worst_case_leader_decel(x[1:], v[1:], promise_d[1 : n + 1], prm, human_driven=human[1 : n + 1])
-            l1_decel = float(chain)
+        # The chain (Eqs. 1-3): L1's worst case, and every link's bound for the leaders' behaviour below.
+        if n >= 1:
+            chain_l1, link_bounds = yield "chain", (x[1:], v[1:], promise_d[1 : n + 1], human[1 : n + 1])
         else:
-            l1_decel = prm.a_x_d
+            chain_l1, link_bounds = prm.a_x_d, [prm.a_x_d]
+        # Worst case by variant.
+        l1_decel = chain_l1 if variant.uses_chain else prm.a_x_d
         f_aggr = False if (variant.uses_follower_v2x and f_conn) else (aggressive if variant.uses_assessment else True)
         # Expert planner.
         a_x = 0.3 * (0.5 * (x[1] + x[0]) - ex) + 0.8 * (v[1] - evx)
@@ -149,7 +204,7 @@ def loop_scenario(b, i: int, prm: Params, steps: int, open_decel=0.5, open_gap=3
         # Supervisor.
         behaviour, completing = 2, False
         if completed:
-            a_x = _responsible_accel(a_x, x[1] - ex - prm.p_m, evx, v[1], l1_decel, prm, dt)
+            a_x = yield "responsible", (a_x, x[1] - ex - prm.p_m, evx, v[1], l1_decel)
             a_y = min(max(0.8 * (prm.lane_width - ey) - 1.6 * evy, -prm.a_y_m), prm.a_y_m)
             behaviour = -1
         else:
@@ -164,10 +219,10 @@ def loop_scenario(b, i: int, prm: Params, steps: int, open_decel=0.5, open_gap=3
                     _pair_min_gap(x[1] - ex - prm.p_m, evx, a_x, v[1], -l1_decel, dt) >= -1e-9
                     and _pair_min_gap(ex - x[0] - prm.p_m, v[0], a_f, evx, a_x, dt) >= -1e-9
                 )
-                candidate = plan_evasion(nx, ny, nvx, nvy, lx, lv, l1_decel, fx, fv, f_aggr, prm)
+                candidate = yield "plan", (nx, ny, nvx, nvy, lx, lv, l1_decel, fx, fv, f_aggr)
                 if ny >= prm.y_boundary:
-                    ok = ok and _min_follow_decel(lx - nx - prm.p_m, nvx, lv, l1_decel) <= prm.a_x_d
-                    ok = ok and _min_follow_decel(nx - fx - prm.p_m, fv, nvx, prm.a_x_d) <= prm.a_x_d
+                    ok = ok and (yield "follow", (lx - nx - prm.p_m, nvx, lv, l1_decel)) <= prm.a_x_d
+                    ok = ok and (yield "follow", (nx - fx - prm.p_m, fv, nvx, prm.a_x_d)) <= prm.a_x_d
                 else:
                     ok = ok and bool(candidate.feasible)
                 if ok:
@@ -176,37 +231,26 @@ def loop_scenario(b, i: int, prm: Params, steps: int, open_decel=0.5, open_gap=3
             counts[behaviour] += 1
         # Others act: each connected leader keeps its task while it could still keep its margin braking at its own
         # bound (never above the smallest it has had) against the vehicle ahead at that one's bound.
-        bounds = [prm.a_x_d]
-        for j in range(n, 0, -1):  # the chain scan, written out: L(N+1) at a_x_d, then Eq. 3 link by link
-            margin = prm.p_m_human if human[j] else prm.p_m
-            z = _min_follow_decel(x[j + 1] - x[j] - margin, v[j], v[j + 1], bounds[0])
-            bounds.insert(0, min(max(promise_d[j], z), prm.a_x_d))
-        bounds.insert(0, prm.a_x_d)  # F's slot: unused
+        bounds = [prm.a_x_d, *link_bounds]  # F's slot (unused), L1..LN, L(N+1) at a_x_d
         acc = [0.0] * k
-        for j in range(1, k):
-            if j == n + 1:
-                acc[j] = -decel_last if t + 1e-9 >= 0.0 else 0.0
-                continue
+        leaders = []
+        for j in range(1, n + 1):
             cap[j] = min(cap[j], bounds[j])
-            own, d = cap[j], bounds[j + 1]
             margin = prm.p_m_human if human[j] else prm.p_m
-            slack = x[j + 1] - x[j] - margin
             task = min(max(0.5 * (v_desired[j] - v[j]), -promise_d[j]), promise_a[j])
-            want = min(task, _responsible_bound(slack, v[j], v[j + 1], d, prm, dt, own) - 1e-9)
-            xf, vf = _advance(0.0, v[j], want, dt)
-            xl, vl = _advance(slack, v[j + 1], -d, dt)
-            ok = _pair_min_gap(slack, v[j], want, v[j + 1], -d, dt) >= -1e-9
-            ok = ok and _min_follow_decel(xl - xf, vf, vl, d) <= own
-            acc[j] = max(want if ok else -own, -own)
+            leaders.append((task, x[j + 1] - x[j] - margin, v[j], v[j + 1], bounds[j + 1], cap[j]))
+        if leaders:
+            acc[1 : n + 1] = yield "leaders", leaders
+        acc[n + 1] = -decel_last if t + 1e-9 >= 0.0 else 0.0
         if f_aggr_true:
             wanted = min(max(0.5 * (x[1] - x[0] - prm.p_m - 1.0) + 1.5 * (v[1] - v[0]), -prm.a_x_d), prm.a_x_a)
         elif ex - x[0] < gap0 + open_gap:
             wanted = -open_decel
         else:
             wanted = min(max(evx - v[0], -open_decel), open_decel)
-        a_f = _responsible_accel(wanted, x[1] - x[0] - prm.p_m, v[0], v[1], prm.a_x_d, prm, dt)
+        a_f = yield "responsible", (wanted, x[1] - x[0] - prm.p_m, v[0], v[1], prm.a_x_d)
         if ex - x[0] > 0.0 and (not f_aggr_true or completed):
-            a_f = _responsible_accel(a_f, ex - x[0] - prm.p_m, v[0], evx, prm.a_x_d, prm, dt)
+            a_f = yield "responsible", (a_f, ex - x[0] - prm.p_m, v[0], evx, prm.a_x_d)
         acc[0] = a_f
         # Exact integration (an abort follows the verified plan) and continuous-time checks; the abort's
         # motion switches acceleration inside the period, so its gaps are checked at 11 instants instead.
