@@ -11,6 +11,9 @@ from safelane import Params
 from safelane.sim.kinematics import Fleet, Motion, crossing_knots, extrema, gap_extrema, windowed_gap_extrema
 from test_sim_checks_reference import trajectory
 
+#: The checks and motions divide only where it is safe (or under errstate): no floating-point warning escapes.
+pytestmark = pytest.mark.filterwarnings("error")
+
 PARAMS = Params()
 DT = PARAMS.dt
 TQ = np.linspace(0.0, DT, 1001)

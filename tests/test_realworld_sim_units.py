@@ -17,6 +17,9 @@ from safelane.sim.realworld import cruise, executed_motion, issued, l0_motion, o
 from safelane.sim.scenario import paper_scenarios
 from test_sim_checks_reference import GRID, _plan_segments, scenarios, trajectory
 
+#: The checks and motions divide only where it is safe (or under errstate): no floating-point warning escapes.
+pytestmark = pytest.mark.filterwarnings("error")
+
 PARAMS = Params()
 DT = PARAMS.dt
 LEVEL = PARAMS.vehicle_width

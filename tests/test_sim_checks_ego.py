@@ -13,6 +13,9 @@ from safelane import Params
 from safelane.sim.checks import ego_checks
 from safelane.sim.kinematics import Fleet, Motion
 
+#: The checks and motions divide only where it is safe (or under errstate): no floating-point warning escapes.
+pytestmark = pytest.mark.filterwarnings("error")
+
 PARAMS = Params()
 DT = PARAMS.dt
 CONFLICT = PARAMS.y_safe + 1e-9

@@ -13,6 +13,9 @@ from safelane import Params
 from safelane.sim.checks import lane_checks
 from safelane.sim.kinematics import Fleet
 
+#: The checks and motions divide only where it is safe (or under errstate): no floating-point warning escapes.
+pytestmark = pytest.mark.filterwarnings("error")
+
 PARAMS = Params()
 DT = PARAMS.dt
 M = PARAMS.p_m
