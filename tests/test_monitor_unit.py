@@ -124,3 +124,22 @@ def test_breach_none():
     assert none.first_s.shape == (3,) and np.isnan(none.first_s).all()
     assert none.any.tolist() == [False, False, False]
     assert BREACH_KINDS == ("l1_decel", "leader_bound", "last_decel", "follower", "stale_v2x")
+
+
+def test_exactly_tol_m_beyond_the_worst_case_is_still_inside():
+    """Stopped vehicles (and an F whose limit is 0 at rest) stay exactly where they are under the assumed worst case,
+    so the boundary is exact in floats: ``TOL_M`` behind (ahead for F) is inside; a little more is a breach."""
+    b, m = 4, 3
+    x = np.array([[10.0, 30.0, 50.0]] * b)
+    last = Snapshot(
+        chain_x=x, chain_v=np.zeros((b, m)), bounds=np.full((b, m), 3.0), n_connected=np.array([0, 1, 2, 2]),
+        f_x=np.full(b, -20.0), f_v=np.zeros(b), f_limit=np.zeros(b), plan_l1_decel=np.full(b, 3.0),
+        plan_f_aggr=np.zeros(b, bool), active=np.ones(b, bool),
+    )  # fmt: skip
+    at = observe_breaches(Breach.none(b), last, SimpleNamespace(chain_x=x - TOL_M, f_x=last.f_x + TOL_M), PRM, 1.0)
+    assert not at.flags.any()
+    beyond = observe_breaches(
+        Breach.none(b), last, SimpleNamespace(chain_x=x - 2 * TOL_M, f_x=last.f_x + 2 * TOL_M), PRM, 1.0
+    )
+    assert beyond.flags[:, [0, 3]].all() and beyond.flags[:, 1].tolist() == [False, True, True, True]
+    assert beyond.flags[:, 2].all()
