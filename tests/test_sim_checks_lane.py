@@ -86,3 +86,16 @@ def test_pairs_at_rest_at_and_just_above_the_margin():
 def test_a_fleet_without_pairs():
     """One vehicle per scenario: no pair, nothing violated, the ratio is inf."""
     assert _check([0.0], [10.0], [0.0]) == (False, False, np.inf)
+
+
+def test_stop_and_go_pair_minimum():
+    """Behind at 0.32 m/s braking at 8 stops at 0.04 s; ahead starts from rest at 2.5 m/s². Until 0.04 s the gap is
+    7.05 − 0.32 t + 5.25 t² (minimum 7.05 − 0.32² / 21 at t = 0.32 / 10.5 = 0.0305 s), then it only grows: the
+    exact minimum is 7.05 − 0.1024 / 21, no violation."""
+    collided, violated, ratio = _check([0.0, 7.05], [0.32, 0.0], [-8.0, 2.5])
+    assert (collided, violated) == (False, False)
+    assert ratio * M == pytest.approx(7.05 - 0.1024 / 21.0, abs=1e-12)
+    # The same with the roles' order of stopping reversed: ahead at 0.1 m/s stops at 0.0125 s, behind from rest.
+    collided, violated, ratio = _check([0.0, 7.05], [0.0, 0.1], [2.5, -8.0])
+    # gap = 7.05 + 0.1 t − 5.25 t² until 0.0125 s, then 7.05 + 0.000625 − 1.25 t² (behind): minimum at dt.
+    assert ratio * M == pytest.approx(7.05 + 0.1**2 / 16.0 - 1.25 * DT**2, abs=1e-12)
