@@ -99,3 +99,18 @@ def test_stop_and_go_pair_minimum():
     collided, violated, ratio = _check([0.0, 7.05], [0.0, 0.1], [2.5, -8.0])
     # gap = 7.05 + 0.1 t − 5.25 t² until 0.0125 s, then 7.05 + 0.000625 − 1.25 t² (behind): minimum at dt.
     assert ratio * M == pytest.approx(7.05 + 0.1**2 / 16.0 - 1.25 * DT**2, abs=1e-12)
+
+
+def test_a_pair_exactly_on_the_filters_bound_is_sampled():
+    """Behind braking at 8 (the row's a_max) at 10 m/s, ahead accelerating at 2.5 at 9.5 m/s: the gap can fall at
+    most |Δv| dt + a_max dt² = 0.05 + 0.08 m. Starting exactly that (plus the filter's 1e-6 m) above the margin, it
+    cannot come within it: the pair is not near and its ratio is the end samples' (the start, 7.130001 m), though
+    the gap dips by 0.5² / (2 · 10.5) m mid-period (at 0.048 s)."""
+    gap0 = 7.130001
+    assert gap0 - abs(9.5 - 10.0) * DT == M + (8.0 * DT * DT + 1e-6)  # on the bound, in floating point too
+    collided, violated, ratio = _check([0.0, gap0], [10.0, 9.5], [-8.0, 2.5])
+    assert (collided, violated) == (False, False)
+    assert ratio == gap0 / M
+    # 1 ulp closer it is near, and its exact minimum is reported.
+    closer = np.nextafter(gap0, 0.0)
+    assert _check([0.0, closer], [10.0, 9.5], [-8.0, 2.5])[2] == pytest.approx((closer - 0.25 / 21.0) / M, abs=1e-12)
