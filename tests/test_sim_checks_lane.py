@@ -114,3 +114,15 @@ def test_a_pair_exactly_on_the_filters_bound_is_sampled():
     # 1 ulp closer it is near, and its exact minimum is reported.
     closer = np.nextafter(gap0, 0.0)
     assert _check([0.0, closer], [10.0, 9.5], [-8.0, 2.5])[2] == pytest.approx((closer - 0.25 / 21.0) / M, abs=1e-12)
+
+
+def test_a_pair_both_starting_and_stopping_inside_the_period_is_checked():
+    """Both from rest, then braking at 8 from 0.05 s: behind at 2.5 m/s² first moves 0.5·2.5·0.05² + 0.125²/16 =
+    4.102 mm, ahead at 1 m/s² 0.5·1·0.05² + 0.05²/16 = 1.406 mm: from 2 mm above the margin the gap ends 0.7 mm
+    inside it, though both are at rest at both ends."""
+    gap0 = M + 0.002
+    moved = (0.5 * 2.5 * 0.05**2 + 0.125**2 / 16.0) - (0.5 * 1.0 * 0.05**2 + 0.05**2 / 16.0)
+    switch = (np.array([[0.05, 0.05]]), np.array([[-8.0, -8.0]]))
+    collided, violated, ratio = _check([0.0, gap0], [0.0, 0.0], [2.5, 1.0], switch)
+    assert (collided, violated) == (False, True)
+    assert ratio == pytest.approx((gap0 - moved) / M, abs=1e-12)
