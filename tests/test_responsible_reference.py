@@ -199,6 +199,9 @@ def test_final_stop_accel_edges():
     # with B = 8: w = -0.4 + sqrt(0.16 + 8·(20 − 1)) = -0.4 + sqrt(152.16)).
     w = -0.4 + np.sqrt(0.16 + 8.0 * 19.0)
     assert final_stop_accel(one(10.0), one(10.0), z, one(5.0), PRM)[0] == pytest.approx((w - 10.0) / 0.1, rel=1e-12)
+    # A stopped leader's deceleration does not matter (0 included: it stays where it is).
+    assert final_stop_accel(one(10.0), one(10.0), z, z, PRM)[0] == pytest.approx((w - 10.0) / 0.1, rel=1e-12)
+    assert final_stop_accel(z, z, z, z, PRM)[0] == 0.0
     # Follower at 20 m/s, stopped leader 1 m ahead: w would be negative, so it stops inside the period at
     # v²/(2|a|) = 1: a = -200.
     assert final_stop_accel(one(1.0), one(20.0), z, one(5.0), PRM)[0] == pytest.approx(-200.0, rel=1e-12)
@@ -229,3 +232,18 @@ def test_responsible_accel_caps_at_the_wish_and_floors_at_a_x_d():
     assert (ref_ok(a[binds] + 1e-6, slack[binds], v_f[binds], v_l[binds], lead[binds], PRM.a_x_d) < 0.0).all()
     # Scalars broadcast.
     assert np.shape(responsible_accel(1.0, 5.0, 20.0, 20.0, PRM.a_x_d, PRM)) == ()
+
+
+def test_a_wish_exactly_at_the_bound_is_taken_on_the_safe_side():
+    """``responsible_accel`` applies the closed-form bound ``ROOT_EPS_MPS2`` on the safe side (rounding at the
+    boundary): a wish exactly equal to the bound is not taken as is; a wish just above it neither; one below it is.
+    Hand case: leader stopped 10 m beyond the margin, follower at 10 m/s: the final stop binds, ``a = (w − 10)/0.1``
+    with ``w = −0.4 + sqrt(0.16 + 8·19)`` (see ``test_final_stop_accel_edges``)."""
+    one = lambda x: np.full(1, float(x))  # noqa: E731
+    row = (one(10.0), one(10.0), one(0.0), one(5.0))
+    bound = (-0.4 + np.sqrt(0.16 + 8.0 * 19.0) - 10.0) / 0.1
+    assert responsible_bound(*row, PRM)[0] == pytest.approx(bound, rel=1e-12)
+    exact = responsible_bound(*row, PRM)
+    assert responsible_accel(exact, *row, PRM)[0] == exact[0] - ROOT_EPS_MPS2
+    assert responsible_accel(exact + 1e-3, *row, PRM)[0] == exact[0] - ROOT_EPS_MPS2
+    assert responsible_accel(exact - 1e-3, *row, PRM)[0] == exact[0] - 1e-3
