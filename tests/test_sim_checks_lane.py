@@ -80,6 +80,12 @@ def test_each_pair_is_at_rest_by_its_own_vehicles():
 def test_pairs_at_rest_at_and_just_above_the_margin():
     """At rest all period: the gap is constant; exactly the margin is no violation (``gap < margin − 1 nm``)."""
     assert _check([0.0, M], [0.0, 0.0], [-8.0, 0.0]) == (False, False, 1.0)
+    # The edges themselves: 1 nm inside the margin is its tolerance (not a violation), touching is no overlap.
+    assert _check([0.0, M - 1e-9], [0.0, 0.0], [0.0, 0.0])[:2] == (False, False)
+    assert _check([0.0, M - 2e-9], [0.0, 0.0], [0.0, 0.0])[:2] == (False, True)
+    length = PARAMS.vehicle_length
+    assert _check([0.0, length], [0.0, 0.0], [0.0, 0.0])[:2] == (False, True)
+    assert _check([0.0, np.nextafter(length, 0.0)], [0.0, 0.0], [0.0, 0.0])[:2] == (True, True)
     assert _check([0.0, M + 0.03, 100.0], [0.0, 0.0, 20.0], [0.0, 0.0, -8.0])[2] == pytest.approx((M + 0.03) / M)
 
 
