@@ -213,3 +213,48 @@ def test_braking_at_once_within_the_tolerance_is_an_evasion(offset, exists):
     assert bool(got[0]) == exists
     if exists:
         assert parts["own_gap"][0] >= -1e-9 and parts["lead_gap"][0] >= -1e-9
+
+
+@pytest.mark.parametrize("seed", range(2))
+def test_a_far_l0_leaves_the_papers_evasion_as_it_is(seed):
+    """L0 2 km ahead at 50 m/s, not braking (never binding): wherever the paper's evasion (no L0,
+    :func:`safelane.safety.plan_evasion`) exists, the own-lane check finds the same one — following L1, with the
+    paper's switch time exactly (the closed form is not shortened by a search it does not need) and its L1 gap."""
+    from safelane.safety import plan_evasion
+
+    rng = np.random.default_rng(300 + seed)
+    prm = Params()
+    kw = random_states(rng, prm, N)
+    kw["lead_margin"] = kw["follow_margin"] = np.full(N, prm.p_m)
+    kw["l0_p"] = kw["ego_px"] + 2000.0
+    kw["l0_v"], kw["l0_decel"] = np.full(N, 50.0), np.zeros(N)
+    exists, parts = own_lane_core(**kw, prm=prm)
+    paper = plan_evasion(kw["ego_px"], kw["ego_py"], kw["ego_vx"], kw["ego_vy"], kw["l1_p"], kw["l1_v"],
+                         kw["l1_decel"], kw["f_p"], kw["f_v"], kw["aggressive"], prm)  # fmt: skip
+    both = paper.feasible
+    evading = paper.t_y_f > 0.0
+    assert (both & evading).sum() > 50
+    assert exists[both].all()
+    assert not parts["follows_own"][both].any()
+    np.testing.assert_array_equal(parts["t_x1"][both & evading], paper.t_x1[both & evading])
+    np.testing.assert_allclose(parts["lead_gap"][both & evading], (paper.min_gap_leader - prm.p_m)[both & evading],
+                               rtol=1e-9, atol=1e-9)  # fmt: skip
+
+
+def test_the_tolerance_is_the_callers():
+    """``tol`` is passed through to the closed form: ego and L1 at 20 m/s (L1 not braking), L0 far and faster, F far
+    behind, the ego intruding 1 m (``t_y_f = 2·sqrt(1/1.5)`` = T). Accelerating throughout ``[0, T]`` closes on L1 by
+    ``a_x_a T²/2`` = 1.25 T² by T (the braking comes after T, outside L1's window); L1 is placed so that this
+    leaves the gap 0.5 mm inside the margin. With ``tol = 1e-3`` that is kept: ``u = T``; with the default 1 nm
+    the switch comes earlier and the gap stays within 1 nm."""
+    T = 2.0 * np.sqrt(1.0 / 1.5)
+    kw = {k: np.atleast_1d(np.asarray(v, bool if k == "aggressive" else float)) for k, v in dict(
+        ego_px=0.0, ego_py=0.85 + 1.0, ego_vx=20.0, ego_vy=0.0, l1_p=7.0 + 1.25 * T * T - 0.5e-3, l1_v=20.0,
+        l1_decel=0.0, f_p=-100.0, f_v=0.0, aggressive=False, l0_p=2000.0, l0_v=50.0, l0_decel=0.0, lead_margin=7.0,
+        follow_margin=7.0, own_margin=7.0).items()}  # fmt: skip
+    exists, parts = own_lane_core(**kw, prm=Params(), tol=1e-3)
+    assert exists[0] and not parts["follows_own"][0]
+    assert parts["t_x1"][0] == pytest.approx(T, rel=1e-12)
+    assert parts["lead_gap"][0] == pytest.approx(-0.5e-3, abs=1e-9)
+    exists, parts = own_lane_core(**kw, prm=Params())
+    assert exists[0] and parts["t_x1"][0] < T - 1e-6 and parts["lead_gap"][0] >= -1e-9
