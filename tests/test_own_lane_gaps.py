@@ -215,18 +215,20 @@ def test_braking_at_once_within_the_tolerance_is_an_evasion(offset, exists):
         assert parts["own_gap"][0] >= -1e-9 and parts["lead_gap"][0] >= -1e-9
 
 
-@pytest.mark.parametrize("seed", range(2))
-def test_a_far_l0_leaves_the_papers_evasion_as_it_is(seed):
-    """L0 2 km ahead at 50 m/s, not braking (never binding): wherever the paper's evasion (no L0,
-    :func:`safelane.safety.plan_evasion`) exists, the own-lane check finds the same one — following L1, with the
-    paper's switch time exactly (the closed form is not shortened by a search it does not need) and its L1 gap."""
+@pytest.mark.parametrize("seed, l0_gap", [(0, 2000.0), (1, 2000.0), (2, 0.5e-9), (3, 0.0)])
+def test_a_far_l0_leaves_the_papers_evasion_as_it_is(seed, l0_gap):
+    """L0 ``l0_gap`` beyond its margin (2 km; or right at it, within the 1 nm tolerance) at 50 m/s, not braking: it
+    only pulls away, so it never binds. Wherever the paper's evasion (no L0, :func:`safelane.safety.plan_evasion`)
+    exists, the own-lane check finds the same one — following L1, with the paper's switch time exactly (the closed
+    form is not shortened by a search it does not need) and its L1 gap; where L1 is already inside its margin, no
+    switch time (0), as in the paper."""
     from safelane.safety import plan_evasion
 
     rng = np.random.default_rng(300 + seed)
     prm = Params()
     kw = random_states(rng, prm, N)
     kw["lead_margin"] = kw["follow_margin"] = np.full(N, prm.p_m)
-    kw["l0_p"] = kw["ego_px"] + 2000.0
+    kw["l0_p"] = kw["ego_px"] + prm.p_m + l0_gap
     kw["l0_v"], kw["l0_decel"] = np.full(N, 50.0), np.zeros(N)
     exists, parts = own_lane_core(**kw, prm=prm)
     paper = plan_evasion(kw["ego_px"], kw["ego_py"], kw["ego_vx"], kw["ego_vy"], kw["l1_p"], kw["l1_v"],
@@ -239,6 +241,11 @@ def test_a_far_l0_leaves_the_papers_evasion_as_it_is(seed):
     np.testing.assert_array_equal(parts["t_x1"][both & evading], paper.t_x1[both & evading])
     np.testing.assert_allclose(parts["lead_gap"][both & evading], (paper.min_gap_leader - prm.p_m)[both & evading],
                                rtol=1e-9, atol=1e-9)  # fmt: skip
+    assert (parts["t_x1"][both & evading] > 0.0).sum() > 20
+    inside = kw["l1_p"] - kw["ego_px"] - prm.p_m < -1e-6
+    assert (inside & evading).sum() > 5
+    assert not exists[inside & evading].any()
+    np.testing.assert_array_equal(parts["t_x1"][inside & evading], 0.0)
 
 
 def test_the_tolerance_is_the_callers():
