@@ -298,3 +298,76 @@ def run(args, shape, params, tol: float, lat_tol: float, want_gaps: bool = False
     exists_kernel(*flat, params.a_x_a, params.a_x_d, params.a_y_m, params.y_safe, lat_tol, tol, out, gaps)
     out = out.reshape(shape)
     return (out, gaps) if want_gaps else out
+
+
+# ---------------------------------------------------------------------------------------------------------------
+# Responsible following (issue 13): responsible.responsible_bound fused, element by element
+# ---------------------------------------------------------------------------------------------------------------
+
+_RESPONSIBLE_SIGNATURE = types.void(*(_F,) * 5, types.float64, types.Array(types.float64, 1, "C"))
+
+
+@numba.njit(_RESPONSIBLE_SIGNATURE, cache=True, nogil=True, error_model="numpy")
+def responsible_kernel(slack, v_f, v_l, lead_decel, brake, dt, out):
+    """:func:`~.responsible.responsible_bound` (the smallest of :func:`~.responsible.responsible_bounds`) per element,
+    each expression in the NumPy path's evaluation order, divisions as NumPy's (``error_model="numpy"``: ``x / 0``
+    is ``±inf`` or NaN, never an exception), and the minimum taken in the same order with NaN propagating — the
+    same bits (``tests/test_fast_core.py``)."""
+    inf = _INF
+    for i in range(out.shape[0]):
+        s = slack[i] + 0.0  # −0.0 → +0.0, as the NumPy path
+        vf, vl, d, b = v_f[i], v_l[i], lead_decel[i], brake[i]
+        # _motion.advance(s, v_l, −d, dt): the leader's gap position and speed at dt, stopping at rest
+        a = -d
+        ts = _min(vl / -a, dt) if a < 0.0 else dt
+        xl_end = s + vl * ts + 0.5 * a * ts * ts
+        u1 = 0.0 if ts < dt else _max(vl + a * dt, 0.0)
+        g = xl_end - vf * dt
+        end = 2.0 * g / (dt * dt)
+        if not vf + end * dt >= 0.0:
+            end = -vf * vf / (2.0 * xl_end)
+        dv = vf - vl
+        tau = 2.0 * s / dv
+        in_period = dv > 0.0 and s >= 0.0 and tau < dt and vl - d * tau > 0.0
+        c = b - d
+        r0 = vf - u1
+        disc = c * c * dt * dt + 4.0 * c * (2.0 * g + dt * r0)
+        q = 0.5 * (-c * dt + (math.sqrt(disc) if disc >= 0.0 else math.nan))
+        after_period = c > 0.0 and disc >= 0.0 and q > 0.0 and u1 > 0.0 and q * d <= c * u1
+        # final_stop_accel(s, v_f, v_l, d, brake)
+        if d > 0.0:
+            lead_stop = vl * vl / (2.0 * d)
+        else:
+            lead_stop = inf if vl > 0.0 else 0.0
+        y = s + lead_stop
+        w = -0.5 * b * dt + _sqrt(0.25 * b * b * dt * dt + b * (2.0 * y - vf * dt))
+        if w >= 0.0:
+            a_final = (w - vf) / dt
+        else:
+            a_final = -vf * vf / (2.0 * y) if y > 0.0 else -inf
+        if y == inf:
+            final = inf
+        elif y <= 0.0:
+            final = 0.0 if (y == 0.0 and vf == 0.0) else -inf
+        else:
+            final = a_final
+        # the five bounds, in responsible_bounds' order: inside, final, end, in_period, after_period
+        r = inf if s >= 0.0 else -inf
+        r = _min(r, final)
+        r = _min(r, end if xl_end > 0.0 else (-inf if xl_end < 0.0 else 0.0))
+        r = _min(r, -d - dv * dv / (2.0 * s) if in_period else inf)
+        r = _min(r, (q - r0) / dt if after_period else inf)
+        out[i] = r
+
+
+def responsible(slack, v_f, v_l, lead_decel, brake, dt: float) -> np.ndarray:
+    """:func:`responsible_kernel` on arrays broadcast to one shape; returns that shape."""
+    arrays = [np.asarray(x, dtype=np.float64) for x in (slack, v_f, v_l, lead_decel, brake)]
+    shape = np.broadcast_shapes(*(a.shape for a in arrays))
+    n = math.prod(shape)
+    # Scalars with stride 0, arrays of the full shape as they are (read-only views: the signature takes any layout).
+    flat = [np.broadcast_to(a.reshape(-1), (n,)) if a.size == 1 else np.broadcast_to(a, shape).reshape(-1)
+            for a in arrays]  # fmt: skip
+    out = np.empty(n)
+    responsible_kernel(*flat, float(dt), out)
+    return out.reshape(shape)

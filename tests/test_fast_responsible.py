@@ -1,0 +1,91 @@
+"""The compiled responsible-following bound (:func:`safelane.safety._fast.responsible_kernel`, numba) against the
+NumPy path it accelerates (:func:`safelane.safety.responsible.responsible_bound` with ``SAFELANE_NO_NUMBA=1``).
+
+The NumPy path is the reference (itself held to the exact check and an independent time-sampled reference in
+``test_sim_responsible.py``). The kernel must give the same bits — compared with NaN equal to NaN — on random
+rows, simulator-like rows where every bound binds somewhere, a grid of corners (zero and negative-zero slack,
+infinite slack, stopped vehicles, zero and vanishing decelerations, equal speeds, a follower's own bound below the
+vehicle ahead's) and NaN inputs. Skipped where numba is missing (extra ``fast``; ``make install`` installs it).
+"""
+
+from __future__ import annotations
+
+import importlib.util
+import itertools
+
+import numpy as np
+import pytest
+
+from safelane import Params
+from safelane.safety.responsible import responsible_bound
+
+PRM = Params()
+pytestmark = pytest.mark.skipif(importlib.util.find_spec("numba") is None, reason="numba is not installed")
+
+
+def _numpy_bound(monkeypatch, slack, v_f, v_l, lead, brake):
+    monkeypatch.setenv("SAFELANE_NO_NUMBA", "1")
+    try:
+        with np.errstate(all="ignore"):
+            return responsible_bound(slack, v_f, v_l, lead, PRM, brake=brake)
+    finally:
+        monkeypatch.delenv("SAFELANE_NO_NUMBA")
+
+
+def _kernel_bound(slack, v_f, v_l, lead, brake):
+    from safelane.safety import _fast
+
+    return _fast.responsible(slack, v_f, v_l, lead, brake, PRM.dt)
+
+
+def _rows(n: int, seed: int):
+    rng = np.random.default_rng(seed)
+    near = rng.random(n) < 0.5  # half close behind, as in the simulator; half anywhere
+    slack = np.where(near, rng.uniform(-0.5, 12, n), rng.uniform(-2, 60, n))
+    v_f = rng.uniform(0, 35, n)
+    v_l = np.where(near, np.clip(v_f + rng.normal(0, 4, n), 0, None), rng.uniform(0, 35, n))
+    lead = rng.uniform(0, PRM.a_x_d, n)
+    brake = np.where(rng.random(n) < 0.5, PRM.a_x_d, rng.uniform(0.5, PRM.a_x_d, n))
+    lead[::3], v_f[::11], v_l[::13] = PRM.a_x_d, 0.0, 0.0
+    return slack, v_f, v_l, lead, brake
+
+
+def _corners():
+    slack = (-1.0, -0.0, 0.0, 1e-12, 0.35, 5.0, np.inf)
+    speed = (0.0, 1e-9, 9.0, 9.25, 30.0)
+    decel = (0.0, 1e-12, 3.0, PRM.a_x_d)
+    brake = (0.5, 3.0, PRM.a_x_d)
+    return [np.array(c, dtype=float) for c in zip(*itertools.product(slack, speed, speed, decel, brake), strict=True)]
+
+
+@pytest.mark.parametrize("seed", range(3))
+def test_kernel_gives_the_numpy_paths_bits_on_random_rows(monkeypatch, seed):
+    rows = _rows(200_000, seed)
+    expected = _numpy_bound(monkeypatch, *rows)
+    got = _kernel_bound(*rows)
+    assert got.shape == expected.shape and got.dtype == np.float64
+    np.testing.assert_array_equal(got, expected)
+    assert np.isfinite(expected).mean() > 0.5 and (expected == -np.inf).any()  # the rows reach every kind of answer
+
+
+def test_kernel_gives_the_numpy_paths_bits_on_corners(monkeypatch):
+    rows = _corners()
+    np.testing.assert_array_equal(_kernel_bound(*rows), _numpy_bound(monkeypatch, *rows))
+
+
+def test_kernel_propagates_nan_as_the_numpy_path(monkeypatch):
+    rows = [np.array(col, dtype=float) for col in zip(*[
+        (np.nan, 10.0, 10.0, 3.0, 8.0), (5.0, np.nan, 10.0, 3.0, 8.0), (5.0, 10.0, np.nan, 3.0, 8.0),
+        (5.0, 10.0, 10.0, np.nan, 8.0), (5.0, 10.0, 10.0, 3.0, np.nan),
+    ], strict=True)]  # fmt: skip
+    expected = _numpy_bound(monkeypatch, *rows)
+    np.testing.assert_array_equal(_kernel_bound(*rows), expected)  # NaN == NaN here
+    assert np.isnan(expected).any()
+
+
+def test_kernel_broadcasts_like_the_numpy_path(monkeypatch):
+    slack = np.linspace(-1.0, 30.0, 12).reshape(3, 4)
+    args = (slack, 20.0, np.array([15.0, 20.0, 25.0, 30.0]), 6.0, PRM.a_x_d)
+    got = _kernel_bound(*args)
+    assert got.shape == (3, 4)
+    np.testing.assert_array_equal(got, _numpy_bound(monkeypatch, *args))
