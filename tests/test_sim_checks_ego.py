@@ -78,3 +78,36 @@ def test_a_stop_inside_the_period_with_the_ego_settled_in_the_target_lane():
     collided, violated, _, gap_l1 = _run(0.0, 1.0, -8.0, 3.5, [-40.0, 7.06], [0.0, 0.4], [0.0, -8.0])
     assert (collided, violated) == (False, False)
     assert gap_l1 == pytest.approx(7.01, abs=1e-12)
+
+
+def test_a_dip_inside_a_window_cut_by_a_crossing():
+    """The ego crosses the conflict level at 0.03 s (y = 0.82 + t); L1's gap, d0 − 0.48 t + 4 t² (ego braking at
+    8 from 20 m/s, L1 cruising at 19.52), has its minimum d0 − 0.48² / 16 = d0 − 0.0144 at 0.06 s, inside the window
+    [0.03, 0.1], below both of its ends (d0 − 0.0108, d0 − 0.008). From d0 = 7.012: 6.9976 < p_m, a violation only
+    the vertex shows."""
+    y0 = CONFLICT - 0.03
+    _, violated, _, gap_l1 = _run(0.0, 20.0, -8.0, y0, [-40.0, 7.012], [20.0, 19.52], [0.0, 0.0], vy=1.0)
+    assert violated
+    assert gap_l1 == pytest.approx(7.012 - 0.0144, abs=1e-9)
+    # F behind: the ego accelerates at 2.5, F (0.3 m/s faster) brakes at 2.5: ego − F = 7.005 − 0.3 t + 2.5 t², its
+    # minimum 7.005 − 0.009 at 0.06 s inside the window; the window's ends give 6.99825 and 7.0.
+    _, violated, gap_f, _ = _run(0.0, 20.0, 2.5, y0, [-7.005, 60.0], [20.3, 20.0], [-2.5, 0.0], vy=1.0)
+    assert violated
+    assert gap_f == pytest.approx(7.005 - 0.009, abs=1e-9)
+    # Relative acceleration exactly 1 (the ego braking at 1, L1 cruising 0.06 m/s slower): 7.0015 − 0.06 t + t²/2,
+    # minimum 7.0015 − 0.0018 = 6.9997 at 0.06 s; the window's ends give 7.00015 and 7.0005.
+    _, violated, _, gap_l1 = _run(0.0, 20.0, -1.0, y0, [-40.0, 7.0015], [20.0, 19.94], [0.0, 0.0], vy=1.0)
+    assert violated
+    assert gap_l1 == pytest.approx(6.9997, abs=1e-9)
+
+
+def test_a_window_between_two_crossings():
+    """The ego's lateral position rises over the conflict level at 0.02 s and falls back at 0.09 s:
+    y − level = −0.75 (t − 0.02)(t − 0.09), at most 0.75 · 0.035² = 0.92 mm above it. L1 6.9 m ahead at the ego's
+    speed: inside p_m during [0.02, 0.09] only, a violation; 1 mm lower the ego never crosses and nothing counts."""
+    y0, vy, ay = CONFLICT - 0.75 * 0.02 * 0.09, 0.75 * 0.11, -1.5
+    collided, violated, _, gap_l1 = _run(0.0, 20.0, 0.0, y0, [-40.0, 6.9], [20.0, 20.0], [0.0, 0.0], vy, ay)
+    assert (collided, violated) == (False, True)
+    assert gap_l1 == pytest.approx(6.9, abs=1e-12)
+    collided, violated, _, gap_l1 = _run(0.0, 20.0, 0.0, y0 - 0.001, [-40.0, 6.9], [20.0, 20.0], [0.0, 0.0], vy, ay)
+    assert (collided, violated, gap_l1) == (False, False, np.inf)
