@@ -1,6 +1,9 @@
-"""``lane_checks`` at the edges of its shortcuts: the near-pair filter at its bound, the "at rest all period" skip,
-pairs in the last columns, a fleet without pairs. Each expected outcome is derived by hand in the test's docstring
-from constant-acceleration kinematics (``x(t) = x0 + v0 t + a t²/2`` until a stop)."""
+"""``lane_checks`` and ``ego_checks`` at the edges of their shortcuts. ``lane_checks``: the near-pair filter at and on
+its bound, the "at rest all period" skip, per-pair rest, stop-and-go pairs, the exact edges of contact and of the
+margin's tolerance, a fleet without pairs. ``ego_checks``: the near-pair filter at its bound, an ego exactly on a
+lateral level (the windows are ``y > level``, strict), dips inside windows cut by crossings, a stop inside the period
+with the ego settled. Each expected outcome is derived by hand in the test's docstring from constant-acceleration
+kinematics (``x(t) = x0 + v0 t + a t²/2`` until a stop)."""
 
 from __future__ import annotations
 
@@ -10,8 +13,8 @@ import numpy as np
 import pytest
 
 from safelane import Params
-from safelane.sim.checks import lane_checks
-from safelane.sim.kinematics import Fleet
+from safelane.sim.checks import ego_checks, lane_checks
+from safelane.sim.kinematics import Fleet, Motion
 
 #: The checks and motions divide only where it is safe (or under errstate): no floating-point warning escapes.
 pytestmark = pytest.mark.filterwarnings("error")
@@ -19,6 +22,8 @@ pytestmark = pytest.mark.filterwarnings("error")
 PARAMS = Params()
 DT = PARAMS.dt
 M = PARAMS.p_m
+CONFLICT = PARAMS.y_safe + 1e-9
+OVERLAP = PARAMS.lane_width - PARAMS.vehicle_width
 
 
 def _check(x, v, a, switch=None):
@@ -132,3 +137,97 @@ def test_a_pair_both_starting_and_stopping_inside_the_period_is_checked():
     collided, violated, ratio = _check([0.0, gap0], [0.0, 0.0], [2.5, 1.0], switch)
     assert (collided, violated) == (False, True)
     assert ratio == pytest.approx((gap0 - moved) / M, abs=1e-12)
+
+
+# --- ego_checks ------------------------------------------------------------------------------------------------
+
+
+def _run(ego_x, ego_v, ego_a, ego_y, others_x, others_v, others_a, vy=0.0, ay=0.0):
+    lon = Motion.constant(np.array([ego_x]), np.array([ego_v]), np.array([ego_a]), DT)
+    lat = Motion.free(np.array([ego_y]), np.array([vy]), np.array([ay]), DT)
+    x = np.asfortranarray([others_x], float)
+    v = np.asfortranarray([others_v], float)
+    others = Fleet.constant(x, v, np.asfortranarray([others_a], float), DT)
+    b = SimpleNamespace(valid=np.ones(x.shape, bool))
+    s = SimpleNamespace(x=x, v=v, ego=(np.array([ego_x]), np.array([ego_y]), np.array([ego_v]), np.array([vy])),
+                        min_gap_f=np.full(1, np.inf), min_gap_l1=np.full(1, np.inf))  # fmt: skip
+    collided, violated, gap_f, gap_l1 = ego_checks(b, PARAMS, s, lon, lat, others, CONFLICT, OVERLAP)
+    return bool(collided[0]), bool(violated[0]), float(gap_f[0]), float(gap_l1[0])
+
+
+def test_a_follower_closing_at_the_filters_bound_is_still_checked():
+    """The ego brakes at a_x_d = 8, F (1 m/s faster) accelerates at 2.5, the row's largest |acceleration|: the gap
+    ego − F shrinks by exactly the filter's bound, |Δv| dt + (8 + 2.5) dt²/2 = 0.1525 m, to its minimum at dt. From
+    0.1525 m − 5e-7 m above the margin's edge it ends 5e-7 m inside: a violation the filter must not drop."""
+    gap0 = PARAMS.p_m - 1e-9 + 0.1525 - 5e-7
+    collided, violated, gap_f, gap_l1 = _run(0.0, 20.0, -8.0, 3.5, [-gap0, 60.0], [21.0, 20.0], [2.5, 0.0])
+    assert (collided, violated) == (False, True)
+    assert gap_f == pytest.approx(gap0 - 0.1525, abs=1e-12)
+    # L1 stayed far: its gap is sampled at the period's ends, 60 m and 60 m + what the braking ego lost: 0.04 m.
+    assert gap_l1 == 60.0
+
+
+@pytest.mark.parametrize(
+    ("ego_y", "expect"),
+    [
+        (OVERLAP + 1e-6, (True, True)),  # beyond both levels: contact and violation count
+        (OVERLAP, (False, True)),  # exactly on the overlap level: beyond the conflict level only
+        (CONFLICT, (False, False)),  # exactly on the conflict level: nothing counts
+    ],
+)
+@pytest.mark.parametrize("l1_v", [30.0, 0.3])  # L1 cruising, or stopping inside the period (the stop knots' path)
+def test_an_ego_exactly_on_a_level_is_not_beyond_it(ego_y, expect, l1_v):
+    """The ego holds its lateral position; L1 is 3 m ahead (overlapping footprints, inside p_m) all period."""
+    collided, violated, _, gap_l1 = _run(
+        0.0, l1_v, 0.0, ego_y, [-40.0, 3.0], [l1_v, l1_v], [0.0, -8.0 if l1_v < 1 else 0.0]
+    )
+    assert (collided, violated) == expect
+    if expect[1]:
+        assert gap_l1 <= 3.0
+    else:
+        assert gap_l1 == np.inf
+
+
+def test_a_stop_inside_the_period_with_the_ego_settled_in_the_target_lane():
+    """Ego at 1 m/s braking at 8: stops after 0.125 s > dt, covering 0.1 − 0.04 = 0.06 m. L1 at 0.4 m/s braking at 8
+    stops after 0.05 s, covering 0.01 m, from 7.04 m ahead: the gap falls from 7.04 to 7.04 + 0.01 − 0.06 = 6.99 m,
+    monotonically (the ego is always the faster), so its minimum 6.99 m < p_m = 7 is a violation, not a contact."""
+    collided, violated, _, gap_l1 = _run(0.0, 1.0, -8.0, 3.5, [-40.0, 7.04], [0.0, 0.4], [0.0, -8.0])
+    assert (collided, violated) == (False, True)
+    assert gap_l1 == pytest.approx(6.99, abs=1e-12)
+    collided, violated, _, gap_l1 = _run(0.0, 1.0, -8.0, 3.5, [-40.0, 7.06], [0.0, 0.4], [0.0, -8.0])
+    assert (collided, violated) == (False, False)
+    assert gap_l1 == pytest.approx(7.01, abs=1e-12)
+
+
+def test_a_dip_inside_a_window_cut_by_a_crossing():
+    """The ego crosses the conflict level at 0.03 s (y = 0.82 + t); L1's gap, d0 − 0.48 t + 4 t² (ego braking at
+    8 from 20 m/s, L1 cruising at 19.52), has its minimum d0 − 0.48² / 16 = d0 − 0.0144 at 0.06 s, inside the window
+    [0.03, 0.1], below both of its ends (d0 − 0.0108, d0 − 0.008). From d0 = 7.012: 6.9976 < p_m, a violation only
+    the vertex shows."""
+    y0 = CONFLICT - 0.03
+    _, violated, _, gap_l1 = _run(0.0, 20.0, -8.0, y0, [-40.0, 7.012], [20.0, 19.52], [0.0, 0.0], vy=1.0)
+    assert violated
+    assert gap_l1 == pytest.approx(7.012 - 0.0144, abs=1e-9)
+    # F behind: the ego accelerates at 2.5, F (0.3 m/s faster) brakes at 2.5: ego − F = 7.005 − 0.3 t + 2.5 t², its
+    # minimum 7.005 − 0.009 at 0.06 s inside the window; the window's ends give 6.99825 and 7.0.
+    _, violated, gap_f, _ = _run(0.0, 20.0, 2.5, y0, [-7.005, 60.0], [20.3, 20.0], [-2.5, 0.0], vy=1.0)
+    assert violated
+    assert gap_f == pytest.approx(7.005 - 0.009, abs=1e-9)
+    # Relative acceleration exactly 1 (the ego braking at 1, L1 cruising 0.06 m/s slower): 7.0015 − 0.06 t + t²/2,
+    # minimum 7.0015 − 0.0018 = 6.9997 at 0.06 s; the window's ends give 7.00015 and 7.0005.
+    _, violated, _, gap_l1 = _run(0.0, 20.0, -1.0, y0, [-40.0, 7.0015], [20.0, 19.94], [0.0, 0.0], vy=1.0)
+    assert violated
+    assert gap_l1 == pytest.approx(6.9997, abs=1e-9)
+
+
+def test_a_window_between_two_crossings():
+    """The ego's lateral position rises over the conflict level at 0.02 s and falls back at 0.09 s:
+    y − level = −0.75 (t − 0.02)(t − 0.09), at most 0.75 · 0.035² = 0.92 mm above it. L1 6.9 m ahead at the ego's
+    speed: inside p_m during [0.02, 0.09] only, a violation; 1 mm lower the ego never crosses and nothing counts."""
+    y0, vy, ay = CONFLICT - 0.75 * 0.02 * 0.09, 0.75 * 0.11, -1.5
+    collided, violated, _, gap_l1 = _run(0.0, 20.0, 0.0, y0, [-40.0, 6.9], [20.0, 20.0], [0.0, 0.0], vy, ay)
+    assert (collided, violated) == (False, True)
+    assert gap_l1 == pytest.approx(6.9, abs=1e-12)
+    collided, violated, _, gap_l1 = _run(0.0, 20.0, 0.0, y0 - 0.001, [-40.0, 6.9], [20.0, 20.0], [0.0, 0.0], vy, ay)
+    assert (collided, violated, gap_l1) == (False, False, np.inf)
