@@ -89,3 +89,42 @@ def test_kernel_broadcasts_like_the_numpy_path(monkeypatch):
     got = _kernel_bound(*args)
     assert got.shape == (3, 4)
     np.testing.assert_array_equal(got, _numpy_bound(monkeypatch, *args))
+
+
+def test_responsible_bound_runs_the_kernel_from_its_batch_threshold(monkeypatch):
+    from safelane.safety import _fast, responsible
+
+    calls = []
+    real = _fast.responsible
+    monkeypatch.setattr(_fast, "responsible", lambda *a: calls.append(np.shape(a[0])) or real(*a))
+    monkeypatch.delenv("SAFELANE_NO_NUMBA", raising=False)
+    n = responsible.FAST_MIN_BATCH
+    rows = _rows(n, 7)
+    big = responsible_bound(*rows[:4], PRM, brake=rows[4])
+    small = responsible_bound(*(r[: n - 1] for r in rows[:4]), PRM, brake=rows[4][: n - 1])
+    assert calls == [(n,)]  # the kernel ran for the batch at the threshold, not for the one below it
+    np.testing.assert_array_equal(big, _numpy_bound(monkeypatch, *rows))
+    np.testing.assert_array_equal(small, big[: n - 1])
+    monkeypatch.setenv("SAFELANE_NO_NUMBA", "1")
+    responsible_bound(*rows[:4], PRM)
+    assert len(calls) == 1  # the switch keeps the NumPy path
+
+
+def test_the_simulator_gives_the_same_table_with_and_without_the_kernel(monkeypatch):
+    """The closed loop calls the bound for the leaders, F and the completed ego: with the kernel (batch above the
+    threshold) the per-scenario table is the NumPy path's, column for column."""
+    from safelane.safety import _fast
+    from safelane.sim import SimConfig, concat, paper_scenarios, simulate_batch
+
+    calls = []
+    real = _fast.responsible
+    monkeypatch.setattr(_fast, "responsible", lambda *a: calls.append(1) or real(*a))
+
+    planners = ("CV_all", "CV_none")
+    batch = concat([paper_scenarios(p, 3, 5.0, 150, np.random.default_rng(k)) for k, p in enumerate(planners)])
+    monkeypatch.delenv("SAFELANE_NO_NUMBA", raising=False)
+    fast = simulate_batch(batch, seed=3, config=SimConfig()).table
+    monkeypatch.setenv("SAFELANE_NO_NUMBA", "1")
+    reference = simulate_batch(batch, seed=3, config=SimConfig()).table
+    assert fast.equals(reference) and len(calls) > 100  # the kernel ran every period
+    assert reference["n_abort"].sum() > 0 and reference["success"].any()

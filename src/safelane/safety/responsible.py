@@ -8,12 +8,15 @@ traffic behaviours (:mod:`safelane.sim.behaviours`) and by the shield (the ego a
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 from .._motion import advance, stop_time
 from ..params import Params
 from ._backend import ARRAY
 from .chain import min_follow_decel
+from .evasion import fast_kernel
 
 
 def pair_min_gap(slack, v_f, a_f, v_l, a_l, dt):
@@ -76,6 +79,9 @@ def final_stop_accel(slack, v_f, v_l, lead_decel, prm: Params, brake=None):
 
 
 ROOT_EPS_MPS2 = 1e-9  # m/s²: the closed-form bound is applied this far on the safe side (rounding at the boundary)
+#: Elements from which :func:`responsible_bound` runs the compiled kernel (its call costs a few µs; the NumPy path
+#: ~50 array operations).
+FAST_MIN_BATCH = 256
 
 
 def responsible_bounds(slack, v_f, v_l, lead_decel, prm: Params, brake=None) -> dict[str, np.ndarray]:
@@ -128,7 +134,14 @@ def responsible_bounds(slack, v_f, v_l, lead_decel, prm: Params, brake=None) -> 
 def responsible_bound(slack, v_f, v_l, lead_decel, prm: Params, brake=None):
     """The smallest of :func:`responsible_bounds`: the largest safe acceleration, in closed form (exact for
     ``brake >= lead_decel``, always the case with the default ``a_x_d``; a softer ``brake`` admits one more case,
-    the follower stopping first, that the caller must check — see :func:`leader_accels`)."""
+    the follower stopping first, that the caller must check — see :func:`leader_accels`).
+
+    NumPy batches of :data:`FAST_MIN_BATCH` elements or more run the compiled kernel
+    (:func:`._fast.responsible_kernel`, extra ``fast``) where numba imports and ``SAFELANE_NO_NUMBA`` is not ``1``:
+    the same bits as the NumPy path below, which stays the reference (``tests/test_fast_responsible.py``)."""
+    shape = np.broadcast_shapes(*(np.shape(x) for x in (slack, v_f, v_l, lead_decel)))
+    if math.prod(shape) >= FAST_MIN_BATCH and (kernel := fast_kernel()) is not None:
+        return kernel.responsible(slack, v_f, v_l, lead_decel, prm.a_x_d if brake is None else brake, prm.dt)
     bounds = iter(responsible_bounds(slack, v_f, v_l, lead_decel, prm, brake).values())
     out = next(bounds)
     for b in bounds:
