@@ -231,3 +231,13 @@ def test_a_window_between_two_crossings():
     assert gap_l1 == pytest.approx(6.9, abs=1e-12)
     collided, violated, _, gap_l1 = _run(0.0, 20.0, 0.0, y0 - 0.001, [-40.0, 6.9], [20.0, 20.0], [0.0, 0.0], vy, ay)
     assert (collided, violated, gap_l1) == (False, False, np.inf)
+
+
+def test_a_peak_before_the_window_does_not_count():
+    """F (0.1 m/s faster, braking at 2.5) behind the ego (accelerating at 2.5): ego − F = 7.005 − 0.1 t + 2.5 t², its
+    closest approach 7.004 at 0.02 s, before the ego crosses the conflict level at 0.03 s. Inside the window
+    [0.03, 0.1] the closest is at its start: 7.005 − 0.003 + 0.00225 = 7.00425 m, no violation."""
+    y0 = CONFLICT - 0.03
+    _, violated, gap_f, _ = _run(0.0, 20.0, 2.5, y0, [-7.005, 60.0], [20.1, 20.0], [-2.5, 0.0], vy=1.0)
+    assert not violated
+    assert gap_f == pytest.approx(7.00425, abs=1e-9)
