@@ -35,6 +35,10 @@ def _rows(seed: int, kind: str):
     kw["f_v"][::13] = 0.0
     kw["ego_vx"][::17] = 0.0
     kw["l0_v"][::19] = 0.0
+    # Decelerations one apart (a unit denominator of the equal-speed instants): L0 at a_x_d − 1 (the braking ego
+    # closes on it until their speeds meet), L1 at L0's + 1.
+    kw["l0_decel"][3::7] = prm.a_x_d - 1.0
+    kw["l1_decel"][5::7] = np.minimum(kw["l0_decel"][5::7] + 1.0, prm.a_x_d)
     T = np.where(rng.random(N) < 0.1, 0.0, rng.uniform(0.2, 6.0, N))
     u = rng.uniform(0.0, 1.2, N) * T
     u[::10] = 0.0
@@ -265,3 +269,16 @@ def test_the_tolerance_is_the_callers():
     assert parts["lead_gap"][0] == pytest.approx(-0.5e-3, abs=1e-9)
     exists, parts = own_lane_core(**kw, prm=Params())
     assert exists[0] and parts["t_x1"][0] < T - 1e-6 and parts["lead_gap"][0] >= -1e-9
+
+
+def test_a_follower_exactly_at_its_margin_keeps_it():
+    """F at rest exactly ``p_m`` behind the ego (which never reverses): the follower gap's minimum is 0, at t = 0,
+    kept; 1 mm closer it is not. L1 and L0 far and fast, the ego intruding 1 m at 20 m/s."""
+    for offset, ok in ((0.0, True), (-1e-3, False)):
+        kw = {k: np.atleast_1d(np.asarray(v, bool if k == "aggressive" else float)) for k, v in dict(
+            ego_px=10.0, ego_py=0.85 + 1.0, ego_vx=20.0, ego_vy=0.0, l1_p=500.0, l1_v=50.0, l1_decel=0.0,
+            f_p=10.0 - 7.0 - offset, f_v=0.0, aggressive=False, l0_p=1000.0, l0_v=50.0, l0_decel=0.0,
+            lead_margin=7.0, follow_margin=7.0, own_margin=7.0).items()}  # fmt: skip
+        exists, parts = own_lane_core(**kw, prm=Params())
+        assert parts["follow_gap"][0] == pytest.approx(offset, abs=1e-12)
+        assert bool(exists[0]) == ok and bool(parts["follow_ok"][0]) == ok
