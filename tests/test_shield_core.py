@@ -514,6 +514,10 @@ def test_rows_of_other_rules_are_decided_by_their_rule_and_a_row_never_depends_o
             np.testing.assert_array_equal(d.a_y[rows], ry)
             np.testing.assert_array_equal(d.completing[rows], completing & ~sub_state.completed)
             np.testing.assert_array_equal(new.completed[rows], sub_state.completed | completing)
+            # The paper's rule never decides these rows: no plan is checked or accepted for them.
+            for i in rows:
+                _same_plan_row(d.plan, i, state.plan, i)
+            np.testing.assert_array_equal(new.plan_f_aggr[rows], state.plan_f_aggr[rows])
         state, s = new, _world(s, d, PRM, rng, np.zeros(b, bool))
     assert new.completed.any()
 
