@@ -230,3 +230,26 @@ def test_extrema_match_dense_sampling_of_multi_segment_motions():
     np.testing.assert_allclose(w_hi, 5.0, atol=1e-12)
     n_lo, n_hi = windowed_gap_extrema(m, shifted, always, crossing_knots(always, 20.0), 20.0)
     assert (n_lo == np.inf).all() and (n_hi == -np.inf).all()
+
+
+def test_windowed_gap_extrema_broadcast_batches():
+    """``(3, 1)`` behind ``(1, 4)`` with a ``(3, 1)`` lateral motion: ``(3, 4)`` pairs, each as the pair alone."""
+    rng = np.random.default_rng(13)
+    behind = Motion.constant(rng.uniform(-10, 0, (3, 1)), rng.uniform(0, 30, (3, 1)), rng.uniform(-8, 2.5, (3, 1)), DT)
+    ahead = Motion.constant(rng.uniform(0, 10, (1, 4)), rng.uniform(0, 30, (1, 4)), rng.uniform(-8, 2.5, (1, 4)), DT)
+    lat = Motion.free(np.full((3, 1), 0.98), np.full((3, 1), 0.5), np.zeros((3, 1)), DT)  # crosses 1.0 at 0.04 s
+    lo, hi = windowed_gap_extrema(behind, ahead, lat, crossing_knots(lat, 1.0), 1.0)
+    assert lo.shape == hi.shape == (3, 4)
+    for i in range(3):
+        for j in range(4):
+
+            def pick(m, idx):
+                return Motion(*(getattr(m, f)[idx] for f in ("t", "x", "v", "acc")))
+
+            one_lat = pick(lat, (i, 0))
+            one = windowed_gap_extrema(pick(behind, (i, 0)), pick(ahead, (0, j)), one_lat, crossing_knots(one_lat, 1.0),
+                                       1.0)  # fmt: skip
+            assert (one[0], one[1]) == pytest.approx((lo[i, j], hi[i, j]), abs=1e-12)
+            tq = np.linspace(0.04, DT, 601)
+            d = ahead.at(tq[None, None, :])[0][0, j] - behind.at(tq[None, None, :])[0][i, 0]
+            assert d.min() - 1e-5 <= lo[i, j] <= d.min() + 1e-12

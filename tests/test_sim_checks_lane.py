@@ -241,3 +241,15 @@ def test_a_peak_before_the_window_does_not_count():
     _, violated, gap_f, _ = _run(0.0, 20.0, 2.5, y0, [-7.005, 60.0], [20.1, 20.0], [-2.5, 0.0], vy=1.0)
     assert not violated
     assert gap_f == pytest.approx(7.00425, abs=1e-9)
+
+
+def test_an_ego_leaving_the_conflict_zone_counts_only_before_it_leaves():
+    """L1 7.01 m ahead, the ego 0.2 m/s faster: 7.01 − 0.2 t, below p_m from 0.05 s on. Leaving the zone at 0.03 s
+    (y = level + 0.03 − t) or at √(0.005 / 0.75) = 0.0816 s (y = level + 0.005 − 0.75 t², from 7.0175 m: 7.00118 m
+    then), the ego was never in the zone while closer than p_m; far to the right of its own lane (y = −1) it never
+    enters it."""
+    for y0, vy, ay, d0 in ((CONFLICT + 0.03, -1.0, 0.0, 7.01), (CONFLICT + 0.005, 0.0, -1.5, 7.0175)):
+        collided, violated, _, gap_l1 = _run(0.0, 20.0, 0.0, y0, [-40.0, d0], [20.0, 19.8], [0.0, 0.0], vy, ay)
+        assert (collided, violated) == (False, False)
+        assert gap_l1 >= PARAMS.p_m
+    assert _run(0.0, 20.0, 0.0, -1.0, [-40.0, 3.0], [20.0, 20.0], [0.0, 0.0]) == (False, False, np.inf, np.inf)
