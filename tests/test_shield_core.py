@@ -617,3 +617,18 @@ def test_chain_analysis_of_l1_alone_is_the_mechanical_worst_case():
     state = init(s, PRM, ShieldConfig(), "CV_all")
     _, d = step(state, s, (np.zeros(5), np.zeros(5)), PRM, ShieldConfig(), "CV_all")
     assert (d.l1_decel == PRM.a_x_d).all()
+
+
+def test_a_disabled_shield_passes_the_proposal_and_counts_a_step_ending_on_the_boundary_as_completing():
+    """``enabled=False``: the (clipped) proposal goes through unfiltered; a step whose end is exactly on the lane
+    boundary (``y = w_l / 2``, as check_candidate's ``ey >= level``) completes, one ending a hair short does not."""
+    b = 3
+    y0 = np.array([PRM.y_boundary, np.nextafter(PRM.y_boundary, 0.0), 0.5])
+    ego = (np.zeros(b), y0, np.full(b, 25.0), np.zeros(b))
+    s = Situation.from_arrays(
+        t=0.0, ego=ego, follower=(-20.0, 25.0), leaders=([20.0], [25.0]), n_connected=0, params=PRM
+    )
+    cfg = ShieldConfig(enabled=False)
+    _, d = step(init(s, PRM, cfg), s, (np.array([9.0, 1.0, 1.0]), np.zeros(b)), PRM, cfg)
+    assert d.completing.tolist() == [True, False, False]
+    assert (d.behaviour == PROCEED).all() and d.a_x.tolist() == [0.0, 1.0, 1.0] and d.invalid.tolist()[0]
