@@ -632,3 +632,16 @@ def test_a_disabled_shield_passes_the_proposal_and_counts_a_step_ending_on_the_b
     _, d = step(init(s, PRM, cfg), s, (np.array([9.0, 1.0, 1.0]), np.zeros(b)), PRM, cfg)
     assert d.completing.tolist() == [True, False, False]
     assert (d.behaviour == PROCEED).all() and d.a_x.tolist() == [0.0, 1.0, 1.0] and d.invalid.tolist()[0]
+
+
+def test_only_an_f_strictly_behind_the_ego_is_watched():
+    """The monitor's follower limit is set only where the held plan takes F for collaborative and the ego is ahead
+    of F (``x_ego − x_F > 0``): F half a metre behind is watched, F level with the ego or ahead of it is not."""
+    b = 4
+    ego = (np.full(b, 100.0), np.zeros(b), np.full(b, 25.0), np.zeros(b))
+    f_x = np.array([99.5, 100.0, 101.0, 80.0])
+    s = Situation.from_arrays(t=0.0, ego=ego, follower=(f_x, np.full(b, 25.0)), leaders=([150.0], [25.0]),
+                              n_connected=0, f_connected=True, f_collaborative=True, params=PRM)  # fmt: skip
+    state = dataclasses.replace(init(s, PRM, ShieldConfig()), plan_f_aggr=np.zeros(b, bool))
+    new, _ = step(state, s, (np.zeros(b), np.zeros(b)), PRM, ShieldConfig(), "CV_all")
+    assert np.isfinite(new.last.f_limit).tolist() == [True, False, False, True]
