@@ -253,3 +253,18 @@ def test_an_ego_leaving_the_conflict_zone_counts_only_before_it_leaves():
         assert (collided, violated) == (False, False)
         assert gap_l1 >= PARAMS.p_m
     assert _run(0.0, 20.0, 0.0, -1.0, [-40.0, 3.0], [20.0, 20.0], [0.0, 0.0]) == (False, False, np.inf, np.inf)
+
+
+def test_a_leader_exactly_on_the_filters_bound_is_sampled():
+    """The ego cruising at 20 m/s, L1 at 19.9 accelerating at 2.5 (the row's largest): the gap can fall at most
+    |Δv| dt + (8 + 2.5) dt²/2 = 0.01 + 0.0525 m. Starting exactly that (plus the filter's 1e-6 m) above p_m, L1 is
+    not near: its gap is the end samples' (7.062501 m at the start, 7.065001 at the end), though the gap
+    7.062501 − 0.1 t + 1.25 t² dips to 7.060501 at 0.04 s. One ulp closer the exact minimum is reported."""
+    d0 = 7.062501
+    reach = abs(19.9 - 20.0) * DT
+    assert d0 - reach == PARAMS.p_m + 0.5 * (8.0 + 2.5) * DT * DT + 1e-6  # on the bound, in floating point too
+    _, violated, _, gap_l1 = _run(0.0, 20.0, 0.0, 3.5, [-40.0, d0], [20.0, 19.9], [0.0, 2.5])
+    assert not violated and gap_l1 == d0
+    closer = np.nextafter(d0, 0.0)
+    _, violated, _, gap_l1 = _run(0.0, 20.0, 0.0, 3.5, [-40.0, closer], [20.0, 19.9], [0.0, 2.5])
+    assert not violated and gap_l1 == pytest.approx(closer - 0.002, abs=1e-9)
