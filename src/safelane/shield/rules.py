@@ -45,7 +45,8 @@ class Coded:
 
 DECISION_RULES = {"rss": Coded(RssRule("ad_rss")), "rss_matched": Coded(RssRule("matched"))}
 
-_RULE_OF = np.array([v.rule for v in VARIANTS.values()])
+_RULE_NAMES = tuple(dict.fromkeys(v.rule for v in VARIANTS.values()))  # each registered rule once, "paper" among them
+_RULE_CODE = np.array([_RULE_NAMES.index(v.rule) for v in VARIANTS.values()])  # per variant index
 
 
 @dataclass(frozen=True)
@@ -85,5 +86,7 @@ def rule_rows(variant, n: int) -> list[tuple[object, np.ndarray]]:
         return [] if rule == "paper" else [(DECISION_RULES[rule], np.arange(n))]
     arr = np.asarray(variant)
     idx = np.array([VARIANT_NAMES.index(v) for v in arr.tolist()]) if arr.dtype.kind in "US" else arr
-    rules = _RULE_OF[idx]
-    return [(DECISION_RULES[name], np.flatnonzero(rules == name)) for name in np.unique(rules) if name != "paper"]
+    codes = _RULE_CODE[idx]
+    present = np.flatnonzero(np.bincount(codes, minlength=len(_RULE_NAMES)))  # integer counting, not a string sort
+    named = [(_RULE_NAMES[c], c) for c in present.tolist() if _RULE_NAMES[c] != "paper"]
+    return [(DECISION_RULES[name], np.flatnonzero(codes == c)) for name, c in sorted(named)]
