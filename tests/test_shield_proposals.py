@@ -154,3 +154,13 @@ def test_reasons_one_readable_sentence_per_row():
             .reasons()[0]
             .endswith("keeps a safe evasion (assumptions breached: most conservative worst case)")
         )
+
+
+def test_the_tolerance_is_inclusive():
+    """Exactly at a limit plus ``1e-9`` m/s² (the same float the rule computes) is still a valid proposal."""
+    a_x = np.array([-PRM.a_x_d - 1e-9, PRM.a_x_a + 1e-9, 0.0, 0.0])
+    a_y = np.array([0.0, 0.0, PRM.a_y_m + 1e-9, -(PRM.a_y_m + 1e-9)])
+    out_x, out_y, invalid = check_proposal("p", (a_x, a_y), 4, PRM)
+    assert not invalid.any()
+    np.testing.assert_array_equal(out_x, a_x)
+    np.testing.assert_array_equal(out_y, a_y)
