@@ -110,6 +110,11 @@ def test_the_gap_to_l0_is_minus_infinity_exactly_when_the_ego_ends_faster():
     l1_crawl = (one(100.0), one(0.5), one(0.0))
     g = leader_gap(one(0.0), p, v, l1_crawl, (one(80.0), one(0.0), one(8.0)), one(7.0), INF, prm)
     assert g[0] == -np.inf
+    # The ego ending exactly SPEED_TOL (1e-9 m/s) faster is round-off by the module's convention: finite; 2e-9: not.
+    for crawl, closing in ((1e-9, False), (2e-9, True)):
+        g = leader_gap(one(0.0), p, v, (one(100.0), one(crawl), one(0.0)), (one(80.0), one(0.0), one(8.0)), one(7.0),
+                       INF, prm)  # fmt: skip
+        assert (g[0] == -np.inf) == closing
     # Following L0 itself: the ego ends at L0's speed, never faster: the minimum is finite.
     l0 = (one(30.0), one(15.0), one(3.0))
     g = leader_gap(one(0.0), p, v, l0, l0, one(7.0), INF, prm)
