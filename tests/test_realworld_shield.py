@@ -373,3 +373,22 @@ def test_chain_bounds_empty_slots_and_the_exact_unsafe_boundary():
     x[0, 1] -= 0.01
     bounds, unsafe = chain_bounds(x, v, promise, np.array([2, 2, 0]), np.zeros((3, 2), bool), None, prm)
     np.testing.assert_array_equal(unsafe, [True, False, False])
+
+
+def test_delay_periods_rounds_within_a_nanosecond():
+    """A delay within 1e-9 s of a whole number of periods is that number (round-off of a configured float);
+    beyond, refused. Exactly 1e-9 s off (the delay 1e-9 s, 0 periods: the difference is that double exactly) is
+    still accepted."""
+    from safelane.shield.realworld import delay_periods
+
+    prm = Params()
+
+    class Cfg:
+        def __init__(self, delay):
+            self.actuation_delay_s = delay
+
+    assert delay_periods(Cfg(1e-9), prm) == 0
+    assert delay_periods(Cfg(0.2), prm) == 2
+    assert delay_periods(Cfg(0.0), prm) == 0
+    with pytest.raises(ValueError, match="actuation_delay_s"):
+        delay_periods(Cfg(2e-9), prm)
