@@ -268,3 +268,32 @@ def test_a_leader_exactly_on_the_filters_bound_is_sampled():
     closer = np.nextafter(d0, 0.0)
     _, violated, _, gap_l1 = _run(0.0, 20.0, 0.0, 3.5, [-40.0, closer], [20.0, 19.9], [0.0, 2.5])
     assert not violated and gap_l1 == pytest.approx(closer - 0.002, abs=1e-9)
+
+
+@pytest.mark.parametrize(
+    ("y0", "vy", "ay", "d0"),
+    [
+        (OVERLAP - 0.05, 1.0, 0.0, 4.795),  # rising through the overlap level at 0.05 s
+        (OVERLAP + 0.05, -1.0, 0.0, 4.805),  # falling through it at 0.05 s
+        (OVERLAP + 0.005, -0.15, 1.5, 4.805),  # dipping below it at 0.0423 s (slowing to 0 at dt)
+        (OVERLAP + 0.002, 0.05, -1.5, 4.8095),  # curving below it at 0.0948 s
+    ],
+)
+def test_contact_only_outside_the_overlap_window_with_a_stop_inside_the_period(y0, vy, ay, d0):
+    """L1 (0.4 m/s, braking at 8) stops at 0.05 s after 0.01 m, so the pair takes the stop-knot path. Rising case:
+    the ego at rest, the gap d0 + 0.4 t − 4 t² is below the length 4.8 only until 0.0127 s, before the ego overlaps
+    (from 0.05 s). Other cases: the ego at 0.2 m/s, the gap d0 + 0.2 t − 4 t² then d0 + 0.01 − 0.2 t after 0.05 s,
+    below 4.8 only after the ego has left the overlap zone (at 0.075 s, resp. 0.0475 s and 0.09475 s). The ego is
+    beyond the conflict level all period, inside p_m: a violation, never a contact."""
+    ego_v = 0.0 if vy > 0 and ay == 0 else 0.2
+    collided, violated, _, _ = _run(0.0, ego_v, 0.0, y0, [-40.0, d0], [0.0, 0.4], [0.0, -8.0], vy, ay)
+    assert (collided, violated) == (False, True)
+
+
+def test_touching_is_no_contact():
+    """The ego and L1 at the same speed exactly a car's length apart, the ego in the target lane: touching, no
+    overlap; a hair closer is a contact."""
+    length = PARAMS.vehicle_length
+    assert _run(0.0, 20.0, 0.0, 3.5, [-40.0, length], [20.0, 20.0], [0.0, 0.0])[:2] == (False, True)
+    closer = np.nextafter(length, 0.0)
+    assert _run(0.0, 20.0, 0.0, 3.5, [-40.0, closer], [20.0, 20.0], [0.0, 0.0])[:2] == (True, True)
