@@ -297,3 +297,23 @@ def test_touching_is_no_contact():
     assert _run(0.0, 20.0, 0.0, 3.5, [-40.0, length], [20.0, 20.0], [0.0, 0.0])[:2] == (False, True)
     closer = np.nextafter(length, 0.0)
     assert _run(0.0, 20.0, 0.0, 3.5, [-40.0, closer], [20.0, 20.0], [0.0, 0.0])[:2] == (True, True)
+
+
+def test_the_egos_contact_and_margin_edges_ahead_and_behind():
+    """Constant gaps (everyone at 20 m/s), the ego in the target lane: a car's length exactly is touching (no
+    contact), ``p_m − 1 nm`` exactly is the margin's tolerance (no violation), behind as ahead."""
+    length, edge = PARAMS.vehicle_length, PARAMS.p_m - 1e-9
+    far = 60.0
+    assert _run(0.0, 20.0, 0.0, 3.5, [-length, far], [20.0, 20.0], [0.0, 0.0])[:2] == (False, True)
+    assert _run(0.0, 20.0, 0.0, 3.5, [-edge, far], [20.0, 20.0], [0.0, 0.0])[:2] == (False, False)
+    assert _run(0.0, 20.0, 0.0, 3.5, [-far, edge], [20.0, 20.0], [0.0, 0.0])[:2] == (False, False)
+    assert _run(0.0, 20.0, 0.0, 3.5, [-far, edge - 1e-9], [20.0, 20.0], [0.0, 0.0])[:2] == (False, True)
+
+
+def test_a_dip_with_relative_acceleration_one_over_the_whole_period():
+    """The ego settled in the target lane braking at 1, L1 cruising 0.06 m/s slower: 7.0015 − 0.06 t + t²/2, its
+    minimum 6.9997 at 0.06 s (ends 7.0015 and 7.0005); between target-lane vehicles the same relative motion."""
+    _, violated, _, gap_l1 = _run(0.0, 20.0, -1.0, 3.5, [-40.0, 7.0015], [20.0, 19.94], [0.0, 0.0])
+    assert violated and gap_l1 == pytest.approx(6.9997, abs=1e-9)
+    collided, violated, ratio = _check([0.0, 7.0015], [20.0, 19.94], [-1.0, 0.0])
+    assert (collided, violated) == (False, True) and ratio * M == pytest.approx(6.9997, abs=1e-9)
