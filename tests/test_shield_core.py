@@ -361,6 +361,7 @@ CONFIGS = {
     "no_agg": ({}, "No_agg_assess"),
     "slow_paper_rule": ({"assessment": "slow", "completion": "paper_evasion", "assess_delay_s": 0.2}, "CV_none"),
     "monitor_off": ({"monitor": False}, "CV_all"),
+    "monitor_off_own": ({"monitor": False}, "CV_all"),
     "own_lane": ({}, "CV_all"),
     "own_lane_off": ({"own_lane": False}, "CV_all"),
     "delay": ({"actuation_delay_s": 0.2}, "CV_all"),
@@ -378,7 +379,7 @@ def test_step_makes_the_documented_decision_row_by_row(name):
     prm = PRM
     rng = np.random.default_rng(sum(map(ord, name)))
     b = 36
-    s = _situations(rng, b, own=name in ("own_lane", "own_lane_off", "delay_own"), t=1.0)
+    s = _situations(rng, b, own=name in ("own_lane", "own_lane_off", "delay_own", "monitor_off_own"), t=1.0)
     s = dataclasses.replace(s, f_aggressive_truth=rng.random(b) < 0.5)
     state = init(s, prm, cfg, variant)
     push_f = rng.random(b) < 0.3
