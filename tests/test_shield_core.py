@@ -646,3 +646,14 @@ def test_only_an_f_strictly_behind_the_ego_is_watched():
     state = dataclasses.replace(init(s, PRM, ShieldConfig()), plan_f_aggr=np.zeros(b, bool))
     new, _ = step(state, s, (np.zeros(b), np.zeros(b)), PRM, ShieldConfig(), "CV_all")
     assert np.isfinite(new.last.f_limit).tolist() == [True, False, False, True]
+
+
+def test_init_refuses_the_plan_where_the_commands_in_flight_break_a_gap_inside_the_delay():
+    """Actuation delay 0.2 s: an ego just out of its lane, drifting back in within the delay, 5 m behind L1 (inside
+    p_m) — from the end of the delay there is nothing to evade, but the cruise acting meanwhile is in the conflict
+    zone with L1 too close: no verified plan. The same ego 12 m behind L1 holds one."""
+    ego = (np.zeros(2), np.full(2, PRM.y_safe + 0.05), np.full(2, 20.0), np.full(2, -1.0))
+    s = Situation.from_arrays(t=0.0, ego=ego, follower=(-30.0, 20.0), leaders=(np.array([[5.0], [12.0]]), [[20.0]] * 2),
+                              n_connected=0, params=PRM)  # fmt: skip
+    state = init(s, PRM, ShieldConfig(actuation_delay_s=0.2))
+    assert state.plan.feasible.tolist() == [False, True]
