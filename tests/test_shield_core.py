@@ -657,3 +657,13 @@ def test_init_refuses_the_plan_where_the_commands_in_flight_break_a_gap_inside_t
                               n_connected=0, params=PRM)  # fmt: skip
     state = init(s, PRM, ShieldConfig(actuation_delay_s=0.2))
     assert state.plan.feasible.tolist() == [False, True]
+
+
+def test_init_checks_the_own_lane_leader_during_the_delay_too():
+    """Delay 0.2 s, the ego in its own lane 6.9 m behind a faster L0 (inside p_m now, outside it once the delay has
+    passed): the cruise acting meanwhile breaks the margin to L0, so no plan is verified; 7.5 m behind, one is."""
+    ego = (np.zeros(2), np.zeros(2), np.full(2, 20.0), np.zeros(2))
+    s = Situation.from_arrays(t=0.0, ego=ego, follower=(-60.0, 20.0), leaders=([100.0], [20.0]), n_connected=0,
+                              own_leaders=(np.array([[6.9], [7.5]]), np.full((2, 1), 30.0)), params=PRM)  # fmt: skip
+    state = init(s, PRM, ShieldConfig(actuation_delay_s=0.2))
+    assert state.plan.feasible.tolist() == [False, True]
