@@ -233,11 +233,11 @@ def test_extrema_match_dense_sampling_of_multi_segment_motions():
 
 
 def test_windowed_gap_extrema_broadcast_batches():
-    """``(3, 1)`` behind ``(1, 4)`` with a ``(3, 1)`` lateral motion: ``(3, 4)`` pairs, each as the pair alone."""
+    """``(3, 1)`` behind ``(1, 4)`` with a ``(1, 1)`` lateral motion: ``(3, 4)`` pairs, each as the pair alone."""
     rng = np.random.default_rng(13)
     behind = Motion.constant(rng.uniform(-10, 0, (3, 1)), rng.uniform(0, 30, (3, 1)), rng.uniform(-8, 2.5, (3, 1)), DT)
     ahead = Motion.constant(rng.uniform(0, 10, (1, 4)), rng.uniform(0, 30, (1, 4)), rng.uniform(-8, 2.5, (1, 4)), DT)
-    lat = Motion.free(np.full((3, 1), 0.98), np.full((3, 1), 0.5), np.zeros((3, 1)), DT)  # crosses 1.0 at 0.04 s
+    lat = Motion.free(np.full((1, 1), 0.98), np.full((1, 1), 0.5), np.zeros((1, 1)), DT)  # crosses 1.0 at 0.04 s
     lo, hi = windowed_gap_extrema(behind, ahead, lat, crossing_knots(lat, 1.0), 1.0)
     assert lo.shape == hi.shape == (3, 4)
     for i in range(3):
@@ -246,7 +246,7 @@ def test_windowed_gap_extrema_broadcast_batches():
             def pick(m, idx):
                 return Motion(*(getattr(m, f)[idx] for f in ("t", "x", "v", "acc")))
 
-            one_lat = pick(lat, (i, 0))
+            one_lat = pick(lat, (0, 0))
             one = windowed_gap_extrema(pick(behind, (i, 0)), pick(ahead, (0, j)), one_lat, crossing_knots(one_lat, 1.0),
                                        1.0)  # fmt: skip
             assert (one[0], one[1]) == pytest.approx((lo[i, j], hi[i, j]), abs=1e-12)
