@@ -667,3 +667,20 @@ def test_init_checks_the_own_lane_leader_during_the_delay_too():
                               own_leaders=(np.array([[6.9], [7.5]]), np.full((2, 1), 30.0)), params=PRM)  # fmt: skip
     state = init(s, PRM, ShieldConfig(actuation_delay_s=0.2))
     assert state.plan.feasible.tolist() == [False, True]
+
+
+def test_a_proposal_inside_the_tolerance_is_clipped_to_the_mechanical_limits():
+    """A proposal up to 1e-9 m/s² beyond a limit is valid (proposals.py) and executed at the limit itself (the
+    shield's 'clipped, checked' proposal): exactly -a_x_d, a_x_a, ±a_y_m."""
+    b = 4
+    ego = (np.zeros(b), np.zeros(b), np.full(b, 25.0), np.zeros(b))
+    s = Situation.from_arrays(t=0.0, ego=ego, follower=(-40.0, 25.0), leaders=([60.0], [25.0]), n_connected=0,
+                              params=PRM)  # fmt: skip
+    a_x = np.array([-PRM.a_x_d - 1e-9, PRM.a_x_a + 1e-9, 0.0, 0.0])
+    a_y = np.array([0.0, 0.0, PRM.a_y_m + 1e-9, -(PRM.a_y_m + 1e-9)])
+    for cfg in (ShieldConfig(enabled=False), ShieldConfig()):
+        _, d = step(init(s, PRM, cfg), s, (a_x, a_y), PRM, cfg)
+        assert not d.invalid.any() and (d.behaviour == PROCEED).all()
+        assert d.a_x.tolist() == [-PRM.a_x_d, PRM.a_x_a, 0.0, 0.0]
+        assert d.a_y.tolist() == [0.0, 0.0, PRM.a_y_m, -PRM.a_y_m]
+        np.testing.assert_array_equal(d.nominal_x, a_x)
