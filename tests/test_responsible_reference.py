@@ -247,3 +247,12 @@ def test_a_wish_exactly_at_the_bound_is_taken_on_the_safe_side():
     assert responsible_accel(exact, *row, PRM)[0] == exact[0] - ROOT_EPS_MPS2
     assert responsible_accel(exact + 1e-3, *row, PRM)[0] == exact[0] - ROOT_EPS_MPS2
     assert responsible_accel(exact - 1e-3, *row, PRM)[0] == exact[0] - 1e-3
+
+
+def test_a_follower_at_rest_needs_no_braking():
+    """A follower at rest staying at rest (``a = 0``) behind a stopped leader 5 m beyond the margin needs no braking
+    at all: the check passes with ``brake = 0`` (the required deceleration, 0, is at most the brake); moving off
+    at 1 m/s² it needs some, so ``brake = 0`` fails."""
+    one = lambda x: np.full(1, float(x))  # noqa: E731
+    assert responsible_ok(one(0.0), one(5.0), one(0.0), one(0.0), one(8.0), PRM, brake=0.0)[0]
+    assert not responsible_ok(one(1.0), one(5.0), one(0.0), one(0.0), one(8.0), PRM, brake=0.0)[0]
