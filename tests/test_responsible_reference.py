@@ -256,3 +256,16 @@ def test_a_follower_at_rest_needs_no_braking():
     one = lambda x: np.full(1, float(x))  # noqa: E731
     assert responsible_ok(one(0.0), one(5.0), one(0.0), one(0.0), one(8.0), PRM, brake=0.0)[0]
     assert not responsible_ok(one(1.0), one(5.0), one(0.0), one(0.0), one(8.0), PRM, brake=0.0)[0]
+
+
+def test_the_bounds_raise_no_floating_point_warnings():
+    """Equal speeds (the in-period vertex divides by ``v_f − v_l`` = 0), zero slack, stopped vehicles, a leader
+    that never brakes: the closed forms divide raw and mask after, silently."""
+    rows = [np.array(c, dtype=float) for c in zip(*[
+        (0.0, 10.0, 10.0, 3.0), (-0.0, 9.25, 9.0, 0.0), (5.0, 0.0, 0.0, 0.0), (0.0, 0.0, 0.0, 8.0),
+        (2.0, 20.0, 20.0, 0.0), (-1.0, 5.0, 0.0, 8.0),
+    ], strict=True)]  # fmt: skip
+    with np.errstate(all="raise"):
+        out = responsible_bound(*rows, PRM)
+        responsible_accel(np.zeros(6), *rows, PRM)
+    assert out.shape == (6,) and not np.isnan(out).any()
