@@ -66,6 +66,9 @@ def test_scalars_and_small_batches_never_run_the_kernel(monkeypatch):
         got = evasion_exists(**one, params=PARAMS)
         assert isinstance(got, np.bool_ | bool)
         assert bool(got) == bool(_numpy_answer(monkeypatch, one))
+    # and a NumPy batch one element short of the threshold
+    small = evasion_inputs(np.random.default_rng(33), (ev.FAST_MIN_BATCH - 1,))
+    np.testing.assert_array_equal(evasion_exists(**small, params=PARAMS), _numpy_answer(monkeypatch, small))
 
 
 @needs_numba
