@@ -15,7 +15,7 @@ from safelane.sim import SimConfig
 from safelane.sim.kinematics import Fleet, Motion
 from safelane.sim.realworld import cruise, executed_motion, issued, l0_motion, own_lane_checks, with_own_lane
 from safelane.sim.scenario import paper_scenarios
-from test_sim_checks_reference import GRID, _plan_segments, scenarios, trajectory
+from test_sim_checks_reference import GRID, _plan_segments, crossings, scenarios, trajectory
 
 #: The checks and motions divide only where it is safe (or under errstate): no floating-point warning escapes.
 pytestmark = pytest.mark.filterwarnings("error")
@@ -23,21 +23,6 @@ pytestmark = pytest.mark.filterwarnings("error")
 PARAMS = Params()
 DT = PARAMS.dt
 LEVEL = PARAMS.vehicle_width
-
-
-def _crossings(y0, vy0, starts, accs, level):
-    out, y, vy = [], y0, vy0
-    for start, end, a in zip(starts, [*starts[1:], DT], accs, strict=True):
-        c = y - level
-        if a == 0.0:
-            roots = [-c / vy] if vy != 0.0 else []
-        else:
-            disc = vy * vy - 2.0 * a * c
-            roots = [] if disc < 0.0 else [(-vy - np.sqrt(disc)) / a, (-vy + np.sqrt(disc)) / a]
-        out += [start + r for r in roots if 0.0 < r < end - start]
-        h = end - start
-        y, vy = y + vy * h + 0.5 * a * h * h, vy + a * h
-    return out
 
 
 @pytest.mark.parametrize(("seed", "planned"), [(21, False), (22, True)])
@@ -67,7 +52,7 @@ def test_own_lane_checks_match_the_dense_reference(seed, planned):
             assert not collided[i] and not violated[i] and min_gap[i] == np.inf
             continue
         (sx, ax), (sy, ay) = world["ego"][i]
-        cross = _crossings(world["ey"][i], world["evy"][i], sy, ay, LEVEL)
+        cross = crossings(world["ey"][i], world["evy"][i], sy, ay, LEVEL)
         t = np.unique(np.concatenate([GRID, cross]))
         ex = trajectory(world["ex"][i], world["evx"][i], sx, ax, t)[0]
         ey = trajectory(world["ey"][i], world["evy"][i], sy, ay, t, clamp=False)[0]

@@ -38,11 +38,8 @@ from safelane.safety._checks import bool_array
 from safelane.safety.chain import braked_position, min_follow_decel
 from safelane.safety.lateral import LATERAL_TOL_M
 from safelane.safety.longitudinal import leader_gap_min, longitudinal_core
+from test_safety_golden import DEFAULT, GOLDEN  # the golden cases' parameters
 
-GOLDEN = Params(
-    a_x_a=2.0, a_x_d=8.0, a_y_m=2.0, lane_width=3.5, vehicle_width=1.5, vehicle_length=4.5, p_m=5.0, p_m_human=10.0
-)
-DEFAULT = Params()
 BACKENDS = pytest.mark.parametrize("xp", [SCALAR, ARRAY], ids=["scalar", "array"])
 
 

@@ -25,23 +25,15 @@ from safelane.v2x import (
     leader_arrays,
     received_chain,
 )
+from test_v2x import NOW
+from test_v2x import message as v2x_message
 
 PARAMS = Params()
-NOW = 1.0
 
 
 def message(**overrides) -> V2XMessage:
-    fields = dict(
-        vehicle_id="L1",
-        timestamp_s=NOW,
-        position_m=30.0,
-        speed_mps=25.0,
-        accel_mps2=0.0,
-        promise_decel=2.0,
-        promise_accel=1.0,
-        human_driven=False,
-    )
-    return V2XMessage(**{**fields, **overrides})
+    """``test_v2x``'s fresh cruising leader, without a planned-acceleration sequence."""
+    return v2x_message(**{"planned_accel": (), **overrides})
 
 
 def sensed(**overrides) -> SensedVehicle:
