@@ -269,3 +269,47 @@ def test_the_bounds_raise_no_floating_point_warnings():
         out = responsible_bound(*rows, PRM)
         responsible_accel(np.zeros(6), *rows, PRM)
     assert out.shape == (6,) and not np.isnan(out).any()
+
+
+def test_the_bounds_are_named_as_documented():
+    """``responsible_bounds``' cases by the names its docstring gives them, in that order (the first binding one is
+    the reported reason)."""
+    bounds = responsible_bounds(np.array([5.0]), np.array([20.0]), np.array([18.0]), np.array([3.0]), PRM)
+    assert list(bounds) == ["inside", "final", "end", "in_period", "after_period"]
+
+
+def test_a_follower_at_rest_at_the_leaders_stop_may_stay_exactly():
+    """The docstring's tie: both stop at the same point and the follower is already there at rest — staying
+    (``a = 0``, exactly; not the round-off of the moving root) is the bound, for any brake. (With ``brake = 0.09``
+    the moving root's ``sqrt(0.25 B² dt²) − 0.5 B dt`` is 8.7e-19, not 0: the tie must be decided before it.)"""
+    for brake in (PRM.a_x_d, 3.0, 0.5, 0.09):
+        for lead_decel in (0.0, 3.0):
+            a = final_stop_accel(np.array([0.0]), np.array([0.0]), np.array([0.0]), np.array([lead_decel]), PRM,
+                                 brake=np.array([brake]))  # fmt: skip
+            assert a[0] == 0.0
+
+
+def test_a_leader_that_never_stops_never_bounds_the_final_stop_whatever_the_brake():
+    """A leader that never stops (not braking, moving): no final-stop constraint — ``+inf`` — even for a follower
+    that cannot brake at all afterwards (``brake = 0``)."""
+    for brake in (0.0, 0.5, PRM.a_x_d):
+        a = final_stop_accel(np.array([10.0]), np.array([10.0]), np.array([10.0]), np.array([0.0]), PRM,
+                             brake=np.array([brake]))  # fmt: skip
+        assert a[0] == np.inf
+
+
+@pytest.mark.filterwarnings("error")
+def test_final_stop_accel_raises_no_floating_point_warning_at_extreme_finite_inputs():
+    huge = np.array([1e200, 1e-300, 0.0])
+    a = final_stop_accel(np.array([10.0, 1e200, 0.0]), huge, huge, np.array([3.0, 1e-300, 8.0]), PRM)
+    assert a.shape == (3,)
+
+
+def test_no_acceleration_keeps_the_end_gap_behind_a_leader_already_past_the_margin_at_dt():
+    """``end`` (the gap zero at ``dt``): where the leader's gap position at ``dt`` is already negative (inside the
+    margin, leader stopped or slow), no acceleration of the follower makes the gap zero there: the bound is ``−inf``;
+    exactly at zero with the follower at rest it is ``0`` (staying)."""
+    rows = ([-2.0, -0.5, 0.0], [10.0, 0.0, 0.0], [0.0, 1.0, 0.0], [3.0, 8.0, 3.0])  # slack, v_f, v_l, lead
+    slack, v_f, v_l, lead = (np.array(x) for x in rows)
+    end = responsible_bounds(slack, v_f, v_l, lead, PRM)["end"]
+    assert end[0] == -np.inf and end[1] == -np.inf and end[2] == 0.0
