@@ -140,7 +140,12 @@ def run(groups: list[str], sample: int | None, seed: int, fresh: bool, children:
         chosen = sorted(random.Random(seed).sample(names, min(sample, len(names)))) if sample else []
         what = f"{len(chosen)} sampled (seed {seed}) of" if sample else "all"
         print(f"[{group}] {what} {len(names)} non-equivalent mutants of {', '.join(GROUPS[group][0])}", flush=True)
-        proc = _mutmut(work, "run", "--max-children", str(children), *chosen, capture_output=True)
+        # Name the mutants to run: mutmut would otherwise also run the reviewed equivalents, each against every test
+        # that reaches its function (they cannot fail, so nothing stops early). Named mutants are re-run even when
+        # cached, so only those without a verdict are named.
+        codes = results(work, group)
+        pending = chosen or [n for n in names if codes.get(n) is None]
+        proc = _mutmut(work, "run", "--max-children", str(children), *pending, capture_output=True) if pending else None
         codes = results(work, group)
         retry = [n for n in names if codes.get(n) in SURVIVED] if not sample else []
         if retry:  # cached survivors are not retried by mutmut unless named: retry them against today's tests
@@ -152,7 +157,7 @@ def run(groups: list[str], sample: int | None, seed: int, fresh: bool, children:
               f"{time.perf_counter() - start:.0f} s wall, {_cpu_seconds() - cpu:.0f} CPU s", flush=True)  # fmt: skip
         if survivors:
             bad += 1
-            if all(codes.get(n) is None for n in survivors):
+            if proc is not None and all(codes.get(n) is None for n in survivors):
                 print(proc.stdout[-3000:], proc.stderr[-3000:], sep="\n")
             for name in survivors:
                 diff = _mutmut(work, "show", name, capture_output=True).stdout
