@@ -105,6 +105,20 @@ def test_l0_period_gap_tolerance_is_half_the_feasibility_tolerance():
     assert FEASIBILITY_TOL_M == 1e-9
 
 
+def test_l0_period_gap_exactly_half_the_tolerance_inside_p_m_is_kept():
+    """The boundary itself: a gap to L0 exactly ½ nm inside ``p_m`` counts as kept (``>=``), one ulp further does
+    not. Exact only where positions are of the tolerance's magnitude: all at rest, ``p_m = 2^-30`` m (so ``x - p_m``
+    is exact) and a sub-nanometre car; the evasion from the period's end keeps ``p_m + ½ tol`` to L0, met there
+    within its own tolerance, so the in-period check alone decides."""
+    tiny = Params(vehicle_length=4e-10, p_m=2.0**-30, p_m_human=2.0**-30)
+    at_tie = tiny.p_m - 0.5 * FEASIBILITY_TOL_M
+    assert at_tie - tiny.p_m == -0.5 * FEASIBILITY_TOL_M
+    z = np.zeros(1)
+    for l0_x, accepted in ((at_tie, True), (np.nextafter(at_tie, -1.0), False), (np.nextafter(at_tie, 1.0), True)):
+        got = _run(z, z, z, z, z, z, np.full(1, l0_x), z, z, prm=tiny)
+        assert got.ok[0] == accepted, l0_x - tiny.p_m
+
+
 def test_l0_is_predicted_braking_at_its_worst_case():
     """The same proposal is safe behind an L0 that may brake at 1 m/s² and unsafe behind one that may brake at
     a_x_d (kills a sign error in L0's predicted motion)."""
