@@ -147,8 +147,11 @@ def run(groups: list[str], sample: int | None, seed: int, fresh: bool, children:
         pending = chosen or [n for n in names if codes.get(n) is None]
         proc = _mutmut(work, "run", "--max-children", str(children), *pending, capture_output=True) if pending else None
         codes = results(work, group)
-        retry = [n for n in names if codes.get(n) in SURVIVED] if not sample else []
-        if retry:  # cached survivors are not retried by mutmut unless named: retry them against today's tests
+        # Survivors cached by an earlier run are not retried by mutmut unless named: retry them against today's tests
+        # (not those this run just found).
+        tried = set(pending)
+        retry = [n for n in names if codes.get(n) in SURVIVED and n not in tried] if not sample else []
+        if retry:
             proc = _mutmut(work, "run", "--max-children", str(children), *retry, capture_output=True)
             codes = results(work, group)
         checked = chosen or names
