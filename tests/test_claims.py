@@ -645,3 +645,16 @@ def test_table1_side_by_side_without_published_cells_has_no_mean_difference():
     side, mae = table1_side_by_side(predicted)
     assert len(side) == 4 and side["paper_success"].isna().all()
     assert np.isnan(mae)
+
+
+def test_trends_with_one_value_along_their_axis_are_stated_and_not_checked():
+    one_decel = frame(cell("CV_all", 1, 4.0, 0.0, 0.3), cell("CV_all", 10, 4.0, 0.0, 0.9))
+    claims = {c.key: c for c in check_claims({"leaders": one_decel})}
+    assert claims["falls_with_decel"].holds is None
+    assert claims["falls_with_decel"].evidence == "needs at least two values of decel"
+    assert claims["rises_with_n"].holds is True
+    one_n = frame(cell("CV_all", 5, 2.0, 0.0, 0.9), cell("CV_all", 5, 6.0, 0.0, 0.3))
+    claims = {c.key: c for c in check_claims({"fig4_n5": one_n})}
+    assert claims["rises_with_n"].holds is None
+    assert claims["rises_with_n"].evidence == "needs at least two values of n_leaders"
+    assert_statements(claims.values())
