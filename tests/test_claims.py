@@ -521,20 +521,39 @@ def test_robust_low_pv_reports_collisions_scenarios_and_the_lowest_success():
     assert_statements([claim])
 
 
-def test_robust_low_pv_is_never_vacuously_true():
-    # A Fig. 6 run with no cell at p_v <= 0.2 and a < 5 gives no evidence for the claim.
-    outside = frame(cell("CV_all", 10, 6.0, 0.5, 0.9), cell("CV_all", 10, 2.0, 0.5, 0.9))
-    assert verdict("robust_low_pv", {"fig6_violation": outside}) is not True
-
-
-@pytest.mark.xfail(
-    strict=True,
-    reason="claims._robustness: with no Fig. 6 cell at p_v <= 0.2 and a < 5 the claim is reported as not holding "
-    "(holds=False, '0 collisions in 0 scenarios; lowest success nan') instead of not checkable (None)",
-)
 def test_robust_low_pv_without_a_cell_in_its_region_is_not_checkable():
+    # A Fig. 6 run with no cell at p_v <= 0.2 and a < 5 gives no evidence for the claim: not checkable, neither
+    # vacuously true nor "0 collisions in 0 scenarios; lowest success nan" reported as a failure.
     outside = frame(cell("CV_all", 10, 6.0, 0.5, 0.9), cell("CV_all", 10, 2.0, 0.5, 0.9))
-    assert verdict("robust_low_pv", {"fig6_violation": outside}) is None
+    claim = {c.key: c for c in check_claims({"fig6_violation": outside})}["robust_low_pv"]
+    assert claim.holds is None
+    assert claim.evidence == "no cell with p_v <= 0.2 and a_x_N+1_d < 5"
+    assert_statements([claim])
+
+
+def test_degrades_high_pv_needs_two_corners_to_compare():
+    # One cell (the corner is the base) or a grid without its far corner: not checkable (it used to compare the cell
+    # with itself and report False, or fail on the missing corner with an IndexError).
+    one = frame(cell("CV_all", 10, 4.0, 0.2, 0.9))
+    no_corner = frame(cell("CV_all", 10, 2.0, 0.0, 0.9), cell("CV_all", 10, 6.0, 0.0, 0.5),
+                      cell("CV_all", 10, 2.0, 0.5, 0.5))  # fmt: skip
+    for grid in (one, no_corner):
+        claim = {c.key: c for c in check_claims({"fig6_violation": grid})}["degrades_high_pv"]
+        assert claim.holds is None, grid
+        assert "needs two cells" in claim.evidence
+        assert_statements([claim])
+    # One axis varied is enough: p_v alone, at one a.
+    along_pv = frame(cell("CV_all", 10, 4.0, 0.0, 0.9), cell("CV_all", 10, 4.0, 0.5, 0.5, collisions=3))
+    assert verdict("degrades_high_pv", {"fig6_violation": along_pv}) is True
+
+
+def test_zero_collisions_without_a_cell_at_p_v_zero_is_not_checkable():
+    # Summaries with cells only at p_v > 0, or with columns and no rows: no evidence, not "0 collisions in 0".
+    high = frame(cell("CV_all", 10, 4.0, 0.5, 0.6))
+    empty = frame(cell("CV_all", 10, 4.0, 0.0, 0.9)).iloc[:0]
+    for summaries in ({"fig6_violation": high}, {"fig4_n5": empty}):
+        claim = {c.key: c for c in check_claims(summaries)}["zero_collisions"]
+        assert (claim.holds, claim.evidence) == (None, "no cell with p_v = 0")
 
 
 def test_degrades_high_pv_compares_the_two_corners_whatever_the_row_order():

@@ -189,6 +189,8 @@ def _zero_collisions(summaries) -> Claim:
     # A cell two experiments list is the same scenarios (same seed, common random numbers): count it once.
     frame = frame.drop_duplicates(subset=[k for k in (*SUMMARY_KEYS, "samples") if k in frame])
     frame = frame[frame["p_v"] == 0.0]
+    if frame.empty:  # not checkable, not vacuously true
+        return Claim("zero_collisions", text, None, "no cell with p_v = 0")
     n = int(frame["samples"].sum())
     collisions = round((frame["collision_rate"] * frame["samples"]).sum())
     violations = round((frame["safety_violation_rate"] * frame["samples"]).sum())
@@ -267,20 +269,27 @@ def _robustness(fig6: pd.DataFrame | None) -> list[Claim]:
             Claim("robust_low_pv", text_a, None, "fig6_violation did not run"),
             Claim("degrades_high_pv", text_b, None, "fig6_violation did not run"),
         ]
+    # Each claim is not checkable (None), not vacuously decided, where the grid lacks what it compares.
     low = fig6[(fig6["p_v"] <= 0.2) & (fig6["decel"] < 5)]
-    collisions = round((low["collision_rate"] * low["samples"]).sum())
-    worst_success = float(low["success_rate"].min()) if len(low) else float("nan")
-    holds_a = collisions == 0 and worst_success >= RELATIVELY_HIGH
-    claim_a = Claim(
-        "robust_low_pv",
-        text_a,
-        holds_a,
-        f"{collisions} collisions in {int(low['samples'].sum())} scenarios; lowest success {worst_success:.3f}",
-    )
+    if low.empty:
+        claim_a = Claim("robust_low_pv", text_a, None, "no cell with p_v <= 0.2 and a_x_N+1_d < 5")
+    else:
+        collisions = round((low["collision_rate"] * low["samples"]).sum())
+        worst_success = float(low["success_rate"].min())
+        claim_a = Claim(
+            "robust_low_pv",
+            text_a,
+            collisions == 0 and worst_success >= RELATIVELY_HIGH,
+            f"{collisions} collisions in {int(low['samples'].sum())} scenarios; lowest success {worst_success:.3f}",
+        )
     pv_max, pv_min = fig6["p_v"].max(), fig6["p_v"].min()
     d_max, d_min = fig6["decel"].max(), fig6["decel"].min()
-    corner = fig6[(fig6["p_v"] == pv_max) & (fig6["decel"] == d_max)].iloc[0]
-    base = fig6[(fig6["p_v"] == pv_min) & (fig6["decel"] == d_min)].iloc[0]
+    corner = fig6[(fig6["p_v"] == pv_max) & (fig6["decel"] == d_max)]
+    base = fig6[(fig6["p_v"] == pv_min) & (fig6["decel"] == d_min)]
+    if (pv_max == pv_min and d_max == d_min) or corner.empty or base.empty:
+        why = "needs two cells: the smallest p_v and a_x_N+1_d, and the largest"
+        return [claim_a, Claim("degrades_high_pv", text_b, None, why)]
+    corner, base = corner.iloc[0], base.iloc[0]
     holds_b = corner["success_rate"] < base["success_rate"] and corner["collision_rate"] > base["collision_rate"]
     claim_b = Claim(
         "degrades_high_pv",
