@@ -378,15 +378,10 @@ def test_a_long_chains_measurement_errors_are_independent_of_the_own_lane_leader
     assert not _own_share_agrees_with_a_chain_share(31)
 
 
-@pytest.mark.xfail(
-    strict=True,
-    reason="bug in sim/realworld.py measure: the chain's draws take the slots _SLOT_NOISE + 2 + 2k (+1) and the own "
-    "lane's _SLOT_NOISE + 64 + 2j (+1), so from the 32nd chain vehicle on (k >= 31) a chain vehicle shares its "
-    "position and speed draws with own-lane leader k - 31: their measurement errors are the same share of their bounds",
-)
 def test_a_chain_of_32_vehicles_measurement_errors_are_independent_of_the_own_lane_leaders():
     """``n_leaders`` is any non-negative integer (``sim.scenario``): a 32-vehicle chain is a valid world, and its
-    vehicles' measurement errors must be drawn apart from ``L0``'s as well."""
+    vehicles' measurement errors must be drawn apart from ``L0``'s as well (the 32nd and later shared ``L0``'s draws
+    until the chain's columns past the 31st got a counter of their own)."""
     assert not _own_share_agrees_with_a_chain_share(32)
 
 

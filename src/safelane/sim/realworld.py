@@ -74,14 +74,18 @@ def measure(seed: int, batch, step: int, s: Situation, bounds: SensingBounds, ed
         w = counter_uniform(seed, sid, step, *counters, 9)
         return np.where(w < edge_share, np.round(u), u)
 
-    def noisy(x, v, err, slot0):
+    def noisy(x, v, err, slot0, own_slots=None):
         k = np.arange(x.shape[1])[None, :]
         ux = draw(slot0 + 2 * k)
         uv = draw(slot0 + 2 * k + 1)
+        if own_slots is not None and x.shape[1] > own_slots:  # columns that would reach the own lane's slots
+            far = k[:, own_slots:]  # draw on a counter of their own (one more element): nothing else uses it
+            ux[:, own_slots:], uv[:, own_slots:] = draw(slot0 + 2 * far, 1), draw(slot0 + 2 * far + 1, 1)
         return x + err[..., 0] * (2.0 * ux - 1.0), np.maximum(v + err[..., 1] * (2.0 * uv - 1.0), 0.0)
 
     fx, fv = noisy(s.f_x[:, None], s.f_v[:, None], s.err_f[:, None, :], _SLOT_NOISE)
-    cx, cv = noisy(s.chain_x, s.chain_v, s.err_chain, _SLOT_NOISE + 2)
+    # The chain's first 31 vehicles take the slots _SLOT_NOISE + 2 .. + 63, the own lane's from _SLOT_NOISE + 64.
+    cx, cv = noisy(s.chain_x, s.chain_v, s.err_chain, _SLOT_NOISE + 2, own_slots=31)
     out = dict(f_x=fx[:, 0], f_v=fv[:, 0], chain_x=cx, chain_v=cv)
     if s.own_x is not None:
         ox, ov = noisy(s.own_x, s.own_v, s.err_own, _SLOT_NOISE + 64)
