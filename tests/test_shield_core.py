@@ -684,3 +684,34 @@ def test_a_proposal_inside_the_tolerance_is_clipped_to_the_mechanical_limits():
         assert d.a_x.tolist() == [-PRM.a_x_d, PRM.a_x_a, 0.0, 0.0]
         assert d.a_y.tolist() == [0.0, 0.0, PRM.a_y_m, -PRM.a_y_m]
         np.testing.assert_array_equal(d.nominal_x, a_x)
+
+
+def test_a_disabled_shield_completes_where_the_steps_exact_lateral_end_reaches_the_boundary():
+    """``enabled=False``: a step completes where ``y + v_y dt + ½ a_y dt²`` (constant ``a_y`` over the period)
+    reaches the boundary. With ``a_y = 1`` and ``v_y = 0`` the step moves 0.005 m: from 0.004 m short it arrives, from
+    0.01 m short it does not; with ``v_y = 0.45``, ``a_y = 0`` it moves 0.045 m: 0.05 m short stays short."""
+    short = np.array([0.004, 0.01, 0.05])
+    b = short.size
+    ego = (np.zeros(b), PRM.y_boundary - short, np.full(b, 25.0), np.array([0.0, 0.0, 0.45]))
+    s = Situation.from_arrays(t=0.0, ego=ego, follower=(-40.0, 25.0), leaders=([60.0], [25.0]), n_connected=0,
+                              params=PRM)  # fmt: skip
+    cfg = ShieldConfig(enabled=False)
+    a_y = np.array([1.0, 1.0, 0.0])
+    _, d = step(init(s, PRM, cfg), s, (np.zeros(b), a_y), PRM, cfg)
+    assert PRM.dt == 0.1 and PRM.a_y_m >= 1.0
+    assert d.completing.tolist() == [True, False, False]
+    assert (d.behaviour == PROCEED).all()
+
+
+def test_where_every_proposal_is_invalid_no_row_proceeds():
+    """Every row's proposal invalid (NaN, out of range): none is executed — each row is checked at hesitation and
+    hesitates or aborts, in a batch where no row could proceed at all."""
+    b = 3
+    ego = (np.zeros(b), np.array([0.0, 1.0, 2.0]), np.full(b, 25.0), np.zeros(b))
+    s = Situation.from_arrays(t=0.0, ego=ego, follower=(-40.0, 25.0), leaders=([60.0], [25.0]), n_connected=0,
+                              params=PRM)  # fmt: skip
+    bad = (np.array([np.nan, 50.0, 0.0]), np.array([0.0, 0.0, np.inf]))
+    _, d = step(init(s, PRM, ShieldConfig()), s, bad, PRM)
+    assert d.invalid.all()
+    assert np.isin(d.behaviour, [HESITATE, ABORT]).all()
+    assert (d.behaviour == HESITATE).all()  # far from L1 and F: hesitating is safe everywhere
