@@ -715,3 +715,45 @@ def test_where_every_proposal_is_invalid_no_row_proceeds():
     assert d.invalid.all()
     assert np.isin(d.behaviour, [HESITATE, ABORT]).all()
     assert (d.behaviour == HESITATE).all()  # far from L1 and F: hesitating is safe everywhere
+
+
+def test_another_rules_rows_see_the_chain_only_where_their_variant_uses_it_and_no_link_is_unsafe(monkeypatch):
+    """``RuleInputs.uses_chain`` (rules.py): the variant uses the connected chain *and* the chain analysis found no
+    unsafe link on the row — recorded from what the RSS rule is handed, on a batch with unsafe chains on some rows."""
+    rng = np.random.default_rng(44)
+    b = 64
+    s = _situations(rng, b)
+    _, unsafe = chain_analysis(s, PRM)
+    names = np.array(["RSS", "RSS_V2X"] * (b // 2))
+    uses = np.array([VARIANTS[n].uses_chain for n in names])
+    assert (uses & unsafe).any() and (uses & ~unsafe).any() and (~uses & ~unsafe).any()
+    seen = []
+
+    class Recorder:
+        def __init__(self, inner):
+            self.inner = inner
+
+        def decide(self, inputs, params):
+            seen.append(inputs)
+            return self.inner.decide(inputs, params)
+
+    monkeypatch.setitem(DECISION_RULES, "rss", Recorder(DECISION_RULES["rss"]))
+    step(init(s, PRM, ShieldConfig(), names), s, (np.zeros(b), np.zeros(b)), PRM, ShieldConfig(), names)
+    assert len(seen) == 1
+    np.testing.assert_array_equal(seen[0].uses_chain, uses & ~unsafe)
+
+
+def test_after_completion_the_lateral_command_is_clipped_to_a_y_m_both_ways():
+    """A completed row keeps its lane with ``a_y = 0.8 (w_l − y) − 1.6 v_y`` clipped to ``±a_y_m``: far above the
+    target lane's centre and drifting up (``y = 4.5``, ``v_y = 1``: −2.4) it is ``−a_y_m``; far below and drifting
+    down (``y = 2``, ``v_y = −1``: +2.8) it is ``+a_y_m``; near the centre (``y = 3.4``, ``v_y = 0``: 0.08) as is."""
+    y, vy = np.array([4.5, 2.0, 3.4]), np.array([1.0, -1.0, 0.0])
+    b = y.size
+    ego = (np.zeros(b), y, np.full(b, 25.0), vy)
+    s = Situation.from_arrays(t=0.0, ego=ego, follower=(-40.0, 25.0), leaders=([60.0], [25.0]), n_connected=0,
+                              params=PRM)  # fmt: skip
+    state = dataclasses.replace(init(s, PRM, ShieldConfig()), completed=np.ones(b, bool))
+    _, d = step(state, s, (np.zeros(b), np.zeros(b)), PRM)
+    assert PRM.lane_width == 3.5
+    assert (d.behaviour == COMPLETED).all()
+    np.testing.assert_allclose(d.a_y, [-PRM.a_y_m, PRM.a_y_m, 0.8 * 0.1], rtol=0, atol=1e-12)
