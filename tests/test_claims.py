@@ -540,7 +540,7 @@ def test_degrades_high_pv_needs_two_corners_to_compare():
     for grid in (one, no_corner):
         claim = {c.key: c for c in check_claims({"fig6_violation": grid})}["degrades_high_pv"]
         assert claim.holds is None, grid
-        assert "needs two cells" in claim.evidence
+        assert claim.evidence == "needs two cells: the smallest p_v and a_x_N+1_d, and the largest"
         assert_statements([claim])
     # One axis varied is enough: p_v alone, at one a.
     along_pv = frame(cell("CV_all", 10, 4.0, 0.0, 0.9), cell("CV_all", 10, 4.0, 0.5, 0.5, collisions=3))
@@ -554,6 +554,7 @@ def test_zero_collisions_without_a_cell_at_p_v_zero_is_not_checkable():
     for summaries in ({"fig6_violation": high}, {"fig4_n5": empty}):
         claim = {c.key: c for c in check_claims(summaries)}["zero_collisions"]
         assert (claim.holds, claim.evidence) == (None, "no cell with p_v = 0")
+        assert_statements([claim])
 
 
 def test_degrades_high_pv_compares_the_two_corners_whatever_the_row_order():

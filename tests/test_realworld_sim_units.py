@@ -385,6 +385,36 @@ def test_a_chain_of_32_vehicles_measurement_errors_are_independent_of_the_own_la
     assert not _own_share_agrees_with_a_chain_share(32)
 
 
+def test_in_a_50_vehicle_chain_no_two_measured_coordinates_share_a_draw():
+    """Every position and speed of F, a 50-vehicle chain and two own-lane leaders is off by a draw of its own: no
+    two coordinates' error shares (error / bound) agree in every scenario. A chain this long reaches past the own
+    lane's counter slots (from the 32nd vehicle on), where its columns draw on a counter of their own."""
+    from safelane.shield import SensingBounds
+    from safelane.sim.realworld import measure
+
+    s = _situation(120, 50, 2)
+    s = dataclasses.replace(s, chain_v=s.chain_v + 50.0, own_v=s.own_v + 50.0, f_v=s.f_v + 50.0)  # never clipped at 0
+    bounds = SensingBounds()
+    want = bounds.apply(s)
+    out = measure(3, SimpleNamespace(scenario_id=np.arange(len(s.f_x)), world_key=None), 4, s, bounds)
+    present = np.isfinite(s.own_x).all(1)
+    cols = [
+        _normalized(out.f_x, s.f_x, want.err_f[:, 0])[:, None],
+        _normalized(out.f_v, s.f_v, want.err_f[:, 1])[:, None],
+    ]
+    pairs = (("chain_x", "err_chain", 0), ("chain_v", "err_chain", 1), ("own_x", "err_own", 0), ("own_v", "err_own", 1))
+    for name, err, i in pairs:
+        cols.append(_normalized(getattr(out, name), getattr(s, name), getattr(want, err)[..., i]))
+    shares = np.concatenate(cols, 1)[present]
+    assert shares.shape[1] == 2 + 100 + 4 and present.sum() > 40 and np.isfinite(shares).all()
+    assert (np.abs(shares) <= 1.0).all()
+    # Equal draws give shares equal up to round-off (~1e-13 here); independent ones never agree to 1e-6 in every
+    # scenario. Sort the columns by their rounded values, then compare neighbours.
+    rounded = np.round(shares, 6)
+    ordered = rounded.T[np.lexsort(rounded[::-1])]
+    assert not (ordered[1:] == ordered[:-1]).all(1).any(), "two coordinates share their draws"
+
+
 def _at_rest(x):
     """Motions over one period of vehicles at rest at ``x`` (longitudinal and lateral)."""
     x = np.asarray(x, float)
