@@ -8,15 +8,21 @@ records, per mutated function, which of the group's tests reach it, and runs eac
     python tools/mutate.py run [GROUP ...]            # every mutant of the groups (default: all groups)
     python tools/mutate.py run decide evasion --sample 40 --seed 18 --fresh   # CI: a fixed, seeded sample
     python tools/mutate.py table [--strict]           # the table of docs/testing.md from the cached results
+    python tools/mutate.py run --equivalents GROUP    # run the listed equivalents instead: none may be killed
+    python tools/mutate.py review GROUP               # record the reviewed functions' hashes (after a re-review)
 
-Exit status of ``run --sample``: 1 if a sampled mutant survives. Reviewed equivalent mutants
-(``tools/mutation/<group>.toml``, with the group's modules and tests) are counted apart and never sampled.
-Timeouts count as killed; "no tests" (no test of the group reaches the function) as survived.
+Exit status of ``run --sample`` (``--equivalents``): 1 if a sampled mutant survives (a listed equivalent is
+killed). Reviewed equivalent mutants (``tools/mutation/<group>.toml``, with the group's modules and tests) are
+counted apart, never run and never sampled — as long as their function is unchanged since the review (its hash
+under ``[reviewed]``); otherwise they run and count like any mutant. Timeouts count as killed; "no tests" (no test
+of the group reaches the function) as survived.
 """
 
 from __future__ import annotations
 
 import argparse
+import ast
+import hashlib
 import json
 import os
 import random
@@ -51,6 +57,50 @@ def _groups() -> dict[str, tuple[tuple[str, ...], tuple[str, ...], dict[str, str
         spec = toml_loads(path.read_text(encoding="utf-8"))
         out[path.stem] = (tuple(spec["modules"]), tuple(spec["tests"]), dict(spec.get("equivalent", {})))
     return out
+
+
+def _reviewed(group: str) -> dict[str, str]:
+    """``{function: mutmut's hash of its source when its equivalents were reviewed}`` (``[reviewed]`` of the group's
+    file, written by ``review``)."""
+    spec = toml_loads((GROUP_DIR / f"{group}.toml").read_text(encoding="utf-8"))
+    return dict(spec.get("reviewed", {}))
+
+
+def _function(mutant: str) -> str:
+    return mutant.rsplit("__mutmut_", 1)[0]
+
+
+def function_hashes(root: Path, group: str) -> dict[str, str]:
+    """``{function: hash of its source text}`` for the group's modules under ``root/src`` — every top-level function
+    and method, named as mutmut names them (``safelane.mod.x_func``, ``safelane.mod.xǁClassǁmethod``; a nested
+    function is part of the one around it). The text, not mutmut's own hash (of ``ast.dump``, which changes with the
+    Python version), so the record holds across Pythons."""
+    out = {}
+    for module in GROUPS[group][0]:
+        path = root / "src" / "safelane" / module
+        if not path.exists():
+            continue
+        text = path.read_text(encoding="utf-8")
+        prefix = "safelane." + module[:-3].replace("/", ".") + "."
+        funcs = (ast.FunctionDef, ast.AsyncFunctionDef)
+        for node in ast.parse(text).body:
+            items = [(f"x_{node.name}", node)] if isinstance(node, funcs) else []
+            if isinstance(node, ast.ClassDef):
+                items = [(f"x\u01c1{node.name}\u01c1{m.name}", m) for m in node.body if isinstance(m, funcs)]
+            for key, fn in items:
+                digest = hashlib.sha256(ast.get_source_segment(text, fn).encode()).hexdigest()[:12]
+                out[prefix + key] = digest
+    return out
+
+
+def stale_equivalents(work: Path, group: str) -> list[str]:
+    """The group's listed equivalents whose function changed since the review (or was never recorded): mutmut
+    numbers mutants per function, so after an edit the name may denote another mutant. They run like any other
+    mutant until reviewed again."""
+    now, then = function_hashes(work, group), _reviewed(group)
+    return sorted(
+        n for n in GROUPS[group][2] if now.get(_function(n)) is None or now[_function(n)] != then.get(_function(n))
+    )
 
 
 GROUPS = _groups()
@@ -130,13 +180,33 @@ def _cpu_seconds() -> float:
     return own.ru_utime + own.ru_stime + kids.ru_utime + kids.ru_stime
 
 
-def run(groups: list[str], sample: int | None, seed: int, fresh: bool, children: int) -> int:
+def run(groups: list[str], sample: int | None, seed: int, fresh: bool, children: int, check_eq: bool = False) -> int:
     eq = equivalents()
     bad = 0
     for group in groups:
         start, cpu = time.perf_counter(), _cpu_seconds()
         work = prepare(group, fresh, sample=bool(sample))
-        names = [n for n in mutant_names(work, group) if n not in eq]
+        every = mutant_names(work, group)
+        stale = set(stale_equivalents(work, group))
+        if stale:
+            print(
+                f"[{group}] {len(stale)} listed equivalents of functions changed since their review run as mutants "
+                f"(re-review them, then `tools/mutate.py review {group}`): {', '.join(sorted(stale))}",
+                flush=True,
+            )
+        if check_eq:  # the listed equivalents themselves, each against every test that reaches it: none may fail
+            listed = [n for n in every if n in eq]
+            if listed:
+                _mutmut(work, "run", "--max-children", str(children), *listed, capture_output=True)
+            codes = results(work, group)
+            killed = [n for n in listed if codes.get(n) in KILLED]
+            took = f"{time.perf_counter() - start:.0f} s wall, {_cpu_seconds() - cpu:.0f} CPU s"
+            print(f"[{group}] {len(listed)} listed equivalents run: {len(killed)} killed (not equivalent) in {took}")
+            for name in killed:
+                print(f"[{group}] KILLED, listed as equivalent: {name}", flush=True)
+            bad += bool(killed)
+            continue
+        names = [n for n in every if n not in eq or n in stale]
         chosen = sorted(random.Random(seed).sample(names, min(sample, len(names)))) if sample else []
         what = f"{len(chosen)} sampled (seed {seed}) of" if sample else "all"
         print(f"[{group}] {what} {len(names)} non-equivalent mutants of {', '.join(GROUPS[group][0])}", flush=True)
@@ -165,7 +235,27 @@ def run(groups: list[str], sample: int | None, seed: int, fresh: bool, children:
             for name in survivors:
                 diff = _mutmut(work, "show", name, capture_output=True).stdout
                 print(f"[{group}] SURVIVED (exit code {codes.get(name)}): {name}\n{diff}", flush=True)
-    return 1 if bad and sample else 0
+    return 1 if bad and (sample or check_eq) else 0
+
+
+def review(groups: list[str]) -> int:
+    """Record, in each group's file, the hash of every function with listed equivalents as mutmut generated it
+    last (``[reviewed]``, rewritten at the end of the file): run after reviewing the equivalents of changed
+    functions."""
+    for group in groups:
+        now = function_hashes(ROOT, group)
+        funcs = sorted({_function(n) for n in GROUPS[group][2]})
+        missing = [f for f in funcs if f not in now]
+        if missing:
+            print(f"[{group}] functions with listed equivalents gone from the source: {', '.join(missing)}")
+            return 1
+        path = GROUP_DIR / f"{group}.toml"
+        text = path.read_text(encoding="utf-8")
+        text = text.split("\n[reviewed]\n", 1)[0].rstrip("\n")
+        lines = [f"{json.dumps(f)} = {json.dumps(now[f])}" for f in funcs]
+        path.write_text(text + "\n\n[reviewed]\n" + "\n".join(lines) + "\n", encoding="utf-8")
+        print(f"[{group}] recorded the hashes of {len(funcs)} functions with listed equivalents")
+    return 0
 
 
 def table(strict: bool) -> int:
@@ -173,13 +263,15 @@ def table(strict: bool) -> int:
     rows = []
     for group, (modules, *_) in GROUPS.items():
         work = WORK / group
+        stale = set(stale_equivalents(work, group)) if work.exists() else set()
         for module in modules:
             meta = work / "mutants" / "src" / "safelane" / (module + ".meta")
             codes = json.loads(meta.read_text())["exit_code_by_key"] if meta.exists() else {}
             n = len(codes)
-            n_eq = sum(name in eq for name in codes)
-            killed = sum(code in KILLED for name, code in codes.items() if name not in eq)
-            survived = [name for name, code in codes.items() if name not in eq and code in SURVIVED]
+            counted = {name for name in codes if name in eq and name not in stale}  # a stale entry counts as a mutant
+            n_eq = len(counted)
+            killed = sum(code in KILLED for name, code in codes.items() if name not in counted)
+            survived = [name for name, code in codes.items() if name not in counted and code in SURVIVED]
             rows.append((module, n, killed, n_eq, survived, n - n_eq - killed - len(survived)))
     print("| module | mutants | killed | equivalent | survived | not run | killed / non-equivalent |")
     print("|---|---:|---:|---:|---:|---:|---:|")
@@ -208,6 +300,13 @@ def main(argv: list[str]) -> int:
     p_run.add_argument("--seed", type=int, default=18)
     p_run.add_argument("--fresh", action="store_true", help="drop the cached verdicts first")
     p_run.add_argument("--children", type=int, default=2, help="parallel mutants (default 2)")
+    p_run.add_argument(
+        "--equivalents",
+        action="store_true",
+        help="run the listed equivalents instead (exit 1 if one is killed: it is not equivalent)",
+    )
+    p_review = sub.add_parser("review", help="record the reviewed functions' hashes (after re-reviewing equivalents)")
+    p_review.add_argument("groups", nargs="*")
     p_table = sub.add_parser("table")
     p_table.add_argument("--strict", action="store_true")
     args = parser.parse_args(argv)
@@ -215,7 +314,9 @@ def main(argv: list[str]) -> int:
         unknown = set(args.groups) - set(GROUPS)
         if unknown:
             parser.error(f"unknown group(s) {sorted(unknown)}; groups: {', '.join(GROUPS)}")
-        return run(args.groups or list(GROUPS), args.sample, args.seed, args.fresh, args.children)
+        return run(args.groups or list(GROUPS), args.sample, args.seed, args.fresh, args.children, args.equivalents)
+    if args.command == "review":
+        return review(args.groups or list(GROUPS))
     return table(args.strict)
 
 
