@@ -423,3 +423,19 @@ def test_an_out_of_range_promise_is_quoted():
     with pytest.raises(ValueError) as info:
         leader_chain(p, v, [0.0, 8.0, 0.5, -0.1], DEFAULT)
     assert re.search(r"got (np\.float64\()?-0\.1\)?$", str(info.value)), str(info.value)
+
+
+@pytest.mark.parametrize("speed", [1e160, 1e200, 1e300])
+def test_huge_finite_inputs_give_the_same_results_on_both_backends_without_an_overflow_error(speed):
+    """Finite but absurd speeds and positions (validated finite, so accepted): the pure-Python backend used to raise
+    ``OverflowError`` from ``(v / a_a) ** 2`` beyond ~1e154 m/s, where NumPy's arithmetic gives ``inf``. Both backends
+    now run the same float arithmetic: the scalar call returns what the array call returns."""
+    args = (0.0, speed, 10.0 * speed, 1.0, 0.0, 1.0)
+    scalar = longitudinal_evasion(*args, DEFAULT)
+    batched = longitudinal_evasion(*(np.array([a]) for a in args), DEFAULT)
+    for field in ("feasible", "t_x1", "t_x2", "case", "min_gap"):
+        np.testing.assert_array_equal(np.asarray(getattr(scalar, field)).reshape(1), getattr(batched, field), field)
+    ok = evasion_exists(0.0, 0.0, speed, 0.0, 10.0 * speed, 1.0, 0.0, -10.0, 0.0, False, DEFAULT)
+    ok_b = evasion_exists(*(np.array([a]) for a in (0.0, 0.0, speed, 0.0, 10.0 * speed, 1.0, 0.0, -10.0, 0.0)),
+                          np.array([False]), DEFAULT)  # fmt: skip
+    assert bool(ok) == bool(ok_b[0])
