@@ -68,6 +68,13 @@ def _situations(rng, b, m=3, *, own=False, sensing=None, t=0.0):
     )  # fmt: skip
 
 
+def _open_road(ego):
+    """The ego (``(x, y, v_x, v_y)`` arrays) on an open road: F 40 m behind and L1 60 m ahead, both at 25 m/s, no
+    connected chain."""
+    return Situation.from_arrays(t=0.0, ego=ego, follower=(-40.0, 25.0), leaders=([60.0], [25.0]), n_connected=0,
+                                 params=PRM)  # fmt: skip
+
+
 def _same_decision(a, b):
     for field in ("behaviour", "a_x", "a_y", "completing", "invalid", "plan_t0", "l1_decel", "f_aggressive"):
         np.testing.assert_array_equal(getattr(a, field), getattr(b, field), err_msg=field)
@@ -674,8 +681,7 @@ def test_a_proposal_inside_the_tolerance_is_clipped_to_the_mechanical_limits():
     shield's 'clipped, checked' proposal): exactly -a_x_d, a_x_a, ±a_y_m."""
     b = 4
     ego = (np.zeros(b), np.zeros(b), np.full(b, 25.0), np.zeros(b))
-    s = Situation.from_arrays(t=0.0, ego=ego, follower=(-40.0, 25.0), leaders=([60.0], [25.0]), n_connected=0,
-                              params=PRM)  # fmt: skip
+    s = _open_road(ego)
     a_x = np.array([-PRM.a_x_d - 1e-9, PRM.a_x_a + 1e-9, 0.0, 0.0])
     a_y = np.array([0.0, 0.0, PRM.a_y_m + 1e-9, -(PRM.a_y_m + 1e-9)])
     for cfg in (ShieldConfig(enabled=False), ShieldConfig()):
@@ -693,8 +699,7 @@ def test_a_disabled_shield_completes_where_the_steps_exact_lateral_end_reaches_t
     short = np.array([0.004, 0.01, 0.05])
     b = short.size
     ego = (np.zeros(b), PRM.y_boundary - short, np.full(b, 25.0), np.array([0.0, 0.0, 0.45]))
-    s = Situation.from_arrays(t=0.0, ego=ego, follower=(-40.0, 25.0), leaders=([60.0], [25.0]), n_connected=0,
-                              params=PRM)  # fmt: skip
+    s = _open_road(ego)
     cfg = ShieldConfig(enabled=False)
     a_y = np.array([1.0, 1.0, 0.0])
     _, d = step(init(s, PRM, cfg), s, (np.zeros(b), a_y), PRM, cfg)
@@ -708,8 +713,7 @@ def test_where_every_proposal_is_invalid_no_row_proceeds():
     hesitates or aborts, in a batch where no row could proceed at all."""
     b = 3
     ego = (np.zeros(b), np.array([0.0, 1.0, 2.0]), np.full(b, 25.0), np.zeros(b))
-    s = Situation.from_arrays(t=0.0, ego=ego, follower=(-40.0, 25.0), leaders=([60.0], [25.0]), n_connected=0,
-                              params=PRM)  # fmt: skip
+    s = _open_road(ego)
     bad = (np.array([np.nan, 50.0, 0.0]), np.array([0.0, 0.0, np.inf]))
     _, d = step(init(s, PRM, ShieldConfig()), s, bad, PRM)
     assert d.invalid.all()
@@ -750,8 +754,7 @@ def test_after_completion_the_lateral_command_is_clipped_to_a_y_m_both_ways():
     y, vy = np.array([4.5, 2.0, 3.4]), np.array([1.0, -1.0, 0.0])
     b = y.size
     ego = (np.zeros(b), y, np.full(b, 25.0), vy)
-    s = Situation.from_arrays(t=0.0, ego=ego, follower=(-40.0, 25.0), leaders=([60.0], [25.0]), n_connected=0,
-                              params=PRM)  # fmt: skip
+    s = _open_road(ego)
     state = dataclasses.replace(init(s, PRM, ShieldConfig()), completed=np.ones(b, bool))
     _, d = step(state, s, (np.zeros(b), np.zeros(b)), PRM)
     assert PRM.lane_width == 3.5

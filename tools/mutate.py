@@ -60,8 +60,8 @@ def _groups() -> dict[str, tuple[tuple[str, ...], tuple[str, ...], dict[str, str
 
 
 def _reviewed(group: str) -> dict[str, str]:
-    """``{function: mutmut's hash of its source when its equivalents were reviewed}`` (``[reviewed]`` of the group's
-    file, written by ``review``)."""
+    """``{function: hash of its source text when its equivalents were reviewed}`` (``[reviewed]`` of the group's
+    file, written by ``review``; see :func:`function_hashes`)."""
     spec = toml_loads((GROUP_DIR / f"{group}.toml").read_text(encoding="utf-8"))
     return dict(spec.get("reviewed", {}))
 
@@ -98,9 +98,7 @@ def stale_equivalents(work: Path, group: str) -> list[str]:
     numbers mutants per function, so after an edit the name may denote another mutant. They run like any other
     mutant until reviewed again."""
     now, then = function_hashes(work, group), _reviewed(group)
-    return sorted(
-        n for n in GROUPS[group][2] if now.get(_function(n)) is None or now[_function(n)] != then.get(_function(n))
-    )
+    return sorted(n for n in GROUPS[group][2] if (h := now.get(_function(n))) is None or h != then.get(_function(n)))
 
 
 GROUPS = _groups()
@@ -194,17 +192,8 @@ def run(groups: list[str], sample: int | None, seed: int, fresh: bool, children:
                 f"(re-review them, then `tools/mutate.py review {group}`): {', '.join(sorted(stale))}",
                 flush=True,
             )
-        if check_eq:  # the listed equivalents themselves, each against every test that reaches it: none may fail
-            listed = [n for n in every if n in eq]
-            if listed:
-                _mutmut(work, "run", "--max-children", str(children), *listed, capture_output=True)
-            codes = results(work, group)
-            killed = [n for n in listed if codes.get(n) in KILLED]
-            took = f"{time.perf_counter() - start:.0f} s wall, {_cpu_seconds() - cpu:.0f} CPU s"
-            print(f"[{group}] {len(listed)} listed equivalents run: {len(killed)} killed (not equivalent) in {took}")
-            for name in killed:
-                print(f"[{group}] KILLED, listed as equivalent: {name}", flush=True)
-            bad += bool(killed)
+        if check_eq:
+            bad += _check_equivalents(work, group, [n for n in every if n in eq], children, start, cpu)
             continue
         names = [n for n in every if n not in eq or n in stale]
         chosen = sorted(random.Random(seed).sample(names, min(sample, len(names)))) if sample else []
@@ -236,6 +225,20 @@ def run(groups: list[str], sample: int | None, seed: int, fresh: bool, children:
                 diff = _mutmut(work, "show", name, capture_output=True).stdout
                 print(f"[{group}] SURVIVED (exit code {codes.get(name)}): {name}\n{diff}", flush=True)
     return 1 if bad and (sample or check_eq) else 0
+
+
+def _check_equivalents(work: Path, group: str, listed: list[str], children: int, start: float, cpu: float) -> bool:
+    """Run the group's listed equivalents themselves, each against every test that reaches it; True if one is
+    killed (it is not equivalent)."""
+    if listed:
+        _mutmut(work, "run", "--max-children", str(children), *listed, capture_output=True)
+    codes = results(work, group)
+    killed = [n for n in listed if codes.get(n) in KILLED]
+    took = f"{time.perf_counter() - start:.0f} s wall, {_cpu_seconds() - cpu:.0f} CPU s"
+    print(f"[{group}] {len(listed)} listed equivalents run: {len(killed)} killed (not equivalent) in {took}")
+    for name in killed:
+        print(f"[{group}] KILLED, listed as equivalent: {name}", flush=True)
+    return bool(killed)
 
 
 def review(groups: list[str]) -> int:
