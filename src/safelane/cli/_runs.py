@@ -72,6 +72,7 @@ def preset_record(preset) -> dict | None:
         "params": preset.params.model_dump(),
         "sim": preset.sim.model_dump(),
         "planner": dict(preset.planner),
+        "network": getattr(preset, "network", None),
     }
 
 

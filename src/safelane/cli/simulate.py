@@ -26,7 +26,10 @@ def simulate(
     preset: str = typer.Option(
         None, "--preset", help="A preset name (e.g. 'paper') or YAML path: its params, horizon, assessment, planner."
     ),
-    nominal: str = typer.Option(None, "--nominal", help="Nominal planner: expert (default), mlp or teacher."),
+    nominal: str = typer.Option(
+        None, "--nominal", help="Nominal planner: expert, mlp, mlp_paper or teacher (default: the preset's — paper: "
+        "mlp_paper, the network distilled from its rule-based planner — else expert)."
+    ),
     assessment: str = typer.Option(
         None, "--assessment", help="'observed' (the real one; default), 'slow' (delayed, sometimes missed verdicts; "
         "the paper preset's) or 'truth' (F's true type)."
@@ -99,7 +102,7 @@ def simulate(
         "preset": preset_record(chosen),
         "params_file": None if params_file is None else str(params_file),
         "planner": planner,
-        "nominal": nominal or ("expert (preset gains)" if chosen else "expert"),
+        "nominal": nominal or ((chosen.network or "expert (preset gains)") if chosen else "expert"),
         "n_leaders": leaders,
         "decel": decel,
         "p_v": p_v,

@@ -82,7 +82,7 @@ def score(preset: Preset, samples: int, seed: int, workers: int | Backend = 1) -
         seed,
         params=preset.params,
         config=preset.sim,
-        nominal=preset.nominal(),
+        nominal=preset.expert(),
         workers=workers,
     )
     ours = summarize(table, by=("planner", "n_leaders", "decel"))

@@ -14,9 +14,9 @@ from pydantic import BaseModel, ConfigDict, Field
 
 from .grid import Cell
 from .modes import ModesConfig, modes_cells, run_modes
-from .nn_table import NNTableConfig, nn_cells, run_nn_table
 from .paper_data import DECELS, PLANNERS
 from .rss_baseline import RssBaselineConfig, rss_cells, run_rss_baseline
+from .rules_table import RulesTableConfig, rules_cells, run_rules_table
 
 
 class ExperimentConfig(BaseModel):
@@ -176,14 +176,14 @@ EXPERIMENTS: dict[str, Experiment] = {
             False,
         ),
         Experiment(
-            "table1_nn",
-            "Table 1 with the neural planner distilled from the calibrated rule-based one (mlp_paper) in the loop, "
-            "beside the rule-based table1 (issue 12; safelane.experiments.nn_table).",
-            NNTableConfig,
-            nn_cells,
+            "table1_rules",
+            "Table 1 with the rule-based planner the network is distilled from (the preset's expert), beside the "
+            "reported table1, which runs the network (issue 12; safelane.experiments.rules_table).",
+            RulesTableConfig,
+            rules_cells,
             {"samples": 40},
             False,
-            run_nn_table,
+            run_rules_table,
             False,
         ),
     )

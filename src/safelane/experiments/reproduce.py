@@ -235,6 +235,7 @@ def _write_run_json(r) -> None:
             "params": r.preset.params.model_dump(),
             "sim": r.preset.sim.model_dump(),
             "planner": dict(r.preset.planner),
+            "network": r.preset.network,
         },
         "configs": {n: res.config.model_dump(mode="json") for n, res in r.results.items()},
         "versions": r.versions,

@@ -52,16 +52,16 @@ W_MAX = 0.0
 
 #: The search space: the plain calibration's, plus issue 12's knobs.
 STRUCTURE_SPACE: dict[str, tuple[float, float]] = {
-    "a_x_a": (1.0, 3.0),
+    "a_x_a": (1.0, 3.5),  # a passenger car's full-throttle acceleration at highway speed: 1–3.5 m/s²
     "a_x_d": (6.0, 9.0),
     "a_y_m": (1.0, 3.5),
     "p_m": (5.0, 10.0),
     "horizon_s": (6.0, 12.0),
     "omega": (0.5, 1.2),
-    "k_v": (0.0, 1.0),
+    "k_v": (0.0, 2.0),  # matching L1's speed: none to a 0.5 s time constant
     "k_p": (0.05, 1.0),
     "gap_fraction": (0.3, 0.6),
-    "brake_comfort": (2.0, 8.0),  # comfortable braking 2–3 m/s², firm 4–5, up to emergency
+    "brake_comfort": (1.0, 8.0),  # comfortable braking 1.5–3 m/s² (IDM's b: 1.5–2), firm 4–5, up to emergency
     "assess_window": (3.0, 20.0),
     "assess_threshold": (0.1, 0.5),
     "assess_delay_s": (0.5, 3.0),  # a style classifier over 1–3 s of F's trajectory, plus a decision latency
@@ -86,7 +86,7 @@ def _pivot(fit: pd.DataFrame, column: str) -> pd.DataFrame:
     return fit.pivot_table(index=["n_leaders", "decel"], columns="planner", values=column)[list(PLANNERS)]
 
 
-def structure_metrics(fit: pd.DataFrame, w_max: float = W_MAX) -> dict[str, float]:
+def structure_metrics(fit: pd.DataFrame, w_max: float = W_MAX, w_claim: float = W_CLAIM) -> dict[str, float]:
     """The loss and its parts from a per-cell fit (columns ``n_leaders, decel, planner, success_rate,
     paper_success``; the published cells)."""
     ours, paper = _pivot(fit, "success_rate"), _pivot(fit, "paper_success")
@@ -99,7 +99,7 @@ def structure_metrics(fit: pd.DataFrame, w_max: float = W_MAX) -> dict[str, floa
     penalty = (max(FOLLOWER_RATIO * chain - follower, 0.0) + reversal) / len(ours)
     mae, max_err = float(diff.to_numpy().mean()), float(diff.to_numpy().max())
     return {
-        "loss": mae + W_ADJ * adj_err + W_CLAIM * penalty + w_max * max(max_err - 0.1, 0.0),
+        "loss": mae + W_ADJ * adj_err + w_claim * penalty + w_max * max(max_err - 0.1, 0.0),
         "mae": mae,
         "max_err": max_err,
         "adj_err": adj_err,
@@ -110,14 +110,19 @@ def structure_metrics(fit: pd.DataFrame, w_max: float = W_MAX) -> dict[str, floa
 
 
 def score_structure(
-    preset: Preset, samples: int, seed: int, workers: int | Backend = 1, w_max: float = W_MAX
+    preset: Preset,
+    samples: int,
+    seed: int,
+    workers: int | Backend = 1,
+    w_max: float = W_MAX,
+    w_claim: float = W_CLAIM,
 ) -> tuple[dict, pd.DataFrame]:
     """:func:`structure_metrics` of a preset on the published cells, and the per-cell fit."""
     table = run_cells(published_cells(), samples, seed, params=preset.params, config=preset.sim,
-                      nominal=preset.nominal(), workers=workers)  # fmt: skip
+                      nominal=preset.expert(), workers=workers)  # fmt: skip
     ours = summarize(table, by=("planner", "n_leaders", "decel"))
     fit = pd.DataFrame(table1_long()).merge(ours, on=["planner", "n_leaders", "decel"])
-    return structure_metrics(fit, w_max), fit
+    return structure_metrics(fit, w_max, w_claim), fit
 
 
 def calibrate_structure(
@@ -129,6 +134,7 @@ def calibrate_structure(
     start: dict | None = None,
     on_candidate: Callable[[int, dict, dict], None] | None = None,
     w_max: float = W_MAX,
+    w_claim: float = W_CLAIM,
 ) -> pd.DataFrame:
     """Stage 1 of the search: every candidate with its metrics (sorted by loss). ``start``: a point scored first
     (default: the shipped ``paper`` preset's values, with the new knobs at their range midpoints)."""
@@ -142,7 +148,7 @@ def calibrate_structure(
     rows: list[dict] = []
 
     def run(point: dict) -> dict:
-        metrics, _ = score_structure(to_preset(point), samples, seed, workers, w_max)
+        metrics, _ = score_structure(to_preset(point), samples, seed, workers, w_max, w_claim)
         rows.append({**point, **metrics})
         if on_candidate:
             on_candidate(len(rows) - 1, point, metrics)
@@ -169,7 +175,7 @@ def n3_cells() -> list[Cell]:
 
 def identifiability(
     stage1: pd.DataFrame, finalists: int = 8, samples: int = 400, seed: int = 1, tol: float = 0.005,
-    workers: int | Backend = 1, n3_samples: int = 400, w_max: float = W_MAX,
+    workers: int | Backend = 1, n3_samples: int = 400, w_max: float = W_MAX, w_claim: float = W_CLAIM,
 ) -> dict:  # fmt: skip
     """Re-score the best ``finalists`` with ``samples`` per cell; the near-optimal sets (within ``tol`` of the best
     re-scored loss), their parameter ranges, and the N = 3 prediction under each (``interval``: the min and max
@@ -177,7 +183,7 @@ def identifiability(
     rescored = []
     for _, row in stage1.head(finalists).iterrows():
         point = {k: float(row[k]) for k in STRUCTURE_SPACE}
-        metrics, fit = score_structure(to_preset(point), samples, seed, workers, w_max)
+        metrics, fit = score_structure(to_preset(point), samples, seed, workers, w_max, w_claim)
         rescored.append({**point, **metrics, "fit": fit})
     best = min(r["loss"] for r in rescored)
     near = [r for r in rescored if r["loss"] <= best + tol]
@@ -185,7 +191,7 @@ def identifiability(
     for i, r in enumerate(near):
         preset = to_preset({k: r[k] for k in STRUCTURE_SPACE})
         table = run_cells(n3_cells(), n3_samples, seed, params=preset.params, config=preset.sim,
-                          nominal=preset.nominal(), workers=workers)  # fmt: skip
+                          nominal=preset.expert(), workers=workers)  # fmt: skip
         s = summarize(table, by=("planner", "n_leaders", "decel"))
         lo, hi = wilson_interval(np.round(s["success_rate"] * n3_samples), n3_samples)
         n3.append(s.assign(set=i, lo=lo, hi=hi)[["set", "planner", "decel", "success_rate", "lo", "hi"]])
@@ -245,6 +251,7 @@ def main(argv: list[str] | None = None) -> None:
         ap.add_argument(f"--{name}", type=int, default=default)
     ap.add_argument("--out", default="results/structure")
     ap.add_argument("--w-max", type=float, default=W_MAX, help="weight of the largest cell error beyond 0.10")
+    ap.add_argument("--w-claim", type=float, default=W_CLAIM, help="weight of the conclusion-(1) penalty")
     ap.add_argument("--start", default=None, help="candidates.csv of an earlier run: start from its best row")
     a = ap.parse_args(argv)
     start = None
@@ -260,10 +267,10 @@ def main(argv: list[str] | None = None) -> None:
               f"fol {m['follower_effect']:.3f} chain {m['chain_effect']:.3f}", flush=True)  # fmt: skip
 
     stage1 = calibrate_structure(a.candidates, a.samples, a.refine, a.seed, a.workers, start, on_candidate=report,
-                                 w_max=a.w_max)  # fmt: skip
+                                 w_max=a.w_max, w_claim=a.w_claim)  # fmt: skip
     stage1.to_csv(out / "candidates.csv", index=False)
     info = identifiability(stage1, a.finalists, a.final_samples, a.seed + 1, workers=a.workers,
-                           n3_samples=a.final_samples, w_max=a.w_max)  # fmt: skip
+                           n3_samples=a.final_samples, w_max=a.w_max, w_claim=a.w_claim)  # fmt: skip
     info["rescored"].to_csv(out / "finalists.csv", index=False)
     info["n3"].to_csv(out / "n3_per_set.csv", index=False)
     info["interval"].to_csv(out / "n3_interval.csv", index=False)

@@ -199,7 +199,7 @@ FIGURES: dict[str, Callable[[pd.DataFrame, Path, float], list[Path]]] = {
     "leaders": lambda data, out, y_boundary: leaders(data, out),
     "rss_baseline": lambda data, out, y_boundary: _rss_figure(data, out),
     "table1_safe_mode": lambda data, out, y_boundary: table1(data, out, stem="table1_safe_mode"),
-    "table1_nn": lambda data, out, y_boundary: table1(data, out, stem="table1_nn"),
+    "table1_rules": lambda data, out, y_boundary: table1(data, out, stem="table1_rules"),
 }
 
 

@@ -36,11 +36,11 @@ def section(doc: Document, table1: pd.DataFrame, safe: pd.DataFrame) -> None:
     doc.table(["N", "a [m/s²]", *PLANNERS], rows)
 
 
-def nn_section(doc: Document, rules: pd.DataFrame, nn: pd.DataFrame) -> None:
-    """Table 1 with the distilled network (``mlp_paper``) beside the rule-based planner it imitates."""
-    from ..experiments.nn_table import nn_beside_rules
+def nn_section(doc: Document, nn: pd.DataFrame, rules: pd.DataFrame) -> None:
+    """The reported Table 1 (the preset's network) beside the rule-based planner it imitates."""
+    from ..experiments.rules_table import nn_beside_rules
 
-    frame = nn_beside_rules(rules, nn)
+    frame = nn_beside_rules(nn, rules)
     published = frame.dropna(subset=["paper_success"])
     gap = frame["nn_minus_rules"].abs()
     doc.paragraph(

@@ -186,8 +186,8 @@ def _experiments(doc: Document, r: RunRecord) -> None:
             from .modes import section as modes_section  # paper-faithful vs safe mode (issue 12)
 
             modes_section(doc, r.results["table1"].summary, res.summary)
-        if name == "table1_nn" and res.summary is not None and "table1" in r.results:
-            from .modes import nn_section  # the NN planner's Table 1 beside the rule-based one (issue 12)
+        if name == "table1_rules" and res.summary is not None and "table1" in r.results:
+            from .modes import nn_section  # the reported (NN) Table 1 beside the rule-based planner's (issue 12)
 
             nn_section(doc, r.results["table1"].summary, res.summary)
 
@@ -244,6 +244,7 @@ def _calibration(doc: Document, preset: Preset) -> None:
         **preset.params.model_dump(),
         **{f"sim.{k}": v for k, v in preset.sim.model_dump().items()},
         **{f"planner.{k}": v for k, v in getattr(preset, "planner", {}).items()},
+        "nominal planner in the loop": getattr(preset, "network", None) or "the rule-based planner above",
     }
     doc.table(["setting", "value"], [[k, v] for k, v in values.items()])
     if not meta:

@@ -18,13 +18,13 @@ import yaml
 from ..config import read_mapping, validate_model
 from ..errors import InputError
 from ..params import Params
-from ..planners.base import ExpertPlanner
+from ..planners.base import ExpertPlanner, NominalPlanner
 from .config import SimConfig
 
 #: The package's own (shipped) presets.
 PRESET_DIR = Path(__file__).resolve().parent.parent / "presets"
 PLANNER_KEYS = tuple(f.name for f in fields(ExpertPlanner))
-_TOP_KEYS = ("name", "params", "sim", "planner", "meta")
+_TOP_KEYS = ("name", "params", "sim", "planner", "network", "meta")
 
 
 class PresetNotFoundError(InputError, FileNotFoundError):
@@ -41,10 +41,21 @@ class Preset:
     meta: dict
     planner: dict = field(default_factory=dict)  # ExpertPlanner keyword arguments
     source: str | None = None  # the file it was read from
+    #: A registered nominal planner distilled from ``planner`` (``paper``: ``mlp_paper``, the paper's kind of
+    #: planner), run by the preset's experiments and ``simulate``; ``None``: the rule-based planner itself.
+    network: str | None = None
 
-    def nominal(self) -> ExpertPlanner:
-        """The nominal planner this preset was calibrated with."""
+    def expert(self) -> ExpertPlanner:
+        """The rule-based nominal planner with the preset's knobs: what calibration fits and distillation imitates."""
         return ExpertPlanner(**self.planner)
+
+    def nominal(self) -> NominalPlanner:
+        """The nominal planner the preset's experiments run: its ``network`` if it names one, else :meth:`expert`."""
+        if self.network is None:
+            return self.expert()
+        from ..planners.registry import get_nominal
+
+        return get_nominal(self.network)
 
     def to_yaml(self) -> str:
         data = {
@@ -52,6 +63,7 @@ class Preset:
             "params": self.params.model_dump(),
             "sim": self.sim.model_dump(),
             "planner": dict(self.planner),
+            **({"network": self.network} if self.network else {}),
             "meta": self.meta,
         }
         return yaml.safe_dump(data, sort_keys=False)
@@ -129,6 +141,13 @@ def load_preset(name_or_path: str | Path | Preset = "paper") -> Preset:
         ExpertPlanner(**sections["planner"])
     except (TypeError, ValueError) as exc:
         raise InputError(f"{src}: planner: {exc}", src) from exc
+    network = data.get("network")
+    if network is not None:
+        from ..planners.registry import NOMINAL_NAMES
+
+        if network not in NOMINAL_NAMES:
+            raise InputError(f"{src}: network {network!r} is not a nominal planner (choose one of "
+                             f"{', '.join(NOMINAL_NAMES)})", src)  # fmt: skip
     return Preset(
         name=str(data.get("name", path.stem)),
         params=validate_model(Params, sections["params"], src, "params."),
@@ -136,6 +155,7 @@ def load_preset(name_or_path: str | Path | Preset = "paper") -> Preset:
         meta=sections["meta"],
         planner=sections["planner"],
         source=src,
+        network=network,
     )
 
 
@@ -150,6 +170,6 @@ def install_preset(preset: Preset, name: str, folder: Path | None = None) -> Pat
     folder = Path(folder) if folder is not None else user_preset_dir()
     folder.mkdir(parents=True, exist_ok=True)
     path = folder / f"{name}.yaml"
-    renamed = Preset(name, preset.params, preset.sim, preset.meta, dict(preset.planner))
+    renamed = Preset(name, preset.params, preset.sim, preset.meta, dict(preset.planner), network=preset.network)
     path.write_text(renamed.to_yaml(), encoding="utf-8")
     return path

@@ -190,7 +190,7 @@ def _train(torch, cfg: TrainConfig, out_dir: Path | str, progress: bool) -> Trai
     prm, teacher = cfg.params, OptimalControlTeacher(cfg.teacher)
     if cfg.teacher_preset:
         preset = load_preset(cfg.teacher_preset)
-        prm, teacher = preset.params, preset.nominal()
+        prm, teacher = preset.params, preset.expert()
     rng = np.random.default_rng(cfg.seed)
     t_start = time.perf_counter()
     timings: dict[str, float] = {}
