@@ -100,6 +100,8 @@ def test_the_two_modes():
     assert safe.params == paper.params and safe.planner == paper.planner
     shipped = load_preset("safe")
     assert all(getattr(shipped.sim, k) == v for k, v in SAFE_MODE.items()) and shipped.params == paper.params
+    assert shipped.planner == paper.planner and shipped.network == paper.network == "mlp_paper"
+    assert shipped.sim == safe.sim  # every other setting is the paper preset's
     assert paper.sim.completion == "paper_evasion" and paper.sim.leader_rule == "reactive"
     point = {"a_x_d": 7.0, "k_p": 0.4, "assess_delay_s": 2.0, "assess_window": 6.4}
     preset = to_preset(point)

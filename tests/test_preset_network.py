@@ -3,6 +3,7 @@ planner; calibration and distillation use the rule-based planner itself."""
 
 from __future__ import annotations
 
+import numpy as np
 import pandas as pd
 import pytest
 import yaml
@@ -60,3 +61,44 @@ def test_table1_runs_the_network_and_table1_rules_the_rule_based_planner():
     rules = run_experiment("table1_rules", rules_cfg, preset=preset, seed=3).table
     by_rules = run_cells(cells, 12, 3, params=preset.params, config=preset.sim, nominal=preset.expert())
     pd.testing.assert_frame_equal(rules.reset_index(drop=True), by_rules.reset_index(drop=True))
+
+
+def test_the_shipped_network_was_distilled_from_the_shipped_presets_planner():
+    # A stale network (paper.yaml re-calibrated, mlp_paper not retrained) fails here: the network records the
+    # teacher preset's values it imitated (safelane train --config src/safelane/models/distill_paper.yaml).
+    preset = load_preset("paper")
+    teacher = get_nominal(preset.network).metadata["teacher_preset"]
+    assert teacher["name"] == "paper"
+    assert teacher["planner"] == preset.planner
+    assert teacher["params"] == preset.params.model_dump()
+
+
+def test_the_network_imitates_the_rule_based_planner_on_fresh_states():
+    # Independent of the training run's own validation split: fresh states of the training distribution (another
+    # seed) through both planners; the network stays within 0.05 m/s² of the rules on all but a sliver of them.
+    from safelane.training.data import DataConfig, sample_observations
+
+    preset = load_preset("paper")
+    obs = sample_observations(4000, np.random.default_rng(7), preset.params, DataConfig())
+    net, rules = preset.nominal()(obs, preset.params), preset.expert()(obs, preset.params)
+    for head, (a, b) in zip(("a_x", "a_y"), zip(net, rules, strict=True), strict=True):
+        err = np.abs(np.asarray(a) - np.asarray(b))
+        assert np.sqrt(np.mean(err**2)) < 0.02, head
+        assert np.mean(err > 0.05) < 0.01, head
+
+
+@pytest.mark.parametrize(("extra", "recorded"), [((), "mlp_paper"), (("--nominal", "expert"), "expert (preset gains)"),
+                                                 (("--nominal", "mlp"), "mlp")])  # fmt: skip
+def test_simulate_records_which_nominal_planner_ran(tmp_path, extra, recorded):
+    import json
+
+    from typer.testing import CliRunner
+
+    from safelane.cli import app
+
+    args = ["simulate", "--planner", "CV_all", "--leaders", "1", "--decel", "4", "--samples", "3", "--no-progress",
+            "--preset", "paper", "--out", str(tmp_path), *extra]  # fmt: skip
+    result = CliRunner().invoke(app, args)
+    assert result.exit_code == 0, result.output
+    (run,) = tmp_path.iterdir()
+    assert json.loads((run / "run.json").read_text())["nominal"] == recorded

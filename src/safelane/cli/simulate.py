@@ -27,8 +27,9 @@ def simulate(
         None, "--preset", help="A preset name (e.g. 'paper') or YAML path: its params, horizon, assessment, planner."
     ),
     nominal: str = typer.Option(
-        None, "--nominal", help="Nominal planner: expert, mlp, mlp_paper or teacher (default: the preset's — paper: "
-        "mlp_paper, the network distilled from its rule-based planner — else expert)."
+        None, "--nominal", help="Nominal planner: expert (with --preset: the preset's rule-based planner and "
+        "gains), mlp, mlp_paper or teacher (default: the preset's — paper: mlp_paper, the network distilled from its "
+        "rule-based planner — else expert)."
     ),
     assessment: str = typer.Option(
         None, "--assessment", help="'observed' (the real one; default), 'slow' (delayed, sometimes missed verdicts; "
@@ -83,7 +84,10 @@ def simulate(
         raise typer.BadParameter(f"{assessment!r} is not one of 'observed', 'slow', 'truth'", param_hint="--assessment")
     config = base.model_copy(update={"assessment": assessment or base.assessment})
     try:
-        planner_obj = as_nominal(nominal) if nominal else (chosen.nominal() if chosen else None)
+        if chosen and nominal == "expert":
+            planner_obj = chosen.expert()  # with a preset: its rule-based planner, the gains it was calibrated with
+        else:
+            planner_obj = as_nominal(nominal) if nominal else (chosen.nominal() if chosen else None)
     except ValueError as exc:
         raise bad(exc, "--nominal") from exc
     options = {"planner": "--planner", "n_leaders": "--leaders", "decel": "--decel", "samples": "--samples",
@@ -102,7 +106,7 @@ def simulate(
         "preset": preset_record(chosen),
         "params_file": None if params_file is None else str(params_file),
         "planner": planner,
-        "nominal": nominal or ((chosen.network or "expert (preset gains)") if chosen else "expert"),
+        "nominal": _nominal_label(chosen, nominal),
         "n_leaders": leaders,
         "decel": decel,
         "p_v": p_v,
@@ -157,3 +161,12 @@ def _print_summary(table, planner, leaders, decel, samples, seed, p_v, assessmen
         ("assessment correct", "assessment_correct"),
     )
     Console().print(outcome_table(title, table, rows))
+
+
+def _nominal_label(chosen, nominal: str | None) -> str:
+    """What ``run.json`` calls the nominal planner of the run."""
+    if chosen and nominal == "expert":
+        return "expert (preset gains)"
+    if chosen and nominal is None:
+        return chosen.network or "expert (preset gains)"
+    return nominal or "expert"

@@ -252,6 +252,7 @@ def main(argv: list[str] | None = None) -> None:
     ap.add_argument("--out", default="results/structure")
     ap.add_argument("--w-max", type=float, default=W_MAX, help="weight of the largest cell error beyond 0.10")
     ap.add_argument("--w-claim", type=float, default=W_CLAIM, help="weight of the conclusion-(1) penalty")
+    ap.add_argument("--tol", type=float, default=0.005, help="near-optimal: re-scored loss within this of the best")
     ap.add_argument("--start", default=None, help="candidates.csv of an earlier run: start from its best row")
     a = ap.parse_args(argv)
     start = None
@@ -269,7 +270,7 @@ def main(argv: list[str] | None = None) -> None:
     stage1 = calibrate_structure(a.candidates, a.samples, a.refine, a.seed, a.workers, start, on_candidate=report,
                                  w_max=a.w_max, w_claim=a.w_claim)  # fmt: skip
     stage1.to_csv(out / "candidates.csv", index=False)
-    info = identifiability(stage1, a.finalists, a.final_samples, a.seed + 1, workers=a.workers,
+    info = identifiability(stage1, a.finalists, a.final_samples, a.seed + 1, tol=a.tol, workers=a.workers,
                            n3_samples=a.final_samples, w_max=a.w_max, w_claim=a.w_claim)  # fmt: skip
     info["rescored"].to_csv(out / "finalists.csv", index=False)
     info["n3"].to_csv(out / "n3_per_set.csv", index=False)

@@ -73,7 +73,8 @@ def build_document(r: RunRecord) -> Document:
     doc.bullets(
         [
             f"Run `{r.run_id}`, started {r.started_utc} UTC; seed **{r.seed}**; "
-            f"{'**quick** (reduced) grid' if r.quick else 'full grid (paper defaults)'}; preset `{r.preset.name}`.",
+            f"{'**quick** (reduced) grid' if r.quick else 'full grid (paper defaults)'}; preset `{r.preset.name}`; "
+            f"nominal planner in the loop: {_nominal_label(r.preset)}.",
             f"Command: `{r.command}`",
             f"Total wall time {sum(r.timings.values()):.1f} s.",
         ]
@@ -190,6 +191,13 @@ def _experiments(doc: Document, r: RunRecord) -> None:
             from .modes import nn_section  # the reported (NN) Table 1 beside the rule-based planner's (issue 12)
 
             nn_section(doc, r.results["table1"].summary, res.summary)
+
+
+def _nominal_label(preset) -> str:
+    network = getattr(preset, "network", None)
+    if network:
+        return f"`{network}` (the network distilled from the preset's rule-based planner; `table1_rules` runs that)"
+    return "the preset's rule-based planner"
 
 
 def _pivots(doc: Document, summary: pd.DataFrame, rows_key: str, cols_key: str, rates: tuple[str, ...]) -> None:

@@ -77,7 +77,8 @@ def as_model(cls, value, name: str):
 
 
 def as_nominal(value):
-    """``None``, a registered name (``"expert"``, ``"mlp"``, ``"teacher"``) or a planner callable."""
+    """``None``, a registered name (``"expert"``, ``"mlp"``, ``"mlp_paper"``, ``"teacher"``) or a planner callable
+    (with a preset, :func:`resolve` reads ``"expert"`` as the preset's rule-based planner)."""
     if value is None:
         return None
     if isinstance(value, str):
@@ -109,6 +110,8 @@ def resolve(preset, params, config, scenario, nominal):
     params = as_model(Params, params, "params")
     config = as_model(SimConfig, config, "config")
     scenario = as_model(ScenarioConfig, scenario, "scenario")
+    if chosen is not None and isinstance(nominal, str) and nominal == "expert":
+        nominal = chosen.expert()  # the rule-based planner with the preset's gains (what its network imitates)
     nominal = as_nominal(nominal)
     if chosen is not None:
         params = chosen.params if params is None else params

@@ -188,9 +188,13 @@ def _train(torch, cfg: TrainConfig, out_dir: Path | str, progress: bool) -> Trai
     out_dir.mkdir(parents=True, exist_ok=True)
     torch.set_num_threads(cfg.threads)
     prm, teacher = cfg.params, OptimalControlTeacher(cfg.teacher)
+    provenance = {}
     if cfg.teacher_preset:
         preset = load_preset(cfg.teacher_preset)
         prm, teacher = preset.params, preset.expert()
+        # What the network imitates, so that a stale network is detectable (tests compare it with the preset).
+        provenance["teacher_preset"] = {"name": preset.name, "params": prm.model_dump(),
+                                        "planner": dict(preset.planner)}  # fmt: skip
     rng = np.random.default_rng(cfg.seed)
     t_start = time.perf_counter()
     timings: dict[str, float] = {}
@@ -252,7 +256,7 @@ def _train(torch, cfg: TrainConfig, out_dir: Path | str, progress: bool) -> Trai
         "timings_s": {k: round(v, 2) for k, v in timings.items()},
     }
     planner = to_planner(module, {"safelane_version": __version__, "train_config_hash": cfg.config_hash(),
-                                  "train_config": cfg.model_dump(mode="json"), "training": summary})
+                                  "train_config": cfg.model_dump(mode="json"), "training": summary, **provenance})
     planner.save(out_dir / "model.npz")
     if cfg.export_onnx:
         planner.to_onnx(out_dir / "model.onnx")
