@@ -211,6 +211,25 @@ def test_paper_completion_rule_decides_the_crossing_step_by_the_evasion_check():
     assert (verdict.completing & guard_strict & ~loose).sum() > 10
 
 
+def test_body_across_rule_checks_every_step_until_the_whole_car_is_across():
+    """``paper_body_across``: the evasion check decides every step, the crossing of the centre line included (the
+    brute-force reference with the paper's rule), and a step completes only at ``y_boundary + w_v / 2``."""
+    rng = np.random.default_rng(11)
+    s = _states(3000, rng)
+    s["ego_y"], s["ego_vy"] = rng.uniform(1.5, 2.9, 3000), rng.uniform(0.0, 1.2, 3000)  # centre and body crossings
+    rule = COMPLETION_RULES["paper_body_across"]
+    verdict = check_candidate(*(s[k] for k in ORDER), PRM, completion=rule)
+    strict = ref_check_candidate(s, EPS, np.random.default_rng(12), rule="paper_evasion")
+    loose = ref_check_candidate(s, -EPS, np.random.default_rng(12), rule="paper_evasion")
+    assert not (strict & ~verdict.ok).any() and not (verdict.ok & ~loose).any()
+    y_end = s["ego_y"] + s["ego_vy"] * PRM.dt + 0.5 * s["a_y"] * PRM.dt**2
+    level = PRM.y_boundary + 0.5 * PRM.vehicle_width
+    assert rule.level(PRM) == level == 1.75 + 0.9
+    assert np.array_equal(verdict.completing, y_end >= level)
+    centre_only = (y_end >= PRM.y_boundary) & (y_end < level)
+    assert centre_only.sum() > 100 and not verdict.completing[centre_only].any()
+
+
 def test_decision_raises_no_floating_point_warnings():
     # Divisions by zero and infinities inside are expected and handled; none may reach the caller as a warning.
     s = _states(500, np.random.default_rng(3))

@@ -107,3 +107,20 @@ def test_the_two_modes():
     preset = to_preset(point)
     assert preset.params.a_x_d == 7.0 and preset.planner["k_p"] == 0.4 and preset.sim.assess_window == 6
     assert preset.sim.assess_delay_s == 2.0 and preset.sim.completion == "paper_evasion"
+
+
+def test_under_the_body_across_rule_an_ego_past_the_centre_line_can_still_turn_back():
+    """``paper_body_across``: crossing the centre line is not final — some egos cross it and turn back — and every
+    completion happens with the whole car across (the trace's first completed row)."""
+    preset = load_preset("paper")
+    cfg = preset.sim.model_copy(update={"completion": "paper_body_across", "horizon_s": 6.0})
+    run = simulate("CV_all", 1, 3.0, 200, 0, params=preset.params, config=cfg, nominal=preset.expert(), trace=True)
+    trace, table = run.trace, run.table
+    level = preset.params.y_boundary + 0.5 * preset.params.vehicle_width
+    peak = trace.groupby("scenario_id")["ego_y"].max()
+    done = table.set_index("scenario_id")["completed"]
+    turned_back = (peak > preset.params.y_boundary) & ~done.reindex(peak.index)
+    assert turned_back.sum() >= 5
+    first = trace[trace["completed"]].groupby("scenario_id")["ego_y"].first()
+    assert len(first) >= 5 and (first >= level - 1e-9).all()
+    assert not table["collision"].any()

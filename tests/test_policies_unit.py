@@ -220,7 +220,8 @@ def test_check_policy_and_the_registries():
     with pytest.raises(ValueError, match="unknown thing 'c'; choose one of a, b"):
         policies.check_policy("thing", "c", {"a": 1, "b": 2})
     assert set(policies.ASSESSMENTS) == {"observed", "truth", "slow"}
-    assert policies.COMPLETION_RULES == {"commit_guard": commit_guard, "paper_evasion": policies.paper_evasion}
+    assert policies.COMPLETION_RULES == {"commit_guard": commit_guard, "paper_evasion": policies.paper_evasion,
+                                         "paper_body_across": policies.paper_body_across}  # fmt: skip
     with pytest.raises(ValueError, match="unknown completion rule 'fast'; choose one of commit_guard, paper_evasion"):
         ShieldConfig(completion="fast")
     assert ShieldConfig(completion="paper_evasion").completion == "paper_evasion"

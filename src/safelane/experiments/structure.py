@@ -73,9 +73,14 @@ _INT_KEYS = ("assess_window",)
 PAPER_MODE = {"completion": "paper_evasion", "assessment": "slow", "leader_rule": "reactive", "monitor": False}
 
 
-def to_preset(point: dict[str, float], meta: dict | None = None, name: str = "paper") -> Preset:
-    """A search point as a paper-faithful preset (``PAPER_MODE`` plus the point)."""
+def to_preset(
+    point: dict[str, float], meta: dict | None = None, name: str = "paper", completion: str | None = None
+) -> Preset:
+    """A search point as a paper-faithful preset (``PAPER_MODE`` plus the point; ``completion``: another paper-mode
+    completion rule than ``PAPER_MODE``'s, e.g. ``paper_body_across``)."""
     params, sim, planner = Params().model_dump(), SimConfig().model_dump() | PAPER_MODE, {}
+    if completion is not None:
+        sim["completion"] = completion
     for key, value in point.items():
         target = sim if key in _SIM_KEYS else planner if key in PLANNER_KEYS else params
         target[key] = round(value) if key in _INT_KEYS else float(value)
@@ -135,6 +140,7 @@ def calibrate_structure(
     on_candidate: Callable[[int, dict, dict], None] | None = None,
     w_max: float = W_MAX,
     w_claim: float = W_CLAIM,
+    completion: str | None = None,
 ) -> pd.DataFrame:
     """Stage 1 of the search: every candidate with its metrics (sorted by loss). ``start``: a point scored first
     (default: the shipped ``paper`` preset's values, with the new knobs at their range midpoints)."""
@@ -148,7 +154,7 @@ def calibrate_structure(
     rows: list[dict] = []
 
     def run(point: dict) -> dict:
-        metrics, _ = score_structure(to_preset(point), samples, seed, workers, w_max, w_claim)
+        metrics, _ = score_structure(to_preset(point, completion=completion), samples, seed, workers, w_max, w_claim)
         rows.append({**point, **metrics})
         if on_candidate:
             on_candidate(len(rows) - 1, point, metrics)
@@ -176,6 +182,7 @@ def n3_cells() -> list[Cell]:
 def identifiability(
     stage1: pd.DataFrame, finalists: int = 8, samples: int = 400, seed: int = 1, tol: float = 0.005,
     workers: int | Backend = 1, n3_samples: int = 400, w_max: float = W_MAX, w_claim: float = W_CLAIM,
+    completion: str | None = None,
 ) -> dict:  # fmt: skip
     """Re-score the best ``finalists`` with ``samples`` per cell; the near-optimal sets (within ``tol`` of the best
     re-scored loss), their parameter ranges, and the N = 3 prediction under each (``interval``: the min and max
@@ -183,13 +190,13 @@ def identifiability(
     rescored = []
     for _, row in stage1.head(finalists).iterrows():
         point = {k: float(row[k]) for k in STRUCTURE_SPACE}
-        metrics, fit = score_structure(to_preset(point), samples, seed, workers, w_max, w_claim)
+        metrics, fit = score_structure(to_preset(point, completion=completion), samples, seed, workers, w_max, w_claim)
         rescored.append({**point, **metrics, "fit": fit})
     best = min(r["loss"] for r in rescored)
     near = [r for r in rescored if r["loss"] <= best + tol]
     n3 = []
     for i, r in enumerate(near):
-        preset = to_preset({k: r[k] for k in STRUCTURE_SPACE})
+        preset = to_preset({k: r[k] for k in STRUCTURE_SPACE}, completion=completion)
         table = run_cells(n3_cells(), n3_samples, seed, params=preset.params, config=preset.sim,
                           nominal=preset.expert(), workers=workers)  # fmt: skip
         s = summarize(table, by=("planner", "n_leaders", "decel"))
@@ -207,7 +214,7 @@ def identifiability(
             "best": best_row}  # fmt: skip
 
 
-def preset_from_best(best: dict, info: dict, command: str) -> Preset:
+def preset_from_best(best: dict, info: dict, command: str, completion: str | None = None) -> Preset:
     """The best re-scored set as the ``paper`` preset, its metrics and identifiability in ``meta``."""
     point = {k: best[k] for k in STRUCTURE_SPACE}
     fit = best["fit"]
@@ -225,7 +232,7 @@ def preset_from_best(best: dict, info: dict, command: str) -> Preset:
         "n3_interval": info["interval"].round(4).to_dict("records"),
         "per_cell": fit[["n_leaders", "decel", "planner", "paper_success", "success_rate"]].round(4).to_dict("records"),
     }
-    return dataclasses.replace(to_preset(point, meta), meta=meta)
+    return dataclasses.replace(to_preset(point, meta, completion=completion), meta=meta)
 
 
 def paper_effects() -> dict[str, float]:
@@ -253,6 +260,7 @@ def main(argv: list[str] | None = None) -> None:
     ap.add_argument("--w-max", type=float, default=W_MAX, help="weight of the largest cell error beyond 0.10")
     ap.add_argument("--w-claim", type=float, default=W_CLAIM, help="weight of the conclusion-(1) penalty")
     ap.add_argument("--tol", type=float, default=0.005, help="near-optimal: re-scored loss within this of the best")
+    ap.add_argument("--completion", default=None, help="paper-mode completion rule (default: PAPER_MODE's)")
     ap.add_argument("--start", default=None, help="candidates.csv of an earlier run: start from its best row")
     a = ap.parse_args(argv)
     start = None
@@ -268,15 +276,16 @@ def main(argv: list[str] | None = None) -> None:
               f"fol {m['follower_effect']:.3f} chain {m['chain_effect']:.3f}", flush=True)  # fmt: skip
 
     stage1 = calibrate_structure(a.candidates, a.samples, a.refine, a.seed, a.workers, start, on_candidate=report,
-                                 w_max=a.w_max, w_claim=a.w_claim)  # fmt: skip
+                                 w_max=a.w_max, w_claim=a.w_claim, completion=a.completion)  # fmt: skip
     stage1.to_csv(out / "candidates.csv", index=False)
     info = identifiability(stage1, a.finalists, a.final_samples, a.seed + 1, tol=a.tol, workers=a.workers,
-                           n3_samples=a.final_samples, w_max=a.w_max, w_claim=a.w_claim)  # fmt: skip
+                           n3_samples=a.final_samples, w_max=a.w_max, w_claim=a.w_claim,
+                           completion=a.completion)  # fmt: skip
     info["rescored"].to_csv(out / "finalists.csv", index=False)
     info["n3"].to_csv(out / "n3_per_set.csv", index=False)
     info["interval"].to_csv(out / "n3_interval.csv", index=False)
     command = "python -m safelane.experiments.structure " + " ".join(sys.argv[1:] if argv is None else argv)
-    preset = preset_from_best(info["best"], info, command.strip())
+    preset = preset_from_best(info["best"], info, command.strip(), a.completion)
     (out / "preset.yaml").write_text(preset.to_yaml(), encoding="utf-8")
     info["best"]["fit"].to_csv(out / "fit_per_cell.csv", index=False)
     summary = {k: preset.meta[k] for k in ("loss", "mae", "max_err", "adj_err", "follower_effect", "chain_effect",

@@ -107,14 +107,15 @@ def check_candidate(
         has_own = np.isfinite(o_x)
         if not has_own.any():
             has_own = None
-    level = prm.y_boundary
+    base = completion.level(prm) if hasattr(completion, "level") else prm.y_boundary  # where the step completes
+    level = base
     if has_own is not None:
         o_slack = np.where(has_own, o_x - ego_x - prm.p_m, 0.0)
         gap_o = pair_min_gap(o_slack, ego_vx, a_x, np.where(has_own, o_v, 0.0), -o_decel, dt)
         # Half the tolerance for L0, here and in the evasion (OWN_MARGIN_M): a follower of L0 settles exactly at the
         # margin, and the executor's round-off must stay inside the tolerance.
         period_ok &= ~has_own | (gap_o >= -0.5 * tol)
-        level = np.where(has_own, own_completion_level(prm), prm.y_boundary)
+        level = np.where(has_own, max(own_completion_level(prm), base), base)
         ox, ov = advance(np.where(has_own, o_x, 0.0), o_v, -o_decel, dt)
 
     completing = ey >= level

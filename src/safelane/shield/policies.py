@@ -139,10 +139,27 @@ def paper_evasion(ex, evx, lx, lv, l1_decel, fx, fv, prm):
 
 paper_evasion.needs_evasion = True
 
+
+def paper_body_across(ex, evx, lx, lv, l1_decel, fx, fv, prm):
+    """The completion rule ``paper_body_across``: the paper's rule (:func:`paper_evasion`: the evasion check alone
+    decides every step), with "crosses the border" read as the *whole car* across it — the lane change completes
+    when the ego's centre is half a vehicle width past the boundary (:attr:`level`). Until then the ego is still
+    checked every period and may turn back, as the paper's evasion (a return to the original lane) allows."""
+    return np.ones(np.shape(ex), bool)
+
+
+paper_body_across.needs_evasion = True
+paper_body_across.level = lambda prm: prm.y_boundary + 0.5 * prm.vehicle_width
+
 #: Completion rules: ``rule(ex, evx, lx, lv, l1_decel, fx, fv, params) -> (n,) bool`` on the predicted states of the
 #: rows whose step crosses the lane boundary (see :func:`.decide.commit_guard`); a rule with the attribute
-#: ``needs_evasion = True`` also requires the step's evasion check (:func:`paper_evasion`).
-COMPLETION_RULES = {"commit_guard": commit_guard, "paper_evasion": paper_evasion}
+#: ``needs_evasion = True`` also requires the step's evasion check (:func:`paper_evasion`); one with ``level(params)``
+#: completes at that lateral position instead of the lane boundary (:func:`paper_body_across`).
+COMPLETION_RULES = {
+    "commit_guard": commit_guard,
+    "paper_evasion": paper_evasion,
+    "paper_body_across": paper_body_across,
+}
 
 _FLAGS = np.array([[v.uses_chain, v.uses_follower_v2x, v.uses_assessment] for v in VARIANTS.values()])
 

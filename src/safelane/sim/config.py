@@ -21,10 +21,11 @@ class SimConfig(BaseModel):
     )
     assess_delay_s: float = Field(1.5, ge=0.0, description="'slow' assessment: mean extra delay of a verdict [s].")
     assess_miss: float = Field(0.0, ge=0.0, le=1.0, description="'slow' assessment: P(a collaborative F is missed).")
-    completion: Literal["commit_guard", "paper_evasion"] = Field(
+    completion: Literal["commit_guard", "paper_evasion", "paper_body_across"] = Field(
         "commit_guard",
         description="Completion rule of the step that crosses the lane boundary: 'commit_guard' (safe mode; the "
-        "guarantee's) or 'paper_evasion' (the paper's Eq. 9 evasion check only; paper-faithful mode).",
+        "guarantee's), 'paper_evasion' (the paper's Eq. 9 evasion check only) or 'paper_body_across' (the same, "
+        "completing only once the whole car is across; before that the ego may still turn back).",
     )
     sensor_noise_std: float = Field(0.0, ge=0.0, description="Std of the ego's measurements of F's speed [m/s].")
     assess_window: int = Field(5, ge=2, description="Observations in the assessment's slope window.")
