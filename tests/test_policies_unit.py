@@ -15,6 +15,7 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
+from safelane import Params
 from safelane.planners.variants import VARIANT_NAMES, VARIANTS
 from safelane.shield import ShieldConfig, policies
 from safelane.shield import assessment as assess
@@ -222,7 +223,8 @@ def test_check_policy_and_the_registries():
     assert set(policies.ASSESSMENTS) == {"observed", "truth", "slow"}
     assert policies.COMPLETION_RULES == {"commit_guard": commit_guard, "paper_evasion": policies.paper_evasion,
                                          "paper_body_across": policies.paper_body_across}  # fmt: skip
-    with pytest.raises(ValueError, match="unknown completion rule 'fast'; choose one of commit_guard, paper_evasion"):
+    choices = "commit_guard, paper_evasion, paper_body_across"
+    with pytest.raises(ValueError, match=f"unknown completion rule 'fast'; choose one of {choices}"):
         ShieldConfig(completion="fast")
     assert ShieldConfig(completion="paper_evasion").completion == "paper_evasion"
 
@@ -234,6 +236,18 @@ def test_paper_evasion_accepts_every_crossing_row_and_asks_for_the_evasion_check
         assert out.dtype == bool and out.shape == (n,) and out.all()
     assert policies.paper_evasion.needs_evasion is True
     assert not getattr(commit_guard, "needs_evasion", False)
+
+
+def test_paper_body_across_accepts_every_completing_row_and_completes_with_the_whole_car_across():
+    rule = policies.paper_body_across
+    for n in (0, 1, 4):
+        z = np.zeros(n)
+        out = rule(z, z, z, z, z, z, z, None)
+        assert out.dtype == bool and out.shape == (n,) and out.all()
+    assert rule.needs_evasion is True
+    prm = Params(lane_width=4.0, vehicle_width=2.0)
+    assert rule.level(prm) == 2.0 + 1.0  # the boundary (lane_width / 2) plus half the car
+    assert not hasattr(policies.paper_evasion, "level") and not hasattr(commit_guard, "level")
 
 
 def _key_drawing_zero(salt: int, v0: float = 25.0) -> float:
