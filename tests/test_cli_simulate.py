@@ -113,9 +113,10 @@ def test_preset_and_nominal_planner(tmp_path):
     assert result.exit_code == 0, result.output
     got = pd.read_csv(_run_dir(tmp_path) / "scenarios.csv")
     info = json.loads((_run_dir(tmp_path) / "run.json").read_text())
-    assert info["preset"]["name"] == "paper" and info["nominal"] == "expert"
+    # With a preset, "expert" is the preset's rule-based planner (its calibrated gains), not ExpertPlanner's defaults.
+    assert info["preset"]["name"] == "paper" and info["nominal"] == "expert (preset gains)"
     preset = load_preset("paper")
-    want = simulate("CV_none", 1, 4.0, 6, 3, params=preset.params, config=preset.sim).table
+    want = simulate("CV_none", 1, 4.0, 6, 3, params=preset.params, config=preset.sim, nominal=preset.expert()).table
     assert got["success"].tolist() == want["success"].tolist()
     assert got["completion_time_s"].fillna(-1).tolist() == pytest.approx(want["completion_time_s"].fillna(-1).tolist())
 

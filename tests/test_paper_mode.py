@@ -124,3 +124,14 @@ def test_under_the_body_across_rule_an_ego_past_the_centre_line_can_still_turn_b
     first = trace[trace["completed"]].groupby("scenario_id")["ego_y"].first()
     assert len(first) >= 5 and (first >= level - 1e-9).all()
     assert not table["collision"].any()
+
+
+def test_structure_loss_weights_and_the_completion_rule_of_a_search_point():
+    fit = pd.DataFrame(table1_long()).assign(success_rate=lambda f: f["paper_success"])
+    chained = fit.copy()
+    chained.loc[chained["planner"] == "CV_all", "success_rate"] += 0.05  # a chain effect the paper does not have
+    base, heavy = structure_metrics(chained), structure_metrics(chained, w_claim=3.0)
+    assert base["claim_penalty"] > 0.0
+    assert heavy["loss"] - base["loss"] == pytest.approx(2.0 * base["claim_penalty"])
+    assert to_preset({"k_v": 1.0}).sim.completion == "paper_evasion"
+    assert to_preset({"k_v": 1.0}, completion="paper_body_across").sim.completion == "paper_body_across"

@@ -219,7 +219,8 @@ def preset_from_best(best: dict, info: dict, command: str, completion: str | Non
     point = {k: best[k] for k in STRUCTURE_SPACE}
     fit = best["fit"]
     meta = {
-        "mode": "paper-faithful (paper_evasion completion, slow assessment, reactive leaders, monitor off)",
+        "mode": f"paper-faithful ({completion or PAPER_MODE['completion']} completion, slow assessment, reactive "
+        "leaders, monitor off)",
         "loss": round(best["loss"], 4),
         **{k: round(best[k], 4) for k in ("mae", "max_err", "adj_err", "follower_effect", "chain_effect")},
         "procedure": "structure-aware calibration (safelane.experiments.structure): loss = MAE + adjacent-variant "
