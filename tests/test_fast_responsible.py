@@ -128,3 +128,22 @@ def test_the_simulator_gives_the_same_table_with_and_without_the_kernel(monkeypa
     reference = simulate_batch(batch, seed=3, config=SimConfig()).table
     assert fast.equals(reference) and len(calls) > 100  # the kernel ran every period
     assert reference["n_abort"].sum() > 0 and reference["success"].any()
+
+
+def test_a_column_of_broadcast_arrays_raises_no_futurewarning_and_the_callers_array_stays_writeable():
+    # Seen in `safelane reproduce --workers 2`: numba's typing read the deprecated "writeable with a warning" flag of
+    # a view of an np.broadcast_arrays output and NumPy emitted a FutureWarning on every such call.
+    import warnings
+
+    from safelane.safety import _fast
+
+    wide, _ = np.broadcast_arrays(np.linspace(-1.0, 20.0, 300)[:, None], np.ones((1, 2)))
+    column = wide[:, 0]
+    mine = np.linspace(-1.0, 20.0, 300)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        got = _fast.responsible(column, 30.0, 29.0, 6.0, 6.0, 0.1)
+        want = _fast.responsible(mine, 30.0, 29.0, 6.0, 6.0, 0.1)
+    assert np.array_equal(got, want)
+    mine[0] = 5.0  # still the caller's writeable array
+    assert mine.flags.writeable

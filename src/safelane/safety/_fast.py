@@ -360,6 +360,12 @@ def responsible_kernel(slack, v_f, v_l, lead_decel, brake, dt, out):
         out[i] = r
 
 
+def _readonly(a: np.ndarray) -> np.ndarray:
+    view = a.view()
+    view.flags.writeable = False
+    return view
+
+
 def responsible(slack, v_f, v_l, lead_decel, brake, dt: float) -> np.ndarray:
     """:func:`responsible_kernel` on arrays broadcast to one shape; returns that shape."""
     arrays = [np.asarray(x, dtype=np.float64) for x in (slack, v_f, v_l, lead_decel, brake)]
@@ -368,6 +374,9 @@ def responsible(slack, v_f, v_l, lead_decel, brake, dt: float) -> np.ndarray:
     # Scalars with stride 0, arrays of the full shape as they are (read-only views: the signature takes any layout).
     flat = [np.broadcast_to(a.reshape(-1), (n,)) if a.size == 1 else np.broadcast_to(a, shape).reshape(-1)
             for a in arrays]  # fmt: skip
+    # Read-only views set explicitly: a view of an np.broadcast_arrays output (a column of one) would otherwise make
+    # numba's typing read its deprecated "writeable with a warning" flag and emit NumPy's FutureWarning.
+    flat = [_readonly(f) for f in flat]
     out = np.empty(n)
     responsible_kernel(*flat, float(dt), out)
     return out.reshape(shape)
