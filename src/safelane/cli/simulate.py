@@ -62,7 +62,7 @@ def simulate(
     from ..config import load_params
     from ..sim import SimConfig
     from ..sim import simulate as run
-    from ..sim.inputs import as_nominal, check_cell_args
+    from ..sim.inputs import check_cell_args, preset_nominal
     from ..sim.preset import load_preset
     from ._runs import check_out_dir, preset_record, run_folder
 
@@ -84,10 +84,7 @@ def simulate(
         raise typer.BadParameter(f"{assessment!r} is not one of 'observed', 'slow', 'truth'", param_hint="--assessment")
     config = base.model_copy(update={"assessment": assessment or base.assessment})
     try:
-        if chosen and nominal == "expert":
-            planner_obj = chosen.expert()  # with a preset: its rule-based planner, the gains it was calibrated with
-        else:
-            planner_obj = as_nominal(nominal) if nominal else (chosen.nominal() if chosen else None)
+        planner_obj = preset_nominal(chosen, nominal)
     except ValueError as exc:
         raise bad(exc, "--nominal") from exc
     options = {"planner": "--planner", "n_leaders": "--leaders", "decel": "--decel", "samples": "--samples",

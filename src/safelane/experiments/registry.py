@@ -16,7 +16,7 @@ from .grid import Cell
 from .modes import ModesConfig, modes_cells, run_modes
 from .paper_data import DECELS, PLANNERS
 from .rss_baseline import RssBaselineConfig, rss_cells, run_rss_baseline
-from .rules_table import RulesTableConfig, rules_cells, run_rules_table
+from .rules_table import run_rules_table
 
 
 class ExperimentConfig(BaseModel):
@@ -179,8 +179,8 @@ EXPERIMENTS: dict[str, Experiment] = {
             "table1_rules",
             "Table 1 with the rule-based planner the network is distilled from (the preset's expert), beside the "
             "reported table1, which runs the network (issue 12; safelane.experiments.rules_table).",
-            RulesTableConfig,
-            rules_cells,
+            Table1Config,
+            _n_grid,
             {"samples": 40},
             False,
             run_rules_table,

@@ -11,33 +11,18 @@ explanation).
 from __future__ import annotations
 
 import pandas as pd
-from pydantic import BaseModel, ConfigDict, Field
 
 from ..sim.metrics import summarize
 from .grid import Cell, run_cells
-from .paper_data import DECELS, PLANNERS, table1_long
+from .paper_data import table1_long
 
 
-class RulesTableConfig(BaseModel):
-    """Table 1's grid (as ``table1``)."""
-
-    model_config = ConfigDict(frozen=True, extra="forbid")
-
-    samples: int = Field(1000, ge=1, description="Scenarios per cell.")
-    planners: tuple[str, ...] = PLANNERS
-    decels: tuple[float, ...] = DECELS
-    n_leaders: tuple[int, ...] = (1, 3, 10)
-
-
-def rules_cells(cfg: RulesTableConfig) -> list[Cell]:
-    return [Cell(p, n, d) for n in cfg.n_leaders for d in cfg.decels for p in cfg.planners]
-
-
-def run_rules_table(cfg: RulesTableConfig, *, preset, seed: int, workers, nominal, cache=None):
-    """``(table, summary)`` of Table 1's cells with the preset's rule-based planner (``nominal`` and ``cache``,
-    the reported planner's, are not used)."""
-    table = run_cells(rules_cells(cfg), cfg.samples, seed, params=preset.params, config=preset.sim,
-                      nominal=preset.expert(), workers=workers)  # fmt: skip
+def run_rules_table(cfg, *, preset, seed: int, workers, nominal, cache=None):
+    """``(table, summary)`` of Table 1's cells (``cfg``: a ``Table1Config``) with the preset's rule-based planner
+    (``nominal`` and ``cache``, the reported planner's, are not used)."""
+    cells = [Cell(p, n, d) for n in cfg.n_leaders for d in cfg.decels for p in cfg.planners]  # table1's grid
+    table = run_cells(cells, cfg.samples, seed, params=preset.params, config=preset.sim, nominal=preset.expert(),
+                      workers=workers)  # fmt: skip
     return table, summarize(table, by=("planner", "n_leaders", "decel", "p_v", "penetration"))
 
 

@@ -78,7 +78,7 @@ def as_model(cls, value, name: str):
 
 def as_nominal(value):
     """``None``, a registered name (``"expert"``, ``"mlp"``, ``"mlp_paper"``, ``"teacher"``) or a planner callable
-    (with a preset, :func:`resolve` reads ``"expert"`` as the preset's rule-based planner)."""
+    (with a preset, :func:`preset_nominal` reads ``"expert"`` as the preset's rule-based planner)."""
     if value is None:
         return None
     if isinstance(value, str):
@@ -96,6 +96,16 @@ def as_nominal(value):
     return value
 
 
+def preset_nominal(chosen, nominal):
+    """The nominal planner of a run under the preset ``chosen`` (or ``None``): ``"expert"`` is the preset's
+    rule-based planner with its gains (what its network imitates), ``None`` the preset's own (its network, if it
+    names one), anything else as :func:`as_nominal` reads it."""
+    if chosen is not None and isinstance(nominal, str) and nominal == "expert":
+        return chosen.expert()
+    nominal = as_nominal(nominal)
+    return chosen.nominal() if nominal is None and chosen is not None else nominal
+
+
 def resolve(preset, params, config, scenario, nominal):
     """The run's ``(params, config, scenario, nominal)``: explicit arguments first, then the preset's parts."""
     from .scenario import ScenarioConfig
@@ -110,13 +120,10 @@ def resolve(preset, params, config, scenario, nominal):
     params = as_model(Params, params, "params")
     config = as_model(SimConfig, config, "config")
     scenario = as_model(ScenarioConfig, scenario, "scenario")
-    if chosen is not None and isinstance(nominal, str) and nominal == "expert":
-        nominal = chosen.expert()  # the rule-based planner with the preset's gains (what its network imitates)
-    nominal = as_nominal(nominal)
+    nominal = preset_nominal(chosen, nominal)
     if chosen is not None:
         params = chosen.params if params is None else params
         config = chosen.sim if config is None else config
-        nominal = chosen.nominal() if nominal is None else nominal
     params = Params() if params is None else params
     check_settings(params, config or SimConfig(), scenario)
     return params, config, scenario, nominal
