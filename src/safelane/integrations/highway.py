@@ -24,7 +24,6 @@ INSTALL_HINT = 'pip install "safelane[highway]"  (gymnasium >= 1.0, highway-env 
 try:
     import gymnasium as gym
     import highway_env  # noqa: F401  (registers highway-v0 & co.)
-    from highway_env.road.lane import StraightLane
 except ImportError as exc:  # pragma: no cover - exercised only without the extra
     raise ImportError(f"safelane.integrations.highway needs gymnasium and highway-env: {INSTALL_HINT}") from exc
 
@@ -32,6 +31,7 @@ from ..params import Params  # noqa: E402
 from ..shield import ABORT, COMPLETED, HESITATE, PROCEED, LaneFrame, Shield, ShieldConfig, Situation  # noqa: E402
 from ..sim.realworld import cruise, executed_motion, issued  # noqa: E402
 from ..v2x import MAX_AGE_S, SensedVehicle, V2XMessage, leader_arrays  # noqa: E402
+from .highway_road import check_frequencies, check_road, classify_crash, longitudinal, own_lane_leaders  # noqa: E402
 from .highway_vehicles import (  # noqa: E402
     NoCutInIDMVehicle,
     PointMassVehicle,
@@ -84,86 +84,6 @@ def register_highway_envs() -> None:
     """Register ``safelane/HighwayScene-v0`` (idempotent)."""
     if SCENE_ENV_ID not in gym.registry:
         gym.register(id=SCENE_ENV_ID, entry_point="safelane.integrations.highway_scene:LaneChangeScene")
-
-
-def check_frequencies(env, params: Params) -> None:
-    """Raise a ``ValueError`` naming the config keys unless the host simulates and decides every ``params.dt``."""
-    config = env.unwrapped.config
-    hz = 1.0 / params.dt
-    sim, pol = config.get("simulation_frequency"), config.get("policy_frequency")
-    if not (np.isclose(sim, hz) and np.isclose(pol, hz)):
-        raise ValueError(
-            f"SafeLaneShield needs a {hz:g} Hz simulation and a {hz:g} Hz policy (the shield's period Params.dt = "
-            f"{params.dt:g} s); this env has config['simulation_frequency'] = {sim!r} and config['policy_frequency'] "
-            f"= {pol!r}. Make it with config={{'simulation_frequency': {hz:g}, 'policy_frequency': {hz:g}}}, e.g. "
-            f"gymnasium.make('highway-v0', config=safelane.integrations.highway.HIGHWAY_CONFIG)"
-        )
-
-
-def _check_road(road, params: Params) -> None:
-    for _from, to in road.network.graph.items():
-        for _to, lanes in to.items():
-            for i, lane in enumerate(lanes):
-                heading = getattr(lane, "heading", np.nan)
-                if not (isinstance(lane, StraightLane) and abs(np.sin(heading)) < 1e-9 and np.cos(heading) > 0):
-                    name = type(lane).__name__
-                    raise ValueError(f"SafeLaneShield supports straight roads along +x (highway-v0's); lane "
-                                     f"{(_from, _to, i)} is a {name} (heading {heading:.3f})")  # fmt: skip
-                if not np.isclose(lane.width, params.lane_width):
-                    raise ValueError(f"lane {(_from, _to, i)} is {lane.width} m wide but Params.lane_width = "
-                                     f"{params.lane_width}: use highway_params(lane_width={lane.width})")  # fmt: skip
-
-
-def _longitudinal(vehicle) -> tuple[float, float]:
-    """``(x, v_x)`` of a host vehicle; a negative speed (highway-env lets IDM vehicles reverse) reads as 0."""
-    speed = getattr(vehicle, "speed", 0.0) * np.cos(getattr(vehicle, "heading", 0.0))
-    return float(vehicle.position[0]), max(float(speed), 0.0)
-
-
-def own_lane_leaders(road, ego, lane_index, k: int = 1) -> tuple[np.ndarray, np.ndarray, list]:
-    """The ego's own-lane leaders ``L0, …`` (nearest first, ``k`` of them): ``(x (k,), v (k,), vehicles)``, with
-    ``np.inf`` positions (and speed 0) where there is none. The one place the own lane is read (issue 17)."""
-    x, v, found = np.full(k, np.inf), np.zeros(k), []
-    current = ego
-    for i in range(k):
-        front, _ = road.neighbour_vehicles(current, lane_index)
-        if front is None:
-            break
-        x[i], v[i] = _longitudinal(front)
-        found.append(front)
-        current = front
-    return x, v, found
-
-
-def classify_crash(ego, road, roles: dict, frame: LaneFrame, params: Params, original_lane, target_lane) -> dict:
-    """Who hit whom, where: the ego's collision partner (the nearest crashed vehicle), its role (``F``, ``L1``,
-    ``L0``, … from ``roles``: vehicle id → name, else ``other``), its lane (``target``, ``original``, ``other``),
-    the ego's lateral phase (``original lane``, ``straddling``, ``target lane``), the kind of contact, and whether
-    the partner was changing lanes (e.g. MOBIL cutting in from the lane beyond the target lane)."""
-    y, _ = frame.y(ego.position[1], 0.0)
-    y = float(y)
-    phase = "original lane" if y <= params.y_safe else ("target lane" if y >= params.lane_width - params.y_safe
-                                                          else "straddling")  # fmt: skip
-    others = [v for v in road.vehicles if v is not ego and getattr(v, "crashed", False)]
-    if not others:
-        return {"partner": "none", "lane": "-", "ego_phase": phase, "kind": "unknown"}
-    partner = min(others, key=lambda v: float(np.linalg.norm(v.position - ego.position)))
-    lane_id = partner.lane_index[2] if partner.lane_index else None
-    lane = "target" if lane_id == target_lane[2] else ("original" if lane_id == original_lane[2] else "other")
-    dx = float(partner.position[0] - ego.position[0])
-    length = 0.5 * (ego.LENGTH + partner.LENGTH)
-    if abs(dx) < 0.8 * length:
-        kind = "side contact"
-    elif dx > 0:
-        kind = "ego ran into it (ahead)"
-    else:
-        kind = "it ran into the ego (behind)"
-    changing = abs(float(getattr(partner, "heading", 0.0))) > 1e-3 or (
-        getattr(partner, "target_lane_index", partner.lane_index) != partner.lane_index)  # fmt: skip
-    return {"partner": roles.get(id(partner), "other"), "lane": lane, "ego_phase": phase, "kind": kind,
-            "partner_changing_lanes": bool(changing),
-            "dx_m": round(dx, 2), "partner_speed": round(float(partner.speed), 2),
-            "ego_speed": round(float(ego.speed), 2)}  # fmt: skip
 
 
 class SafeLaneShield(gym.Wrapper, gym.utils.RecordConstructorArgs):
@@ -267,7 +187,7 @@ class SafeLaneShield(gym.Wrapper, gym.utils.RecordConstructorArgs):
     def _message(self, vehicle):
         """What ``vehicle`` broadcasts now: its exact state, last acceleration and promise (a V2XMessage)."""
         prm = self.params
-        x, v = _longitudinal(vehicle)
+        x, v = longitudinal(vehicle)
         accel = float(getattr(vehicle, "action", {}).get("acceleration", 0.0))
         promise = min(max(float(getattr(vehicle, "safelane_promise", self.promise)), 0.0), prm.a_x_d)
         return V2XMessage(vehicle_id=str(id(vehicle)), timestamp_s=self.t, position_m=x, speed_mps=v,
@@ -282,7 +202,7 @@ class SafeLaneShield(gym.Wrapper, gym.utils.RecordConstructorArgs):
         message = self.inbox.get(id(vehicle))
         if message is not None:
             return message
-        x, v = _longitudinal(vehicle)
+        x, v = longitudinal(vehicle)
         return SensedVehicle(vehicle_id=str(id(vehicle)), timestamp_s=self.t, position_m=x, speed_mps=v)
 
     def _v2x_leaders(self, chain):
@@ -293,7 +213,7 @@ class SafeLaneShield(gym.Wrapper, gym.utils.RecordConstructorArgs):
             if getattr(vehicle, "safelane_connected", False):
                 leaders.append(self._received(vehicle))
             else:
-                x, v = _longitudinal(vehicle)
+                x, v = longitudinal(vehicle)
                 leaders.append(SensedVehicle(vehicle_id=str(id(vehicle)), timestamp_s=self.t, position_m=x,
                                              speed_mps=v))  # fmt: skip
         got = leader_arrays(leaders, self.t, self.params)
@@ -309,7 +229,7 @@ class SafeLaneShield(gym.Wrapper, gym.utils.RecordConstructorArgs):
         roles = {}
         f_connected, stale = False, False
         if f is not None:
-            fx, fv = _longitudinal(f)
+            fx, fv = longitudinal(f)
             roles[id(f)] = "F"
             if self.connected and getattr(f, "safelane_connected", False):
                 # F's message: fresh or not, it declares no intent (IDM yields to no one), so F stays aggressive
@@ -323,7 +243,7 @@ class SafeLaneShield(gym.Wrapper, gym.utils.RecordConstructorArgs):
             lx, lv, promise, n, chain_stale = self._v2x_leaders(chain)
             stale = stale or chain_stale
         elif chain:
-            lx, lv = np.array([_longitudinal(v) for v in chain[:1]]).T
+            lx, lv = np.array([longitudinal(v) for v in chain[:1]]).T
             n, promise = 0, np.zeros(0)
         else:
             lx, lv = np.array([ex + FAR_M]), np.array([ego.speed])
@@ -353,7 +273,7 @@ class SafeLaneShield(gym.Wrapper, gym.utils.RecordConstructorArgs):
         if seed is not None:
             self.rng = np.random.default_rng([seed] if self.v2x_seed is None else [self.v2x_seed, seed])
         check_frequencies(self.env, self.params)
-        _check_road(u.road, self.params)
+        check_road(u.road, self.params)
         old = u.vehicle
         self.ego = PointMassVehicle.replacing(old)
         u.road.vehicles[u.road.vehicles.index(old)] = self.ego

@@ -1,0 +1,97 @@
+"""What :class:`~.highway.SafeLaneShield` reads from a highway-env road: whether the host fits the shield (its
+frequencies, straight lanes of the right width), a vehicle's longitudinal state, the ego's own-lane leaders, and,
+on a crash, who hit whom (:func:`classify_crash`). Needs highway-env (extra ``highway``).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ..params import Params
+from ..shield import LaneFrame
+
+try:
+    from highway_env.road.lane import StraightLane
+except ImportError as exc:  # pragma: no cover - exercised only without the extra
+    raise ImportError('safelane.integrations.highway needs highway-env: pip install "safelane[highway]"') from exc
+
+
+def check_frequencies(env, params: Params) -> None:
+    """Raise a ``ValueError`` naming the config keys unless the host simulates and decides every ``params.dt``."""
+    config = env.unwrapped.config
+    hz = 1.0 / params.dt
+    sim, pol = config.get("simulation_frequency"), config.get("policy_frequency")
+    if not (np.isclose(sim, hz) and np.isclose(pol, hz)):
+        raise ValueError(
+            f"SafeLaneShield needs a {hz:g} Hz simulation and a {hz:g} Hz policy (the shield's period Params.dt = "
+            f"{params.dt:g} s); this env has config['simulation_frequency'] = {sim!r} and config['policy_frequency'] "
+            f"= {pol!r}. Make it with config={{'simulation_frequency': {hz:g}, 'policy_frequency': {hz:g}}}, e.g. "
+            f"gymnasium.make('highway-v0', config=safelane.integrations.highway.HIGHWAY_CONFIG)"
+        )
+
+
+def check_road(road, params: Params) -> None:
+    """Raise a ``ValueError`` naming the lane unless every lane is straight along +x and ``params.lane_width`` wide."""
+    for _from, to in road.network.graph.items():
+        for _to, lanes in to.items():
+            for i, lane in enumerate(lanes):
+                heading = getattr(lane, "heading", np.nan)
+                if not (isinstance(lane, StraightLane) and abs(np.sin(heading)) < 1e-9 and np.cos(heading) > 0):
+                    name = type(lane).__name__
+                    raise ValueError(f"SafeLaneShield supports straight roads along +x (highway-v0's); lane "
+                                     f"{(_from, _to, i)} is a {name} (heading {heading:.3f})")  # fmt: skip
+                if not np.isclose(lane.width, params.lane_width):
+                    raise ValueError(f"lane {(_from, _to, i)} is {lane.width} m wide but Params.lane_width = "
+                                     f"{params.lane_width}: use highway_params(lane_width={lane.width})")  # fmt: skip
+
+
+def longitudinal(vehicle) -> tuple[float, float]:
+    """``(x, v_x)`` of a host vehicle; a negative speed (highway-env lets IDM vehicles reverse) reads as 0."""
+    speed = getattr(vehicle, "speed", 0.0) * np.cos(getattr(vehicle, "heading", 0.0))
+    return float(vehicle.position[0]), max(float(speed), 0.0)
+
+
+def own_lane_leaders(road, ego, lane_index, k: int = 1) -> tuple[np.ndarray, np.ndarray, list]:
+    """The ego's own-lane leaders ``L0, …`` (nearest first, ``k`` of them): ``(x (k,), v (k,), vehicles)``, with
+    ``np.inf`` positions (and speed 0) where there is none. The one place the own lane is read (issue 17)."""
+    x, v, found = np.full(k, np.inf), np.zeros(k), []
+    current = ego
+    for i in range(k):
+        front, _ = road.neighbour_vehicles(current, lane_index)
+        if front is None:
+            break
+        x[i], v[i] = longitudinal(front)
+        found.append(front)
+        current = front
+    return x, v, found
+
+
+def classify_crash(ego, road, roles: dict, frame: LaneFrame, params: Params, original_lane, target_lane) -> dict:
+    """Who hit whom, where: the ego's collision partner (the nearest crashed vehicle), its role (``F``, ``L1``,
+    ``L0``, … from ``roles``: vehicle id → name, else ``other``), its lane (``target``, ``original``, ``other``),
+    the ego's lateral phase (``original lane``, ``straddling``, ``target lane``), the kind of contact, and whether
+    the partner was changing lanes (e.g. MOBIL cutting in from the lane beyond the target lane)."""
+    y, _ = frame.y(ego.position[1], 0.0)
+    y = float(y)
+    phase = "original lane" if y <= params.y_safe else ("target lane" if y >= params.lane_width - params.y_safe
+                                                          else "straddling")  # fmt: skip
+    others = [v for v in road.vehicles if v is not ego and getattr(v, "crashed", False)]
+    if not others:
+        return {"partner": "none", "lane": "-", "ego_phase": phase, "kind": "unknown"}
+    partner = min(others, key=lambda v: float(np.linalg.norm(v.position - ego.position)))
+    lane_id = partner.lane_index[2] if partner.lane_index else None
+    lane = "target" if lane_id == target_lane[2] else ("original" if lane_id == original_lane[2] else "other")
+    dx = float(partner.position[0] - ego.position[0])
+    length = 0.5 * (ego.LENGTH + partner.LENGTH)
+    if abs(dx) < 0.8 * length:
+        kind = "side contact"
+    elif dx > 0:
+        kind = "ego ran into it (ahead)"
+    else:
+        kind = "it ran into the ego (behind)"
+    changing = abs(float(getattr(partner, "heading", 0.0))) > 1e-3 or (
+        getattr(partner, "target_lane_index", partner.lane_index) != partner.lane_index)  # fmt: skip
+    return {"partner": roles.get(id(partner), "other"), "lane": lane, "ego_phase": phase, "kind": kind,
+            "partner_changing_lanes": bool(changing),
+            "dx_m": round(dx, 2), "partner_speed": round(float(partner.speed), 2),
+            "ego_speed": round(float(ego.speed), 2)}  # fmt: skip
