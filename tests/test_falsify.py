@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 
 from safelane import Params
+from safelane.experiments import falsify_build as built
 from safelane.experiments import falsify_space as space
 from safelane.experiments.falsify import OUTCOMES, Setting, falsify, replay
 from safelane.planners.adversarial import ADVERSARIES, HugLeader, Mixture, Oscillating
@@ -67,7 +68,7 @@ def test_decoded_and_knife_specs_build_inside_the_assumptions():
         assert np.all(spec["n"] <= space.MAX_N) and np.all(spec["n"] >= 0)
         assert np.all(np.diff(spec["profile_t"], axis=1) >= PRM.dt - 1e-12)  # at most one switch per period
         assert np.all((spec["profile_a"] >= -PRM.a_x_d) & (spec["profile_a"] <= PRM.a_x_a))
-        batch, ok = space.build(spec, PRM, profiles=space.with_profile_fields())
+        batch, ok = built.build(spec, PRM, profiles=built.with_profile_fields())
         assert 0 < ok.sum() < len(ok)  # some rows are dropped at t = 0, many kept
         assert np.all(batch.v >= 0.0)
     knife = space.knife_specs(np.random.default_rng(1), 400, PRM)

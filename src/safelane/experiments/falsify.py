@@ -40,6 +40,7 @@ from ..params import Params
 from ..sim.config import SimConfig
 from ..sim.engine import simulate_batch
 from ..sim.step import ClosedLoop
+from . import falsify_build as built
 from . import falsify_space as space
 from .falsify_report import NOTES, OUTCOMES, Report, json_scalar, merge, scenario_record  # noqa: F401
 
@@ -94,7 +95,7 @@ class Setting:
         return dataclasses.replace(
             self,
             use_hooks=self.use_hooks and hooks_live(),
-            use_profiles=self.use_profiles and space.with_profile_fields() and self.decel_last_max is None,
+            use_profiles=self.use_profiles and built.with_profile_fields() and self.decel_last_max is None,
         )
 
 
@@ -107,7 +108,7 @@ def evaluate(spec: dict, setting: Setting) -> tuple[pd.DataFrame, dict]:
         spec["decel_last"] = spec["decel_last"] / prm.a_x_d * setting.decel_last_max
     setting = setting.resolved()
     hooks, profiles = setting.use_hooks, setting.use_profiles
-    batch, ok = space.build(spec, prm, profiles=profiles)
+    batch, ok = built.build(spec, prm, profiles=profiles)
     keep = np.flatnonzero(ok)
     frames = []
     delay = spec.get("delay_periods", np.zeros(len(ok), np.int64))
@@ -121,7 +122,7 @@ def evaluate(spec: dict, setting: Setting) -> tuple[pd.DataFrame, dict]:
             update["actuation_delay_s"] = periods * prm.dt
         cfg = setting.sim.model_copy(update=update)
         if "world_key" in spec:  # drop, before simulating, the rows the shield's own initial check rejects
-            start = ClosedLoop(sub, setting.seed, prm, cfg, space.planner_for(sub_spec, prm)).initial_state()
+            start = ClosedLoop(sub, setting.seed, prm, cfg, built.planner_for(sub_spec, prm)).initial_state()
             inside = np.flatnonzero(start.initial_safe)
             if inside.size < rows.size:
                 rows = rows[inside]
@@ -133,11 +134,11 @@ def evaluate(spec: dict, setting: Setting) -> tuple[pd.DataFrame, dict]:
         recorder = None
         if hooks:
             recorder = LaneGapRecorder(sub, prm)
-            kwargs["traffic"] = space.hooks_for(sub_spec, prm, recorder)
+            kwargs["traffic"] = built.hooks_for(sub_spec, prm, recorder)
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")  # decel_last beyond a_x_d is intended where it is asked for
             table = simulate_batch(
-                sub, setting.seed, params=prm, config=cfg, nominal=space.planner_for(sub_spec, prm), workers=1, **kwargs
+                sub, setting.seed, params=prm, config=cfg, nominal=built.planner_for(sub_spec, prm), workers=1, **kwargs
             ).table
         out = pd.DataFrame({"row": rows})
         for name in OUTCOMES:

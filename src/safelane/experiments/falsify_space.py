@@ -12,24 +12,16 @@ the L(N+1) profile, the adversarial planner's and the traffic hooks' parameters)
   conflict-zone edge and the lane boundary;
 * a JSON dump of one row (replay).
 
-:func:`build` turns a spec into a :class:`~safelane.sim.ScenarioBatch`, the adversarial nominal planner and the
-traffic hooks, and says which rows satisfy the assumptions at ``t = 0`` (the others are dropped and counted):
-the ego's evasion plan under the most conservative assumptions exists (:func:`safelane.safety.plan_evasion`),
-the leader chain is safe (:func:`safelane.safety.leader_chain`, ``unsafe`` False) and F can keep its margin
-behind L1 braking at ``a_x_d`` (the same analysis on the F–L1 pair).
+:mod:`safelane.experiments.falsify_build` turns a spec into a batch, the adversarial nominal planner and the traffic
+hooks, and says which rows satisfy the assumptions at ``t = 0``.
 """
 
 from __future__ import annotations
 
-import dataclasses
-
 import numpy as np
 
 from ..params import Params
-from ..planners.adversarial import HugFollower, HugLeader, Mixture, Oscillating, RecklessMerge, square_wave
 from ..planners.variants import PAPER_VARIANT_NAMES, VARIANT_NAMES
-from ..safety import leader_chain, plan_evasion
-from ..sim.scenario import ScenarioBatch
 
 MAX_N = 10  #: most connected leaders searched
 L = MAX_N + 1  #: leader slots L1..L(N+1)
@@ -49,7 +41,7 @@ class _Cube:
         return c[:, 0] if w == 1 else c
 
 
-def _lin(u, lo, hi):
+def lin(u, lo, hi):
     return lo + (hi - lo) * u
 
 
@@ -57,8 +49,8 @@ def _edge(u, lo, hi, *, exact=None, p_exact=0.1, p_tiny=0.2, tiny_lo=1e-12):
     """Edge mixture on ``[lo, hi]``: ``u < p_exact`` → ``exact`` (default ``lo``); the next ``p_tiny`` → ``lo``
     plus a log-uniform tiny amount in ``[tiny_lo, 1]``; the rest uniform on ``[lo, hi]``."""
     exact = lo if exact is None else exact
-    tiny = lo + np.exp(_lin(np.clip((u - p_exact) / max(p_tiny, 1e-300), 0, 1), np.log(tiny_lo), 0.0))
-    plain = _lin(np.clip((u - p_exact - p_tiny) / (1 - p_exact - p_tiny), 0, 1), lo, hi)
+    tiny = lo + np.exp(lin(np.clip((u - p_exact) / max(p_tiny, 1e-300), 0, 1), np.log(tiny_lo), 0.0))
+    plain = lin(np.clip((u - p_exact - p_tiny) / (1 - p_exact - p_tiny), 0, 1), lo, hi)
     return np.where(u < p_exact, exact, np.where(u < p_exact + p_tiny, tiny, plain))
 
 
@@ -77,27 +69,27 @@ def decode(u: np.ndarray, prm: Params, brake_start_s: float = 0.0, world: str = 
     spec = {"n": n}
     # The paper's variants only (the RSS baselines make no guarantee; their indices follow the paper's).
     spec["variant"] = np.minimum((c.take() * len(PAPER_VARIANT_NAMES)).astype(np.int64), len(PAPER_VARIANT_NAMES) - 1)
-    spec["ego_y"] = np.where(c.take() < 0.4, 0.0, _lin(c.take(), 0.0, prm.lane_width))
-    spec["ego_vy"] = np.where(c.take() < 0.4, 0.0, _lin(c.take(), -2.0, 2.0))
-    spec["ego_dv"] = np.where(c.take() < 0.2, 0.0, _lin(c.take(), -10.0, 10.0))  # ego speed − L1's
+    spec["ego_y"] = np.where(c.take() < 0.4, 0.0, lin(c.take(), 0.0, prm.lane_width))
+    spec["ego_vy"] = np.where(c.take() < 0.4, 0.0, lin(c.take(), -2.0, 2.0))
+    spec["ego_dv"] = np.where(c.take() < 0.2, 0.0, lin(c.take(), -10.0, 10.0))  # ego speed − L1's
     spec["l1_slack"] = _edge(c.take(), 0.0, 40.0)  # L1 − ego − p_m
     spec["f_slack"] = _edge(c.take(), 0.0, 40.0)  # ego − F − p_m
-    spec["f_dv"] = np.where(c.take() < 0.2, 0.0, _lin(c.take(), -10.0, 10.0))  # F's speed − the ego's
+    spec["f_dv"] = np.where(c.take() < 0.2, 0.0, lin(c.take(), -10.0, 10.0))  # F's speed − the ego's
     f_type = c.take()
     spec["f_connected"] = f_type < 1 / 3
     spec["f_aggressive"] = f_type >= 2 / 3
     spec["base_v"] = _edge(c.take(), 0.0, 40.0, exact=30.0)  # L(N+1)'s speed
-    spec["lv_dv"] = np.where(c.take(L) < 0.3, 0.0, _lin(c.take(L), -8.0, 8.0))  # L_i − L(i+1) speed
+    spec["lv_dv"] = np.where(c.take(L) < 0.3, 0.0, lin(c.take(L), -8.0, 8.0))  # L_i − L(i+1) speed
     spec["slack"] = _edge(c.take(L), 0.0, 40.0)  # L(i+1) − L_i − margin_i
     spec["human"] = c.take(L) < 0.2
     spec["promise_decel"] = _edge(c.take(L), 0.0, prm.a_x_d, exact=0.5, p_exact=0.3, p_tiny=0.1)
     spec["promise_accel"] = _edge(c.take(L), 0.0, prm.a_x_a, exact=0.5, p_exact=0.3, p_tiny=0.1)
     # L(N+1): piecewise-constant profile; segment j starts dt..3 s after j−1 (snapped to a period with prob 0.5).
-    gaps = _lin(c.take(P - 1), prm.dt, 3.0)
+    gaps = lin(c.take(P - 1), prm.dt, 3.0)
     snap = c.take(P - 1) < 0.5
     gaps = np.where(snap, np.maximum(np.round(gaps / prm.dt), 1.0) * prm.dt, gaps)
     spec["profile_t"] = np.concatenate([np.zeros((len(u), 1)), np.cumsum(gaps, axis=1)], axis=1)
-    acc = _lin(c.take(P), -prm.a_x_d, prm.a_x_a)
+    acc = lin(c.take(P), -prm.a_x_d, prm.a_x_a)
     spec["profile_a"] = np.where(c.take(P) < 0.25, -prm.a_x_d, acc)
     spec["decel_last"] = _edge(c.take(), 1e-3, prm.a_x_d, exact=prm.a_x_d, p_exact=0.3, p_tiny=0.0)
     spec["brake_start_s"] = np.full(len(u), float(brake_start_s))
@@ -105,11 +97,11 @@ def decode(u: np.ndarray, prm: Params, brake_start_s: float = 0.0, world: str = 
     spec["planner"] = c.take(PLANNER_PARAMS)
     spec["task_hi"] = c.take(L)  # leaders' own tasks: a square wave between two levels inside the promise
     spec["task_lo"] = c.take(L)
-    spec["task_period_s"] = _lin(c.take(), prm.dt, 4.0)
+    spec["task_period_s"] = lin(c.take(), prm.dt, 4.0)
     spec["task_phase"] = c.take()
     spec["f_hi"] = c.take()  # F's wish: a square wave between two levels inside [−a_x_d, a_x_a]
     spec["f_lo"] = c.take()
-    spec["f_period_s"] = _lin(c.take(), prm.dt, 4.0)
+    spec["f_period_s"] = lin(c.take(), prm.dt, 4.0)
     spec["f_phase"] = c.take()
     if world == "realistic":
         _decode_realistic(c, spec, prm)
@@ -124,12 +116,12 @@ def _decode_realistic(c: _Cube, spec: dict, prm: Params) -> None:
     n = len(spec["n"])
     spec["l0_present"] = c.take() < 0.85
     spec["l0_slack"] = _edge(c.take(), 0.0, 60.0)  # L0 − ego − p_m
-    spec["l0_dv"] = np.where(c.take() < 0.3, 0.0, _lin(c.take(), -5.0, 10.0))  # L0's speed − the ego's
-    gaps = _lin(c.take(P - 1), prm.dt, 3.0)
+    spec["l0_dv"] = np.where(c.take() < 0.3, 0.0, lin(c.take(), -5.0, 10.0))  # L0's speed − the ego's
+    gaps = lin(c.take(P - 1), prm.dt, 3.0)
     snap = c.take(P - 1) < 0.5
     gaps = np.where(snap, np.maximum(np.round(gaps / prm.dt), 1.0) * prm.dt, gaps)
     spec["l0_profile_t"] = np.concatenate([np.zeros((n, 1)), np.cumsum(gaps, axis=1)], axis=1)
-    acc = _lin(c.take(P), -prm.a_x_d, prm.a_x_a)
+    acc = lin(c.take(P), -prm.a_x_d, prm.a_x_a)
     spec["l0_profile_a"] = np.where(c.take(P) < 0.25, -prm.a_x_d, acc)
     spec["delay_periods"] = np.minimum((c.take() * (MAX_DELAY_PERIODS + 1)).astype(np.int64), MAX_DELAY_PERIODS)
     spec["world_key"] = (c.take() * 2**52).astype(np.int64)  # keys the measurement errors: a replay draws the same
@@ -265,153 +257,3 @@ def knife_specs(rng: np.random.Generator, count: int, prm: Params, brake_start_s
         spec["l0_profile_t"] = np.where(brake[:, None], times, spec["l0_profile_t"])
         spec["l0_profile_a"] = np.where(brake[:, None], accels, spec["l0_profile_a"])
     return spec
-
-
-def planner_for(spec: dict, prm: Params) -> Mixture:
-    """The adversarial nominal planner of each row (:class:`Mixture` over the four adversaries)."""
-    q = spec["planner"]
-    gains = dict(
-        k_p=_lin(q[:, 0], 0.1, 10.0),
-        k_v=_lin(q[:, 1], 0.0, 10.0),
-        offset_m=_lin(q[:, 2], -1.0, 3.0) ** 3 / 9,
-        omega=_lin(q[:, 3], 0.3, 2.0),
-        zeta=_lin(q[:, 4], 0.05, 1.5),
-    )
-    osc = Oscillating(
-        period_s=_lin(q[:, 5], prm.dt, 3.0),
-        phase_x=q[:, 6],
-        phase_y=q[:, 7],
-        amp_x=_lin(q[:, 8], 0.0, prm.a_x_d),
-        mean_x=_lin(q[:, 9], -prm.a_x_d, prm.a_x_a),
-        amp_y=_lin(q[:, 10], 0.0, prm.a_y_m),
-        mean_y=_lin(q[:, 11], -0.5, prm.a_y_m),
-    )
-    reckless = RecklessMerge(a_x=_lin(q[:, 9], -prm.a_x_d, prm.a_x_a), lateral_gain=_lin(q[:, 10], 0.2, 1.0))
-    return Mixture((HugLeader(**gains), HugFollower(**gains), osc, reckless), spec["mode"])
-
-
-def build(spec: dict, prm: Params, *, profiles: bool) -> tuple[ScenarioBatch, np.ndarray]:
-    """The batch of ``spec`` and the mask of rows that satisfy the assumptions at ``t = 0`` (module docstring).
-
-    ``profiles``: give L(N+1) the spec's piecewise-constant profile (:func:`safelane.sim.traffic.with_last_profile`);
-    otherwise it brakes suddenly at ``decel_last`` from ``brake_start_s``.
-    """
-    n = spec["n"]
-    bsz = len(n)
-    k = int(n.max()) + 2
-    slots = np.arange(k)[None, :]
-    valid = slots <= n[:, None] + 1
-    connected = (slots >= 1) & (slots <= n[:, None])
-    connected = connected | ((slots == 0) & spec["f_connected"][:, None])
-    human = (slots >= 1) & (slots <= n[:, None]) & _leaders(spec["human"], k)
-    margin = np.where(human, prm.p_m_human, prm.p_m)
-    v = np.zeros((bsz, k))
-    for j in range(k - 1, 0, -1):  # back to front from L(N+1)
-        ahead = v[:, j + 1] if j + 1 < k else spec["base_v"]
-        v[:, j] = np.where(
-            j == n + 1, spec["base_v"], np.where(j <= n, np.maximum(ahead + spec["lv_dv"][:, j - 1], 0.0), ahead)
-        )
-    ego_vx = np.maximum(v[:, 1] + spec["ego_dv"], 0.0)
-    v[:, 0] = np.maximum(ego_vx + spec["f_dv"], 0.0)
-    x = np.zeros((bsz, k))
-    x[:, 1] = prm.p_m + spec["l1_slack"]
-    for j in range(1, k - 1):
-        step = np.where(j <= n, margin[:, j] + spec["slack"][:, j - 1], 1e6)
-        x[:, j + 1] = x[:, j] + step
-    x[:, 0] = -(prm.p_m + spec["f_slack"])
-    batch = ScenarioBatch(
-        ego_x=np.zeros(bsz),
-        ego_y=spec["ego_y"].astype(float),
-        ego_vx=ego_vx,
-        ego_vy=spec["ego_vy"].astype(float),
-        x=x,
-        v=v,
-        valid=valid,
-        connected=connected,
-        human=human,
-        promise_decel=np.where(connected & (slots >= 1), _leaders(spec["promise_decel"], k), 0.5),
-        promise_accel=np.where(connected & (slots >= 1), _leaders(spec["promise_accel"], k), 0.5),
-        n_connected=n.astype(np.int64),
-        follower_aggressive=spec["f_aggressive"] & ~spec["f_connected"],
-        decel_last=spec["decel_last"].astype(float),
-        p_v=np.zeros(bsz),
-        variant=spec["variant"].astype(np.int64),
-        scenario_id=np.arange(bsz, dtype=np.int64),
-    )
-    if profiles:
-        from ..sim.traffic import with_last_profile
-
-        batch = with_last_profile(batch, spec["profile_t"], spec["profile_a"], prm)
-    if "l0_present" in spec:  # the realistic world: L0 (the shield's own initial check decides what is evadable)
-        l0_v = np.maximum(ego_vx + spec["l0_dv"], 0.0)
-        batch = dataclasses.replace(
-            batch, l0_x=np.where(spec["l0_present"], prm.p_m + spec["l0_slack"], np.inf), l0_v=l0_v,
-            l0_profile_t=spec["l0_profile_t"].astype(float), l0_profile_a=spec["l0_profile_a"].astype(float),
-            world_key=spec["world_key"].astype(np.int64),
-        )  # fmt: skip
-    return batch, _assumptions_hold(batch, prm)
-
-
-def _leaders(a: np.ndarray, k: int) -> np.ndarray:
-    """Per-leader ``(B, L)`` columns placed on slots ``1..k−1`` of a ``(B, k)`` array (slot 0 copies slot 1)."""
-    out = a[:, : k - 1]
-    return np.concatenate([out[:, :1], out], axis=1)
-
-
-def _assumptions_hold(b: ScenarioBatch, prm: Params) -> np.ndarray:
-    """Rows whose ``t = 0`` state satisfies the assumptions (module docstring)."""
-    plan = plan_evasion(
-        b.ego_x, b.ego_y, b.ego_vx, b.ego_vy, b.x[:, 1], b.v[:, 1], prm.a_x_d, b.x[:, 0], b.v[:, 0], True, prm
-    )
-    ok = np.asarray(plan.feasible, bool).copy()
-    # F behind L1, L1 braking at a_x_d: the chain analysis on the F–L1 pair.
-    f_pair = leader_chain(
-        np.stack([b.x[:, 0], b.x[:, 1]], 1), np.stack([b.v[:, 0], b.v[:, 1]], 1), np.full((len(b), 1), prm.a_x_d), prm
-    )
-    ok &= ~np.asarray(f_pair.unsafe, bool)
-    for n in np.unique(b.n_connected):
-        rows = np.flatnonzero(b.n_connected == n)
-        if n == 0:
-            continue
-        chain = leader_chain(
-            b.x[rows, 1 : n + 2],
-            b.v[rows, 1 : n + 2],
-            b.promise_decel[rows, 1 : n + 1],
-            prm,
-            human_driven=b.human[rows, 1 : n + 1],
-        )
-        ok[rows] &= ~np.asarray(chain.unsafe, bool)
-    return ok
-
-
-def hooks_for(spec: dict, prm: Params, recorder=None):
-    """:class:`~safelane.sim.traffic.TrafficHooks` driving the leaders' own tasks and F's wish from the spec
-    (square waves between two levels: inside each leader's promise, inside F's ``[−a_x_d, a_x_a]``).
-    ``recorder``: an object with ``observe(view, params)``, called every period (the lane-gap sampler)."""
-    from ..sim.traffic import TrafficHooks
-
-    def leader_task(view, params):
-        if recorder is not None:
-            recorder.observe(view, params)
-        ids = view.scenario_id
-        k = view.x.shape[1]
-        pd_, pa = _leaders(spec["promise_decel"][ids], k), _leaders(spec["promise_accel"][ids], k)
-        hi, lo = _leaders(spec["task_hi"][ids], k), _leaders(spec["task_lo"][ids], k)
-        # Each leader's wave is shifted by a slot-dependent share of the period.
-        phase = spec["task_phase"][ids][:, None] + 0.37 * np.arange(k)[None, :]
-        up = square_wave(view.t, spec["task_period_s"][ids][:, None], phase) > 0
-        level = np.where(up, hi, lo)
-        return -pd_ + level * (pd_ + pa)
-
-    def follower_wish(view, params):
-        ids = view.scenario_id
-        up = square_wave(view.t, spec["f_period_s"][ids], spec["f_phase"][ids]) > 0
-        level = np.where(up, spec["f_hi"][ids], spec["f_lo"][ids])
-        return -prm.a_x_d + level * (prm.a_x_d + prm.a_x_a)
-
-    return TrafficHooks(leader_task=leader_task, follower_wish=follower_wish)
-
-
-def with_profile_fields() -> bool:
-    """Whether :class:`ScenarioBatch` carries L(N+1) profiles yet (the extension point is being wired)."""
-    return "last_profile_t" in {f.name for f in dataclasses.fields(ScenarioBatch)}
