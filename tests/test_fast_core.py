@@ -75,13 +75,15 @@ def _cases():
 
 @needs_numba
 @pytest.mark.parametrize("name,states,human", _cases(), ids=lambda x: x if isinstance(x, str) else "")
-def test_kernel_gives_the_numpy_paths_bits(name, states, human):
+def test_kernel_gives_the_numpy_paths_bits(name, states, human, monkeypatch):
     from safelane.safety import _fast
 
     args = _inputs(states, human)
     n = len(states["ego_px"])
+    monkeypatch.setenv("SAFELANE_NO_NUMBA", "1")  # evasion_core itself would run the plan kernel (_fast_plan)
     with np.errstate(all="ignore"):
         exists, parts = ev.evasion_core(ARRAY, *args, PARAMS)
+    monkeypatch.delenv("SAFELANE_NO_NUMBA")
     fast, gaps = _fast.run(args, (n,), PARAMS, FEASIBILITY_TOL_M, LATERAL_TOL_M, want_gaps=True)
     np.testing.assert_array_equal(fast, exists, err_msg=name)
     for row, key in enumerate(("lead_gap", "follow_gap")):

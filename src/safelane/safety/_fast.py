@@ -35,55 +35,16 @@ import numba
 import numpy as np
 from numba import types
 
-_INF = math.inf
+from ._fast_base import _B, _F, _INF, _braked, _max, _min, _nan_to_neg, _sqrt, _stop_dist, _stop_time
+
+# responsible.responsible_bound's dispatch finds its kernel here (fast_kernel() is this module): re-exported
+from ._fast_responsible import responsible, responsible_kernel  # noqa: F401
 
 # One explicit signature (compiled at import, or loaded from the cache): read-only 1-D arrays of any layout, so
 # contiguous inputs, broadcast scalars (stride 0) and read-only views all take the same machine code.
-_F = types.Array(types.float64, 1, "A", readonly=True)
-_B = types.Array(types.bool_, 1, "A", readonly=True)
 _SIGNATURE = types.void(
     *(_F,) * 9, _B, _F, _F, *(types.float64,) * 6, types.Array(types.bool_, 1, "C"), types.Array(types.float64, 2, "C")
 )
-
-
-@numba.njit(inline="always")
-def _max(a, b):
-    return a if (a >= b or a != a) else b  # NaN propagates (np.maximum)
-
-
-@numba.njit(inline="always")
-def _min(a, b):
-    return a if (a <= b or a != a) else b  # NaN propagates (np.minimum)
-
-
-@numba.njit(inline="always")
-def _sqrt(x):
-    return math.sqrt(_max(x, 0.0))  # _Array.sqrt
-
-
-@numba.njit(inline="always")
-def _nan_to_neg(x):
-    return x if x == x else -1.0
-
-
-@numba.njit(inline="always")
-def _stop_time(v, a):
-    if a > 0.0:
-        return v / a
-    return _INF if v > 0.0 else 0.0
-
-
-@numba.njit(inline="always")
-def _stop_dist(v, a):
-    if a > 0.0:
-        return v * v / (2.0 * a)
-    return _INF if v > 0.0 else 0.0
-
-
-@numba.njit(inline="always")
-def _braked(p, v, decel, t, t_stop):  # chain.braked_position
-    tt = _min(t, t_stop)
-    return p + v * tt - 0.5 * decel * tt * tt
 
 
 @numba.njit(inline="always")
@@ -143,6 +104,89 @@ def _follow_gap(
     return ego - follower - margin
 
 
+@numba.njit(inline="always")
+def _lateral_time(py, vy, a_y, y_safe, lat_tol):
+    """:func:`~.lateral.lateral_core`'s ``t_y_f`` (Eq. 5)."""
+    e = py - y_safe
+    sl = e + vy * abs(vy) / (2.0 * a_y)
+    if (e <= lat_tol) and ((vy <= 0.0) or (sl <= lat_tol)):  # nothing to evade
+        return 0.0
+    if sl > 0.0:
+        return (vy + 2.0 * _sqrt(a_y * e + 0.5 * vy * vy)) / a_y
+    return (-vy - _sqrt(vy * vy - 2.0 * a_y * e)) / a_y
+
+
+@numba.njit(inline="always")
+def _leader_search(T, gap0, d0, p, v, p1, v1, a1, margin, a_a, a_d, s, s_a, l1_stop, l1_at_T, tol):
+    """:func:`~.longitudinal.longitudinal_core`'s choice of the switch time: ``(u, its leader gap)``; ``gap0`` is the
+    gap of ``u = 0``, kept when no candidate is feasible."""
+    best = 0.0 * T
+    best_gap = gap0
+    if T != 0.0:  # with nothing to evade every candidate clips to 0, the first
+        # longitudinal_core keeps the largest candidate whose gap is feasible (a later one on a tie, which has
+        # the same gap: it is the same arithmetic on the same number). Trying them from the largest down and
+        # stopping at the first feasible one selects the same candidate with the same gap.
+        g = _leader_gap_min(T, T, d0, p, v, p1, v1, a1, margin, a_a, a_d, l1_stop, l1_at_T)
+        if g >= -tol:
+            return T, g
+        big_r = l1_at_T - margin - p - v * T
+        u_a = T - _sqrt(T * T - (a_d * T * T + 2.0 * big_r) / s)
+        p1_stop = p1 + _stop_dist(v1, a1)
+        u_b = -v / a_a + _sqrt((v / a_a) * (v / a_a) - (v * v + 2.0 * a_d * (p + margin - p1_stop)) / s_a)
+        w = v - v1
+        k = a_a + a1
+        u_c = (-w + _sqrt(w * w - k * (w * w - 2.0 * (a_d - a1) * d0) / s)) / k
+        # clipped to [0, T]; a NaN (never selected: `cand >= best` is false) becomes -1, never tried
+        c1 = _nan_to_neg(_min(_max(u_a, 0.0), T))
+        c2 = _nan_to_neg(_min(_max(u_b, 0.0), T))
+        c3 = _nan_to_neg(_min(_max(u_c, 0.0), T))
+        if c1 < c2:
+            c1, c2 = c2, c1
+        if c2 < c3:
+            c2, c3 = c3, c2
+        if c1 < c2:
+            c1, c2 = c2, c1
+        for j in range(3):
+            cand = c1 if j == 0 else (c2 if j == 1 else c3)
+            if cand < 0.0 or cand == T:  # never tried / the same number as T, which failed
+                continue
+            g = _leader_gap_min(cand, T, d0, p, v, p1, v1, a1, margin, a_a, a_d, l1_stop, l1_at_T)
+            if g >= -tol:
+                return cand, g
+    return best, best_gap
+
+
+@numba.njit(inline="always")
+def _follow_min(T, p, v, u, V, t2, match, p1, v1, a1, fp, fv, aggr, fmargin, a_a, a_d, c_ev, l1_stop, tol, early):
+    """The follower gap of Eq. 9: its minimum over the seven candidates clipped to ``[0, T]``; ``early`` stops once
+    it is below ``-tol`` (the minimum only falls: the verdict is known)."""
+    f_stop = _stop_time(fv, a_d)
+    fgap = _follow_gap(0.0 * T, p, v, u, V, t2, match, p1, v1, a1, fp, fv, aggr, fmargin, a_a, a_d, l1_stop, f_stop)
+    if T != 0.0:
+        m1 = a_d - a1
+        for j in range(6):
+            if j == 0:
+                cand = u
+            elif j == 1:
+                cand = t2
+            elif j == 2:
+                cand = f_stop
+            elif j == 3:
+                cand = (fv - v) / c_ev
+            elif j == 4:
+                cand = (fv - v1) / m1 if m1 != 0.0 else 0.0
+            else:
+                cand = T
+            cand = _min(_max(cand, 0.0), T)
+            fgap = _min(
+                fgap,
+                _follow_gap(cand, p, v, u, V, t2, match, p1, v1, a1, fp, fv, aggr, fmargin, a_a, a_d, l1_stop, f_stop),
+            )
+            if early and not fgap >= -tol:  # the minimum can only fall further: False
+                break
+    return fgap
+
+
 @numba.njit(_SIGNATURE, cache=True, nogil=True)
 def exists_kernel(
     ego_px,
@@ -177,19 +221,7 @@ def exists_kernel(
     s_a = s * a_a
     c_ev = a_a + a_d
     for i in range(n):
-        # lateral_core: t_y_f
-        py = ego_py[i]
-        vy = ego_vy[i]
-        e = py - y_safe
-        sl = e + vy * abs(vy) / (2.0 * a_y)
-        nothing = (e <= lat_tol) and ((vy <= 0.0) or (sl <= lat_tol))
-        if nothing:
-            T = 0.0
-        elif sl > 0.0:
-            r = _sqrt(a_y * e + 0.5 * vy * vy)
-            T = (vy + 2.0 * r) / a_y
-        else:
-            T = (-vy - _sqrt(vy * vy - 2.0 * a_y * e)) / a_y
+        T = _lateral_time(ego_py[i], ego_vy[i], a_y, y_safe, lat_tol)
         if T <= 0.0 and not want_gaps:
             out[i] = True
             continue
@@ -203,80 +235,35 @@ def exists_kernel(
         d0 = p1 - p - margin
         l1_stop = _stop_time(v1, a1)
         l1_at_T = _braked(p1, v1, a1, T, l1_stop)
-        best = 0.0 * T
-        best_gap = _leader_gap_min(best, T, d0, p, v, p1, v1, a1, margin, a_a, a_d, l1_stop, l1_at_T)
+        best_gap = _leader_gap_min(0.0 * T, T, d0, p, v, p1, v1, a1, margin, a_a, a_d, l1_stop, l1_at_T)
         feasible = best_gap >= -tol
         if not feasible and not want_gaps:
             out[i] = False
             continue
-        if T != 0.0:  # with nothing to evade every candidate clips to 0, the first
-            # longitudinal_core keeps the largest candidate whose gap is feasible (a later one on a tie, which has
-            # the same gap: it is the same arithmetic on the same number). Trying them from the largest down and
-            # stopping at the first feasible one selects the same candidate with the same gap.
-            g = _leader_gap_min(T, T, d0, p, v, p1, v1, a1, margin, a_a, a_d, l1_stop, l1_at_T)
-            if g >= -tol:
-                best = T
-                best_gap = g
-            else:
-                big_r = l1_at_T - margin - p - v * T
-                u_a = T - _sqrt(T * T - (a_d * T * T + 2.0 * big_r) / s)
-                p1_stop = p1 + _stop_dist(v1, a1)
-                u_b = -v / a_a + _sqrt((v / a_a) * (v / a_a) - (v * v + 2.0 * a_d * (p + margin - p1_stop)) / s_a)
-                w = v - v1
-                k = a_a + a1
-                u_c = (-w + _sqrt(w * w - k * (w * w - 2.0 * (a_d - a1) * d0) / s)) / k
-                # clipped to [0, T]; a NaN (never selected: `cand >= best` is false) becomes -1, never tried
-                c1 = _nan_to_neg(_min(_max(u_a, 0.0), T))
-                c2 = _nan_to_neg(_min(_max(u_b, 0.0), T))
-                c3 = _nan_to_neg(_min(_max(u_c, 0.0), T))
-                if c1 < c2:
-                    c1, c2 = c2, c1
-                if c2 < c3:
-                    c2, c3 = c3, c2
-                if c1 < c2:
-                    c1, c2 = c2, c1
-                for j in range(3):
-                    cand = c1 if j == 0 else (c2 if j == 1 else c3)
-                    if cand < 0.0 or cand == T:  # never tried / the same number as T, which failed
-                        continue
-                    g = _leader_gap_min(cand, T, d0, p, v, p1, v1, a1, margin, a_a, a_d, l1_stop, l1_at_T)
-                    if g >= -tol:
-                        best = cand
-                        best_gap = g
-                        break
-        u = best
+        u, best_gap = _leader_search(T, best_gap, d0, p, v, p1, v1, a1, margin, a_a, a_d, s, s_a, l1_stop, l1_at_T, tol)
         V, t2, match = _profile(u, v, v1, a1, a_a, a_d, l1_stop)
-        # the follower (Eq. 9) at the seven candidates
-        fp = f_p[i]
-        fv = f_v[i]
-        aggr = aggressive[i]
-        fmargin = follow_margin[i]
-        f_stop = _stop_time(fv, a_d)
-        fgap = _follow_gap(0.0 * T, p, v, u, V, t2, match, p1, v1, a1, fp, fv, aggr, fmargin, a_a, a_d, l1_stop, f_stop)
-        if T != 0.0:
-            m1 = a_d - a1
-            for j in range(6):
-                if j == 0:
-                    cand = u
-                elif j == 1:
-                    cand = t2
-                elif j == 2:
-                    cand = f_stop
-                elif j == 3:
-                    cand = (fv - v) / c_ev
-                elif j == 4:
-                    cand = (fv - v1) / m1 if m1 != 0.0 else 0.0
-                else:
-                    cand = T
-                cand = _min(_max(cand, 0.0), T)
-                fgap = _min(
-                    fgap,
-                    _follow_gap(
-                        cand, p, v, u, V, t2, match, p1, v1, a1, fp, fv, aggr, fmargin, a_a, a_d, l1_stop, f_stop
-                    ),
-                )
-                if not want_gaps and not fgap >= -tol:  # the minimum can only fall further: False
-                    break
+        fgap = _follow_min(
+            T,
+            p,
+            v,
+            u,
+            V,
+            t2,
+            match,
+            p1,
+            v1,
+            a1,
+            f_p[i],
+            f_v[i],
+            aggressive[i],
+            follow_margin[i],
+            a_a,
+            a_d,
+            c_ev,
+            l1_stop,
+            tol,
+            not want_gaps,
+        )
         out[i] = (T <= 0.0) or (feasible and fgap >= -tol)
         if want_gaps:
             gaps[0, i] = best_gap
@@ -298,85 +285,3 @@ def run(args, shape, params, tol: float, lat_tol: float, want_gaps: bool = False
     exists_kernel(*flat, params.a_x_a, params.a_x_d, params.a_y_m, params.y_safe, lat_tol, tol, out, gaps)
     out = out.reshape(shape)
     return (out, gaps) if want_gaps else out
-
-
-# ---------------------------------------------------------------------------------------------------------------
-# Responsible following (issue 13): responsible.responsible_bound fused, element by element
-# ---------------------------------------------------------------------------------------------------------------
-
-_RESPONSIBLE_SIGNATURE = types.void(*(_F,) * 5, types.float64, types.Array(types.float64, 1, "C"))
-
-
-@numba.njit(_RESPONSIBLE_SIGNATURE, cache=True, nogil=True, error_model="numpy")
-def responsible_kernel(slack, v_f, v_l, lead_decel, brake, dt, out):
-    """:func:`~.responsible.responsible_bound` (the smallest of :func:`~.responsible.responsible_bounds`) per element,
-    each expression in the NumPy path's evaluation order, divisions as NumPy's (``error_model="numpy"``: ``x / 0``
-    is ``±inf`` or NaN, never an exception), and the minimum taken in the same order with NaN propagating — the
-    same bits (``tests/test_fast_core.py``)."""
-    inf = _INF
-    for i in range(out.shape[0]):
-        s = slack[i] + 0.0  # −0.0 → +0.0, as the NumPy path
-        vf, vl, d, b = v_f[i], v_l[i], lead_decel[i], brake[i]
-        # _motion.advance(s, v_l, −d, dt): the leader's gap position and speed at dt, stopping at rest
-        a = -d
-        ts = _min(vl / -a, dt) if a < 0.0 else dt
-        xl_end = s + vl * ts + 0.5 * a * ts * ts
-        u1 = 0.0 if ts < dt else _max(vl + a * dt, 0.0)
-        g = xl_end - vf * dt
-        end = 2.0 * g / (dt * dt)
-        if not vf + end * dt >= 0.0:
-            end = -vf * vf / (2.0 * xl_end)
-        dv = vf - vl
-        tau = 2.0 * s / dv
-        in_period = dv > 0.0 and s >= 0.0 and tau < dt and vl - d * tau > 0.0
-        c = b - d
-        r0 = vf - u1
-        disc = c * c * dt * dt + 4.0 * c * (2.0 * g + dt * r0)
-        q = 0.5 * (-c * dt + (math.sqrt(disc) if disc >= 0.0 else math.nan))
-        after_period = c > 0.0 and disc >= 0.0 and q > 0.0 and u1 > 0.0 and q * d <= c * u1
-        # final_stop_accel(s, v_f, v_l, d, brake)
-        if d > 0.0:
-            lead_stop = vl * vl / (2.0 * d)
-        else:
-            lead_stop = inf if vl > 0.0 else 0.0
-        y = s + lead_stop
-        w = -0.5 * b * dt + _sqrt(0.25 * b * b * dt * dt + b * (2.0 * y - vf * dt))
-        if w >= 0.0:
-            a_final = (w - vf) / dt
-        else:
-            a_final = -vf * vf / (2.0 * y) if y > 0.0 else -inf
-        if y == inf:
-            final = inf
-        elif y <= 0.0:
-            final = 0.0 if (y == 0.0 and vf == 0.0) else -inf
-        else:
-            final = a_final
-        # the five bounds, in responsible_bounds' order: inside, final, end, in_period, after_period
-        r = inf if s >= 0.0 else -inf
-        r = _min(r, final)
-        r = _min(r, end if xl_end > 0.0 else (-inf if xl_end < 0.0 else 0.0))
-        r = _min(r, -d - dv * dv / (2.0 * s) if in_period else inf)
-        r = _min(r, (q - r0) / dt if after_period else inf)
-        out[i] = r
-
-
-def _readonly(a: np.ndarray) -> np.ndarray:
-    view = a.view()
-    view.flags.writeable = False
-    return view
-
-
-def responsible(slack, v_f, v_l, lead_decel, brake, dt: float) -> np.ndarray:
-    """:func:`responsible_kernel` on arrays broadcast to one shape; returns that shape."""
-    arrays = [np.asarray(x, dtype=np.float64) for x in (slack, v_f, v_l, lead_decel, brake)]
-    shape = np.broadcast_shapes(*(a.shape for a in arrays))
-    n = math.prod(shape)
-    # Scalars with stride 0, arrays of the full shape as they are (read-only views: the signature takes any layout).
-    flat = [np.broadcast_to(a.reshape(-1), (n,)) if a.size == 1 else np.broadcast_to(a, shape).reshape(-1)
-            for a in arrays]  # fmt: skip
-    # Read-only views set explicitly: a view of an np.broadcast_arrays output (a column of one) would otherwise make
-    # numba's typing read its deprecated "writeable with a warning" flag and emit NumPy's FutureWarning.
-    flat = [_readonly(f) for f in flat]
-    out = np.empty(n)
-    responsible_kernel(*flat, float(dt), out)
-    return out.reshape(shape)

@@ -68,8 +68,15 @@ def evasion_core(
 ):
     """Backend-generic core shared by :func:`plan_evasion` and :func:`evasion_exists`.
 
-    Returns ``(exists, parts)`` where ``parts`` is a dict of the plan's fields.
+    Returns ``(exists, parts)`` where ``parts`` is a dict of the plan's fields. NumPy batches of
+    :data:`FAST_PLAN_MIN` elements or more run the compiled kernel (:mod:`._fast_plan`, extra ``fast``) where numba
+    imports and ``SAFELANE_NO_NUMBA`` is not ``1``: the same bits as the NumPy path below, which stays the reference.
     """
+    if xp is ARRAY:
+        args = (ego_px, ego_py, ego_vx, ego_vy, l1_p, l1_v, l1_decel, f_p, f_v, aggressive, lead_margin, follow_margin)
+        shape = np.broadcast_shapes(*(np.shape(a) for a in args))
+        if math.prod(shape) >= FAST_PLAN_MIN and (kernel := fast_plan_kernel()) is not None:
+            return kernel.run_plan(args, shape, prm, tol, LATERAL_TOL_M)
     T, t_y1, y_acc_1, y_acc_2, t_y_end = lateral_core(xp, ego_py, ego_vy, prm)
     lead_ok, u, V, t2, match, lead_gap = longitudinal_core(
         xp, ego_px, ego_vx, l1_p, l1_v, l1_decel, T, lead_margin, prm, tol
@@ -237,6 +244,20 @@ def fast_kernel():
             _fast = None
         _FAST.append(_fast)
     return _FAST[0]
+
+
+#: :func:`evasion_core` runs the compiled plan kernel (:mod:`._fast_plan`) for NumPy batches of at least this many
+#: elements: its call costs about as much as a dozen array operations, the NumPy path a few hundred.
+FAST_PLAN_MIN = 32
+
+
+def fast_plan_kernel():
+    """The compiled plan kernel's module :mod:`._fast_plan`, or ``None`` where :func:`fast_kernel` is ``None``."""
+    if fast_kernel() is None:
+        return None
+    from . import _fast_plan
+
+    return _fast_plan
 
 
 def _exists_chunked(args, shape, params: Params) -> np.ndarray:

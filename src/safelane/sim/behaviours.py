@@ -25,7 +25,21 @@ import numpy as np
 from ..params import Params
 from ..safety._backend import ARRAY, FEASIBILITY_TOL_M
 from ..safety.chain import min_follow_decel
+from ..safety.evasion import fast_kernel
 from ..safety.responsible import ROOT_EPS_MPS2, responsible_accel, responsible_bound, responsible_ok
+
+#: :func:`leader_accels` runs the compiled kernel (:mod:`._fast_traffic`) from this many ``(B, K)`` elements on.
+FAST_MIN_ELEMENTS = 64
+
+
+def traffic_kernel():
+    """The compiled traffic kernel's module :mod:`._fast_traffic`, or ``None`` (numba missing, or
+    ``SAFELANE_NO_NUMBA=1``: :func:`safelane.safety.evasion.fast_kernel`)."""
+    if fast_kernel() is None:
+        return None
+    from . import _fast_traffic
+
+    return _fast_traffic
 
 
 def leader_roles(valid, connected, n_connected):
@@ -46,7 +60,9 @@ def leader_accels(x, v, margin, roles, bounds, task, a_last, decel_last, violati
     brakes minimally for that (:func:`responsible_bound` with ``brake = bounds[:, i]``, checked exactly by
     :func:`responsible_ok`; where the closed form is not confirmed it brakes at its bound, always safe). So a
     leader never brakes harder than its current bound, and its bound never grows: the worst case the ego's held
-    plan assumed for ``L1`` stays a worst case (the consistency invariant, docs/simulator.md).
+    plan assumed for ``L1`` stays a worst case (the consistency invariant, docs/simulator.md). From
+    :data:`FAST_MIN_ELEMENTS` elements on it runs the compiled kernel (:mod:`._fast_traffic`) where numba imports and
+    ``SAFELANE_NO_NUMBA`` is not ``1``: the same bits as the NumPy path below, the reference.
 
     Args:
         x, v: ``(B, K)`` current positions and speeds. ``margin``: ``(B, K)`` each vehicle's margin to the one
@@ -59,6 +75,8 @@ def leader_accels(x, v, margin, roles, bounds, task, a_last, decel_last, violati
         violating: ``(B, K)`` an unexpected violation this period, or ``None`` for none anywhere; then the vehicle
             brakes at ``U[z_i, a_x_N+1_d]`` (``violate_pick`` the uniforms), whatever its bound.
     """
+    if np.size(x) >= FAST_MIN_ELEMENTS and (kernel := traffic_kernel()) is not None:
+        return kernel.leader_accels(x, v, margin, roles, bounds, task, a_last, decel_last, violating, violate_pick, prm)
     bsz, k = x.shape
     is_last, acts = roles
     acc = np.zeros((bsz, k))
