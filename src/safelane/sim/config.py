@@ -88,3 +88,4 @@ class SimConfig(BaseModel):
 
         return SensingBounds(self.sense_connected_pos_m, self.sense_connected_speed_mps, self.sense_sensed_pos_m,
                              self.sense_sensed_speed_mps)  # fmt: skip
+

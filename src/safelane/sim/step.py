@@ -275,11 +275,7 @@ class ClosedLoop:
             others = Fleet.switched(s.x, s.v, acc, t_sw, a2, dt)
         new = self.check_and_advance(s, lon, lat, plan, others, behaviour, completing, acc)
         new = dataclasses.replace(
-            new,
-            shield=shield_state,
-            n_invalid=s.n_invalid + d.invalid,
-            leader_cap=leader_cap,
-            link=link,
+            new, shield=shield_state, n_invalid=s.n_invalid + d.invalid, leader_cap=leader_cap, link=link,
             in_flight=in_flight,
         )
         if s.l0 is not None:
