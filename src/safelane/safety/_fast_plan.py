@@ -35,6 +35,44 @@ FLOAT_PARTS = (
 BOOL_PARTS = ("exists", "lead_ok", "follow_ok", "nothing", "follows_leader")
 
 
+@numba.njit(inline="always")
+def _plan_parts(py, vy, p, v, p1, v1, a1, fp, fv, aggr, margin, fmargin, a_a, a_d, a_y, y_safe, lat_tol, tol):
+    """One element of :func:`plan_kernel`: ``(floats, flags)`` as tuples in the orders of :data:`FLOAT_PARTS` and
+    :data:`BOOL_PARTS`."""
+    s = a_a + a_d
+    # lateral_core (Eq. 5), every output
+    e = py - y_safe
+    sl = e + vy * abs(vy) / (2.0 * a_y)
+    nothing = (e <= lat_tol) and ((vy <= 0.0) or (sl <= lat_tol))
+    above = sl > 0.0
+    r = _sqrt(a_y * e + 0.5 * vy * vy)
+    t_bb = (vy + 2.0 * r) / a_y
+    if nothing:
+        T = 0.0
+    elif above:
+        T = t_bb
+    else:
+        T = (-vy - _sqrt(vy * vy - 2.0 * a_y * e)) / a_y
+    t_1 = (vy + r) / a_y if above else 0.0
+    acc_1 = -a_y if above else 0.0
+    acc_2 = (-a_y if vy > 0.0 else a_y) if nothing else a_y
+    t_end = t_bb if above else abs(vy) / a_y
+    # longitudinal_core (Eqs. 6-8): feasibility from u = 0, then the largest feasible switch time
+    d0 = p1 - p - margin
+    l1_stop = _stop_time(v1, a1)
+    l1_at_T = _braked(p1, v1, a1, T, l1_stop)
+    gap0 = _leader_gap_min(0.0 * T, T, d0, p, v, p1, v1, a1, margin, a_a, a_d, l1_stop, l1_at_T)
+    lead_ok = gap0 >= -tol
+    u, lead_gap = _leader_search(T, gap0, d0, p, v, p1, v1, a1, margin, a_a, a_d, s, s * a_a, l1_stop, l1_at_T, tol)
+    V, t2, match = _profile(u, v, v1, a1, a_a, a_d, l1_stop)
+    # the follower (Eq. 9)
+    fgap = _follow_min(T, p, v, u, V, t2, match, p1, v1, a1, fp, fv, aggr, fmargin, a_a, a_d, s, l1_stop, tol, False)
+    follow_ok = fgap >= -tol
+    floats = (T, t_1, acc_1, acc_2, t_end, u, V, t2, lead_gap, fgap)
+    flags = ((T <= 0.0) or (lead_ok and follow_ok), lead_ok, follow_ok, T <= 0.0, match)
+    return floats, flags
+
+
 @numba.njit(_PLAN_SIGNATURE, cache=True, nogil=True)
 def plan_kernel(
     ego_px,
@@ -61,60 +99,15 @@ def plan_kernel(
     """Write :func:`~.evasion.evasion_core`'s ``exists`` and ``parts`` for each element: ``floats`` ``(10, n)`` in
     the order of :data:`FLOAT_PARTS`, ``flags`` ``(5, n)`` in that of :data:`BOOL_PARTS`. Inputs as
     :func:`~._fast.exists_kernel`'s."""
-    n = floats.shape[1]
-    s = a_a + a_d
-    s_a = s * a_a
-    c_ev = a_a + a_d
-    for i in range(n):
-        # lateral_core (Eq. 5), every output
-        vy = ego_vy[i]
-        e = ego_py[i] - y_safe
-        sl = e + vy * abs(vy) / (2.0 * a_y)
-        nothing = (e <= lat_tol) and ((vy <= 0.0) or (sl <= lat_tol))
-        above = sl > 0.0
-        r = _sqrt(a_y * e + 0.5 * vy * vy)
-        t_bb = (vy + 2.0 * r) / a_y
-        if nothing:
-            T = 0.0
-        elif above:
-            T = t_bb
-        else:
-            T = (-vy - _sqrt(vy * vy - 2.0 * a_y * e)) / a_y
-        floats[0, i] = T
-        floats[1, i] = (vy + r) / a_y if above else 0.0
-        floats[2, i] = -a_y if above else 0.0
-        floats[3, i] = (-a_y if vy > 0.0 else a_y) if nothing else a_y
-        floats[4, i] = t_bb if above else abs(vy) / a_y
-        # longitudinal_core (Eqs. 6-8): feasibility from u = 0, then the largest feasible switch time
-        p = ego_px[i]
-        v = ego_vx[i]
-        p1 = l1_p[i]
-        v1 = l1_v[i]
-        a1 = l1_decel[i]
-        margin = lead_margin[i]
-        d0 = p1 - p - margin
-        l1_stop = _stop_time(v1, a1)
-        l1_at_T = _braked(p1, v1, a1, T, l1_stop)
-        gap0 = _leader_gap_min(0.0 * T, T, d0, p, v, p1, v1, a1, margin, a_a, a_d, l1_stop, l1_at_T)
-        lead_ok = gap0 >= -tol
-        u, lead_gap = _leader_search(T, gap0, d0, p, v, p1, v1, a1, margin, a_a, a_d, s, s_a, l1_stop, l1_at_T, tol)
-        V, t2, match = _profile(u, v, v1, a1, a_a, a_d, l1_stop)
-        # the follower (Eq. 9)
-        fgap = _follow_min(
-            T, p, v, u, V, t2, match, p1, v1, a1, f_p[i], f_v[i], aggressive[i], follow_margin[i], a_a, a_d, c_ev,
-            l1_stop, tol, False,
+    for i in range(floats.shape[1]):
+        f, b = _plan_parts(
+            ego_py[i], ego_vy[i], ego_px[i], ego_vx[i], l1_p[i], l1_v[i], l1_decel[i], f_p[i], f_v[i], aggressive[i],
+            lead_margin[i], follow_margin[i], a_a, a_d, a_y, y_safe, lat_tol, tol,
         )  # fmt: skip
-        follow_ok = fgap >= -tol
-        floats[5, i] = u
-        floats[6, i] = V
-        floats[7, i] = t2
-        floats[8, i] = lead_gap
-        floats[9, i] = fgap
-        flags[0, i] = (T <= 0.0) or (lead_ok and follow_ok)
-        flags[1, i] = lead_ok
-        flags[2, i] = follow_ok
-        flags[3, i] = T <= 0.0
-        flags[4, i] = match
+        for j in range(10):
+            floats[j, i] = f[j]
+        for j in range(5):
+            flags[j, i] = b[j]
 
 
 def run_plan(args, shape, params, tol: float, lat_tol: float):

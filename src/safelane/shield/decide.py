@@ -28,7 +28,7 @@ from .._motion import advance, free_max
 from ..params import Params
 from ..safety._backend import ARRAY
 from ..safety.chain import min_follow_decel
-from ..safety.evasion import evasion_core
+from ..safety.evasion import evasion_core, fast_kernel
 from ..safety.lateral import LATERAL_TOL_M, lateral_core
 from ..safety.longitudinal import FEASIBILITY_TOL_M
 from ..safety.own_lane import own_lane_core
@@ -71,6 +71,20 @@ def own_margin(prm: Params) -> float:
     return prm.p_m + 0.5 * FEASIBILITY_TOL_M
 
 
+#: :func:`check_candidate` runs the compiled kernel (:mod:`._fast_decide`) for batches of at least this many rows.
+FAST_CANDIDATE_MIN = 32
+
+
+def candidate_kernel():
+    """The compiled candidate check's module :mod:`._fast_decide`, or ``None`` where
+    :func:`~safelane.safety.evasion.fast_kernel` is ``None`` (numba missing, or ``SAFELANE_NO_NUMBA=1``)."""
+    if fast_kernel() is None:
+        return None
+    from . import _fast_decide
+
+    return _fast_decide
+
+
 def check_candidate(
     ego_x, ego_y, ego_vx, ego_vy, a_x, a_y, l1_x, l1_v, l1_decel, f_x, f_v, f_aggressive, prm: Params,
     completion=commit_guard, own=None,
@@ -81,7 +95,13 @@ def check_candidate(
     :mod:`safelane.shield.policies`). ``own``: ``(l0_x, l0_v, l0_decel)`` of the own-lane leader ``L0`` per row
     (``+inf`` position where there is none), or ``None``: where there is one, the ego must keep ``p_m`` behind its
     worst case during the period and on the evasion (:mod:`safelane.safety.own_lane`), and the step completes
-    only at :func:`own_completion_level`."""
+    only at :func:`own_completion_level`. Without ``own``, batches of :data:`FAST_CANDIDATE_MIN` rows or more run
+    the compiled kernel (:mod:`._fast_decide`) where numba imports and ``SAFELANE_NO_NUMBA`` is not ``1``: the same
+    bits as the NumPy path below, the reference."""
+    if own is None and np.size(ego_x) >= FAST_CANDIDATE_MIN and (kernel := candidate_kernel()) is not None:
+        return kernel.check_candidate(
+            ego_x, ego_y, ego_vx, ego_vy, a_x, a_y, l1_x, l1_v, l1_decel, f_x, f_v, f_aggressive, prm, completion
+        )
     dt, tol = prm.dt, FEASIBILITY_TOL_M
     ex, evx = advance(ego_x, ego_vx, a_x, dt)
     ey = ego_y + ego_vy * dt + 0.5 * a_y * dt * dt
