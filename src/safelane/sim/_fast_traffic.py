@@ -84,3 +84,92 @@ def leader_accels(x, v, margin, roles, bounds, task, a_last, decel_last, violati
         0.5 * FEASIBILITY_TOL_M, acc,
     )  # fmt: skip
     return acc
+
+
+_R = types.Array(types.float64, 1, "A", readonly=True)
+_RB = types.Array(types.bool_, 1, "A", readonly=True)
+_FOLLOWER_SIGNATURE = types.void(
+    *(_R,) * 6, _RB, _RB, _R, types.boolean, _R, types.boolean, *(types.float64,) * 7,
+    types.Array(types.float64, 1, "C"),
+)  # fmt: skip
+
+
+@numba.njit(inline="always")
+def _responsible_accel(a_wanted, slack, v_f, v_l, lead_decel, a_x_d, dt, eps):  # responsible.responsible_accel
+    bound = _responsible_bound(slack, v_f, v_l, lead_decel, a_x_d, dt)
+    return a_wanted if bound > a_wanted else _max(bound - eps, -a_x_d)
+
+
+@numba.njit(_FOLLOWER_SIGNATURE, cache=True, nogil=True, error_model="numpy")
+def follower_kernel(
+    f_x, f_v, l1_x, l1_v, ego_x, ego_vx, aggressive, completed, gap0, has_wanted, wanted, ignores_ego, p_m, a_x_a,
+    a_x_d, open_decel, open_gap_m, dt, eps, out,
+):  # fmt: skip
+    """:func:`~.behaviours.follower_accel` per scenario into ``out``; ``wanted`` is read only where ``has_wanted``."""
+    for i in range(out.shape[0]):
+        fx, fv, lx, lv, ex, evx = f_x[i], f_v[i], l1_x[i], l1_v[i], ego_x[i], ego_vx[i]
+        aggr = aggressive[i]
+        gap_ego = ex - fx
+        gap_l1 = lx - fx
+        if has_wanted:
+            want = wanted[i]
+        elif aggr:
+            want = _min(_max(0.5 * (gap_l1 - p_m - 1.0) + 1.5 * (lv - fv), -a_x_d), a_x_a)
+        elif gap_ego < gap0[i] + open_gap_m:
+            want = -open_decel
+        else:
+            want = _min(_max(evx - fv, -open_decel), open_decel)
+        a = _responsible_accel(want, gap_l1 - p_m, fv, lv, a_x_d, a_x_d, dt, eps)
+        if gap_ego > 0.0 and ((not aggr) or completed[i]) and not ignores_ego:
+            a = _responsible_accel(a, gap_ego - p_m, fv, evx, a_x_d, a_x_d, dt, eps)
+        out[i] = a
+
+
+def follower_accel(f_x, f_v, l1_x, l1_v, ego_x, ego_vx, aggressive, completed, gap0, prm: Params, open_decel: float,
+                   open_gap_m: float, wanted=None, ignores_ego: bool = False):  # fmt: skip
+    """:func:`follower_kernel` with :func:`~.behaviours.follower_accel`'s arguments and result."""
+    floats = [np.asarray(a, dtype=np.float64) for a in (f_x, f_v, l1_x, l1_v, ego_x, ego_vx)]
+    n = floats[0].shape[0]
+    r = lambda a, dtype=np.float64: np.broadcast_to(np.asarray(a, dtype=dtype), (n,))  # noqa: E731
+    out = np.empty(n)
+    follower_kernel(
+        *(r(a) for a in floats), r(aggressive, np.bool_), r(completed, np.bool_), r(gap0), wanted is not None,
+        r(0.0 if wanted is None else wanted), bool(ignores_ego), prm.p_m, prm.a_x_a, prm.a_x_d, float(open_decel),
+        float(open_gap_m), prm.dt, ROOT_EPS_MPS2, out,
+    )  # fmt: skip
+    return out
+
+
+_CHAIN_SIGNATURE = types.void(
+    _M, _M, _M, _M, *(types.float64,) * 3, types.Array(types.float64, 2, "F"), types.Array(types.bool_, 1, "C")
+)
+
+
+@numba.njit(_CHAIN_SIGNATURE, cache=True, nogil=True, error_model="numpy")
+def chain_kernel(x, v, promise, margin, a_x_d, half, tol, bounds, unsafe):
+    """:meth:`~.step.ClosedLoop.chain` per scenario: the scan of :func:`safelane.safety.chain.propagate_chain` from
+    ``L(N+1)`` (``a_x_d``) down to ``L1`` into ``bounds`` (``(B, K)``, F's slot ``a_x_d``) and ``unsafe``.
+    ``promise``, ``margin``: ``(N, B)`` rows of the links ``L1..LN``."""
+    bsz, k = x.shape
+    for b in range(bsz):
+        a_ahead = a_x_d
+        broken = False
+        bounds[b, 0] = a_x_d
+        bounds[b, k - 1] = a_x_d
+        for i in range(k - 3, -1, -1):  # link i: L(i+1) behind L(i+2), slots i+1 and i+2
+            slack = x[b, i + 2] - x[b, i + 1] - margin[i, b]
+            z = _min_follow_decel(slack, v[b, i + 1], v[b, i + 2], a_ahead, half, tol)
+            broken = broken | (z > a_x_d)
+            a_ahead = _min(_max(promise[i, b], z), a_x_d)
+            bounds[b, i + 1] = a_ahead
+        unsafe[b] = broken
+
+
+def chain_bounds(x, v, promise, margin, prm: Params):
+    """:func:`chain_kernel`: ``(bounds (B, K), unsafe (B,))``."""
+    bsz, k = x.shape
+    bounds = np.empty((bsz, k), order="F")
+    unsafe = np.empty(bsz, dtype=np.bool_)
+    chain_kernel(x, v, promise.reshape(k - 2, bsz), margin.reshape(k - 2, bsz), prm.a_x_d, 0.5 * FEASIBILITY_TOL_M,
+                 FEASIBILITY_TOL_M, bounds, unsafe)  # fmt: skip
+    return bounds, unsafe

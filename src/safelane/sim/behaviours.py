@@ -167,8 +167,12 @@ def follower_accel(
       up to ``a_x_a``), ignoring the ego; afterwards it follows the ego responsibly.
     Both always follow L1 responsibly (L1's worst case: ``a_x_d``). ``wanted``: a traffic hook's wish
     (:class:`safelane.sim.traffic.TrafficHooks`) replacing both nominal laws, inside ``[−a_x_d, a_x_a]``; the
-    responsible filters still apply. ``ignores_ego`` (outside the assumptions): F never follows the ego.
+    responsible filters still apply. ``ignores_ego`` (outside the assumptions): F never follows the ego. From
+    :data:`FAST_MIN_ELEMENTS` scenarios on it runs the compiled kernel (:mod:`._fast_traffic`), the same bits.
     """
+    if np.size(f_x) >= FAST_MIN_ELEMENTS and (kernel := traffic_kernel()) is not None:
+        return kernel.follower_accel(f_x, f_v, l1_x, l1_v, ego_x, ego_vx, aggressive, completed, gap0, prm, open_decel,
+                                     open_gap_m, wanted, ignores_ego)  # fmt: skip
     gap_ego = ego_x - f_x
     collab_nominal = np.where(gap_ego < gap0 + open_gap_m, -open_decel, np.clip(ego_vx - f_v, -open_decel, open_decel))
     gap_l1 = l1_x - f_x

@@ -23,6 +23,7 @@ from ..safety.lateral import LATERAL_TOL_M
 from ..shield import ABORT, HESITATE, PROCEED, ShieldConfig, ShieldState, Situation
 from ..shield import core as shield
 from ..shield.realworld import delay_periods
+from .behaviours import FAST_MIN_ELEMENTS, traffic_kernel
 from .checks import ego_checks, lane_checks, lane_pairs
 from .config import SimConfig
 from .kinematics import Fleet, Motion
@@ -218,6 +219,8 @@ class ClosedLoop:
         """The chain analysis on the current states: ``(bounds (B, K), unsafe (B,))``, ``bounds[:, i]`` the worst-case
         deceleration of slot ``i`` (``a_x_d`` for F's slot, ``L(N+1)`` and anything not connected)."""
         prm = self.prm
+        if len(s.x) >= FAST_MIN_ELEMENTS and (kernel := traffic_kernel()) is not None:  # the same bits, compiled
+            return kernel.chain_bounds(s.x, s.v, self.chain_promise, self.chain_margin, prm)
         n_links = s.x.shape[1] - 2
         with np.errstate(all="ignore"):  # inputs were checked with the batch: the scan alone, unchecked
             decel, _, unsafe = propagate_chain(
