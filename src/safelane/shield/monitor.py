@@ -29,6 +29,7 @@ from .._motion import advance
 from ..params import Params
 from ..safety._backend import ARRAY
 from ..safety.chain import braked_position
+from ..safety.evasion import fast_kernel
 
 BREACH_KINDS = ("l1_decel", "leader_bound", "last_decel", "follower", "stale_v2x")
 #: Positions within this of the assumed worst case count as inside it (round-off).
@@ -69,14 +70,32 @@ class Snapshot:
     active: np.ndarray
 
 
+#: :func:`observe_breaches` runs the compiled kernel (:mod:`._fast_monitor`) from this many scenarios on.
+FAST_MIN_ROWS = 64
+
+
+def monitor_kernel():
+    """The compiled monitor's module :mod:`._fast_monitor`, or ``None`` where
+    :func:`~safelane.safety.evasion.fast_kernel` is ``None`` (numba missing, or ``SAFELANE_NO_NUMBA=1``)."""
+    if fast_kernel() is None:
+        return None
+    from . import _fast_monitor
+
+    return _fast_monitor
+
+
 def observe_breaches(prev: Breach, last, situation, prm: Params, t_now: float) -> Breach:
     """The record after one period: ``last`` (:class:`~safelane.shield.core.Snapshot`) is what the shield knew and
     assumed at the period's start, ``situation`` what it sees at its end. A vehicle that braked no harder than
     assumed is at or ahead of the position braking at the assumed deceleration would give it (exact, with
     stopping); an F no more pushy than a responsible follower of the ego is at or behind the position its
     responsible limit would give it. Positions are compared to ``TOL_M``. Where the chain changed length (a
-    vehicle left or joined it) the leader comparisons are skipped for that period."""
+    vehicle left or joined it) the leader comparisons are skipped for that period. From :data:`FAST_MIN_ROWS`
+    scenarios on it runs the compiled kernel (:mod:`._fast_monitor`) where numba imports and ``SAFELANE_NO_NUMBA`` is
+    not ``1``: the same flags, the NumPy path below is the reference."""
     bsz = len(prev.first_s)
+    if bsz >= FAST_MIN_ROWS and (kernel := monitor_kernel()) is not None:
+        return kernel.observe_breaches(prev, last, situation, prm, t_now)
     flags = np.zeros((bsz, len(BREACH_KINDS)), bool)
     lowest, f_highest = predicted_positions(last, prm.dt)
     active = last.active

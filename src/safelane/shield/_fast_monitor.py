@@ -1,0 +1,72 @@
+"""Optional compiled kernel of the assumption monitor's period check (:func:`~.monitor.observe_breaches`; numba,
+extra ``fast``): per scenario, the chain braking at its bounds and L1 at the held plan's deceleration
+(``braked_position``), F at its responsible limit (``_motion.advance``), each compared with where the vehicle is
+now, to ``TOL_M`` — the NumPy function's arithmetic in its evaluation order, so the same flags and times
+(``tests/test_fast_monitor.py``). The NumPy function stays the reference and the fallback."""
+
+from __future__ import annotations
+
+import numba
+import numpy as np
+from numba import types
+
+from ..safety._fast_base import _braked, _stop_time
+from ..safety._fast_responsible import _advance
+from .monitor import BREACH_KINDS, TOL_M, Breach
+
+_M = types.Array(types.float64, 2, "A", readonly=True)
+_V = types.Array(types.float64, 1, "A", readonly=True)
+_VB = types.Array(types.bool_, 1, "A", readonly=True)
+_SIGNATURE = types.void(
+    _M, _M, _M, _M, types.Array(types.int64, 1, "A", readonly=True), _V, _V, _V, _V, _VB, _V, types.boolean,
+    types.float64, types.float64, types.Array(types.bool_, 2, "A"),
+)  # fmt: skip
+
+
+@numba.njit(_SIGNATURE, cache=True, nogil=True, error_model="numpy")
+def breach_kernel(
+    chain_x, chain_v, bounds, now_x, n_connected, plan_l1_decel, f_x, f_v, f_limit, active, now_f_x, same_chain, dt,
+    tol, flags,
+):  # fmt: skip
+    """Write the period's breach flags (``(B, 4)`` of the first four :data:`~.monitor.BREACH_KINDS`) into ``flags``:
+    ``chain_x``/``chain_v``/``bounds`` the snapshot's chain, ``now_x`` the chain now (read only where
+    ``same_chain``: the chain kept its length)."""
+    bsz, m = chain_x.shape
+    for b in range(bsz):
+        l1 = leader = last = False
+        if same_chain:
+            for i in range(m):
+                p, v, d = chain_x[b, i], chain_v[b, i], bounds[b, i]
+                behind = now_x[b, i] < _braked(p, v, d, dt, _stop_time(v, d)) - tol
+                if i < n_connected[b]:
+                    leader = leader or behind
+                elif i == n_connected[b]:
+                    last = last or behind
+            p, v, d = chain_x[b, 0], chain_v[b, 0], plan_l1_decel[b]
+            l1 = active[b] and now_x[b, 0] < _braked(p, v, d, dt, _stop_time(v, d)) - tol
+        limit = f_limit[b]
+        highest, _ = _advance(f_x[b], f_v[b], 0.0 if limit == np.inf or limit == -np.inf else limit, dt)
+        flags[b, 0] = l1
+        flags[b, 1] = leader
+        flags[b, 2] = last
+        flags[b, 3] = (limit == limit and limit != np.inf and limit != -np.inf) and now_f_x[b] > highest + tol
+
+
+def observe_breaches(prev: Breach, last, situation, prm, t_now: float) -> Breach:
+    """:func:`~.monitor.observe_breaches` through :func:`breach_kernel`."""
+    bsz = len(prev.first_s)
+    same = situation.chain_x.shape == last.chain_x.shape
+    f64 = lambda a, shape: np.broadcast_to(np.asarray(a, dtype=np.float64), shape)  # noqa: E731
+    m = last.chain_x.shape[1]
+    flags = np.zeros((bsz, len(BREACH_KINDS)), dtype=np.bool_)
+    breach_kernel(
+        f64(last.chain_x, (bsz, m)), f64(last.chain_v, (bsz, m)), f64(last.bounds, (bsz, m)),
+        f64(situation.chain_x, (bsz, m)) if same else np.zeros((1, 1)),
+        np.broadcast_to(np.asarray(last.n_connected, dtype=np.int64), (bsz,)), f64(last.plan_l1_decel, (bsz,)),
+        f64(last.f_x, (bsz,)), f64(last.f_v, (bsz,)), f64(last.f_limit, (bsz,)),
+        np.broadcast_to(np.asarray(last.active, dtype=np.bool_), (bsz,)), f64(situation.f_x, (bsz,)), same, prm.dt,
+        TOL_M, flags[:, :4],
+    )  # fmt: skip
+    new = flags & ~prev.flags
+    first = np.where(np.isnan(prev.first_s) & new.any(1), t_now, prev.first_s)
+    return Breach(flags=prev.flags | flags, first_s=first)
