@@ -50,8 +50,10 @@ def leader_kernel(
             d = bounds[b, i + 1]
             own = bounds[b, i]
             want = _min(task[b, i], _responsible_bound(slack, v_f, v_l, d, own, dt) - eps)
+            # The closed form is exact where the own bound is at least the one ahead: else confirm it — unless the
+            # answer is -own either way (want < -own: the maximum below is -own whatever the check says).
             ok = True
-            if own < d:  # the closed form is exact where the own bound is at least the one ahead: else confirm it
+            if own < d and not want < -own:
                 ok = _responsible_ok(want, slack, v_f, v_l, d, own, dt, tol, half, tol)
             a_conn = _max(want if ok else -own, -own)
             if any_violation and violating[b, i]:
