@@ -53,14 +53,17 @@ import safelane.safety
 t0 = time.perf_counter()
 import numba
 t1 = time.perf_counter()
-from safelane.safety import _fast
+from safelane.safety import _fast, _fast_plan
+from safelane.shield import _fast_decide, _fast_monitor
+from safelane.sim import _fast_traffic
 t2 = time.perf_counter()
 print(t1 - t0, t2 - t1)
 """
 
 
 def compile_times() -> tuple[float, float, float]:
-    """``(import numba, compile with an empty cache, load from the cache)`` in seconds, each in a fresh process."""
+    """``(import numba, compile with an empty cache, load from the cache)`` in seconds, each in a fresh process: every
+    kernel module (the evasion check, the plan, the candidate check, the monitor, the traffic)."""
     with tempfile.TemporaryDirectory() as cache:
         env = dict(os.environ, NUMBA_CACHE_DIR=cache)
         runs = []
@@ -103,6 +106,46 @@ def numpy_path(fn):
             del os.environ["SAFELANE_NO_NUMBA"]
 
     return call
+
+
+#: The closed loop's parts timed separately: (label, module, class or None, attribute) of the functions wrapped with
+#: a CPU timer.
+PARTS = (
+    ("shield step (candidate checks, monitor, plans)", "safelane.shield.core", None, "step"),
+    ("traffic (leaders, F)", "safelane.sim.step", "ClosedLoop", "others_accels"),
+    ("chain analysis", "safelane.sim.step", "ClosedLoop", "chain"),
+    ("collision checks and motion", "safelane.sim.step", "ClosedLoop", "check_and_advance"),
+)
+
+
+def part_times(run) -> tuple[dict[str, float], float]:
+    """``({part: CPU s}, total CPU s)`` of one ``run()`` with each of :data:`PARTS` wrapped in a CPU timer."""
+    import importlib
+
+    spent = dict.fromkeys([label for label, *_ in PARTS], 0.0)
+    saved = []
+    for label, module, cls, name in PARTS:
+        target = importlib.import_module(module)
+        target = getattr(target, cls) if cls else target
+        real = getattr(target, name)
+
+        def timed_part(*a, _real=real, _label=label, **k):
+            c = time.process_time()
+            try:
+                return _real(*a, **k)
+            finally:
+                spent[_label] += time.process_time() - c
+
+        saved.append((target, name, real))
+        setattr(target, name, timed_part)
+    try:
+        c = time.process_time()
+        run()
+        total = time.process_time() - c
+    finally:
+        for target, name, real in saved:
+            setattr(target, name, real)
+    return spent, total
 
 
 def main(argv=None) -> None:
@@ -163,6 +206,16 @@ def main(argv=None) -> None:
                 f"  {name:<11} {work / w / 1e6:6.2f} M vehicle-steps/s wall ({w:5.2f} s), {work / c / 1e6:6.2f} M per "
                 f"CPU s   target >= {TARGET_SIM / 1e6:g} M: {mark}"
             )
+        # Where the time goes, part by part (one more run of each path, CPU seconds, timers included)
+        numpy_parts, numpy_total = part_times(numpy_path(run))
+        parts, total = part_times(run) if kernel is not None else (numpy_parts, numpy_total)
+        print(f"\n  {'part (CPU s per run)':<48} {'NumPy path':>10} {'default':>9} {'ratio':>7}")
+        rows = [*((label, numpy_parts[label], parts[label]) for label, *_ in PARTS)]
+        rows.append(("the rest (nominal planner, observation, glue)", numpy_total - sum(numpy_parts.values()),
+                     total - sum(parts.values())))  # fmt: skip
+        rows.append(("whole run", numpy_total, total))
+        for label, a, b in rows:
+            print(f"  {label:<48} {a:10.3f} {b:9.3f} {a / b:6.2f}x")
     load = os.getloadavg()
     print(f"\nload average at the end: {load[0]:.1f} {load[1]:.1f} {load[2]:.1f} on {os.cpu_count()} logical CPUs")
 

@@ -150,3 +150,34 @@ def test_without_numba_the_numpy_path_answers(monkeypatch):
     assert ev.fast_kernel() is None
     s = evasion_inputs(np.random.default_rng(17), (ev.FAST_MIN_BATCH,))
     assert evasion_exists(**s, params=PARAMS).shape == (ev.FAST_MIN_BATCH,)
+
+
+@needs_numba
+def test_an_edited_kernel_source_drops_every_kernels_cache(tmp_path):
+    # numba keys a cached kernel on its own file only; helpers from another kernel file are compiled into it
+    from safelane.safety._fast_base import KERNEL_SOURCES, drop_stale_caches
+
+    names = {p.name for p in KERNEL_SOURCES}
+    assert {"_fast.py", "_fast_plan.py", "_fast_decide.py", "_fast_monitor.py", "_fast_traffic.py"} <= names
+    helper, kernel = tmp_path / "_fast_helper.py", tmp_path / "_fast_kernel.py"
+    helper.write_text("x = 1\n")
+    kernel.write_text("y = 2\n")
+    cache = tmp_path / "__pycache__"
+    cache.mkdir()
+    cached = [cache / "_fast_kernel.k-10.py311.nbi", cache / "_fast_kernel.k-10.py311.1.nbc"]
+    other = cache / "_fast_kernel.cpython-311.pyc"
+
+    def fill():
+        for path in (*cached, other):
+            path.write_bytes(b"")
+
+    stamp = tmp_path / "stamp"
+    fill()
+    assert drop_stale_caches((helper, kernel), stamp)  # no stamp yet: dropped
+    assert not any(p.exists() for p in cached) and other.exists()
+    fill()
+    assert not drop_stale_caches((helper, kernel), stamp)  # nothing changed: kept
+    assert all(p.exists() for p in cached)
+    helper.write_text("x = 3\n")  # the helper's file changed, not the kernel's: the kernel's cache goes
+    assert drop_stale_caches((helper, kernel), stamp)
+    assert not any(p.exists() for p in cached) and other.exists()

@@ -111,7 +111,7 @@ def test_responsible_bound_runs_the_kernel_from_its_batch_threshold(monkeypatch)
 
 
 def test_the_simulator_gives_the_same_table_with_and_without_the_kernel(monkeypatch):
-    """The closed loop calls the bound for the leaders, F and the completed ego: with the kernel (batch above the
+    """The closed loop calls the bound for the completed ego and the monitor: with the kernel (batch above the
     threshold) the per-scenario table is the NumPy path's, column for column."""
     from safelane.safety import _fast
     from safelane.sim import SimConfig, concat, paper_scenarios, simulate_batch
@@ -126,7 +126,9 @@ def test_the_simulator_gives_the_same_table_with_and_without_the_kernel(monkeypa
     fast = simulate_batch(batch, seed=3, config=SimConfig()).table
     monkeypatch.setenv("SAFELANE_NO_NUMBA", "1")
     reference = simulate_batch(batch, seed=3, config=SimConfig()).table
-    assert fast.equals(reference) and len(calls) > 100  # the kernel ran every period
+    # The leaders and F run their own fused kernels (sim/_fast_traffic); the shield calls this one for the completed
+    # ego's responsible following and the monitor's watch on F.
+    assert fast.equals(reference) and len(calls) > 10
     assert reference["n_abort"].sum() > 0 and reference["success"].any()
 
 

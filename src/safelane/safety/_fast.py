@@ -61,7 +61,7 @@ def _profile(u, v, v1, a1, a_a, a_d, l1_stop):  # longitudinal.profile -> (V, t2
     return V, t2, match
 
 
-@numba.njit(inline="always")
+@numba.njit(error_model="numpy", nogil=True)
 def _leader_gap_min(u, T, d0, p, v, p1, v1, a1, margin, a_a, a_d, l1_stop, l1_at_T):  # longitudinal.leader_gap_min
     V, t2, match = _profile(u, v, v1, a1, a_a, a_d, l1_stop)
     at_u = p + v * u + 0.5 * a_a * u * u
@@ -92,7 +92,7 @@ def _ego_position(t, p, v, u, V, t2, match, p1, v1, a1, a_a, a_d, l1_stop):  # l
     return pos + 0.0
 
 
-@numba.njit(inline="always")
+@numba.njit(error_model="numpy", nogil=True)
 def _follow_gap(
     c, ego_px, ego_vx, u, V, t2, match, l1_p, l1_v, l1_decel, f_p, f_v, aggr, margin, a_a, a_d, l1_stop, f_stop
 ):
@@ -116,7 +116,7 @@ def _lateral_time(py, vy, a_y, y_safe, lat_tol):
     return (-vy - _sqrt(vy * vy - 2.0 * a_y * e)) / a_y
 
 
-@numba.njit(inline="always")
+@numba.njit(error_model="numpy", nogil=True)
 def _leader_search(T, gap0, d0, p, v, p1, v1, a1, margin, a_a, a_d, s, s_a, l1_stop, l1_at_T, tol):
     """:func:`~.longitudinal.longitudinal_core`'s choice of the switch time: ``(u, its leader gap)``; ``gap0`` is the
     gap of ``u = 0``, kept when no candidate is feasible."""
@@ -156,7 +156,7 @@ def _leader_search(T, gap0, d0, p, v, p1, v1, a1, margin, a_a, a_d, s, s_a, l1_s
     return best, best_gap
 
 
-@numba.njit(inline="always")
+@numba.njit(error_model="numpy", nogil=True)
 def _follow_min(T, p, v, u, V, t2, match, p1, v1, a1, fp, fv, aggr, fmargin, a_a, a_d, c_ev, l1_stop, tol, early):
     """The follower gap of Eq. 9: its minimum over the seven candidates clipped to ``[0, T]``; ``early`` stops once
     it is below ``-tol`` (the minimum only falls: the verdict is known)."""

@@ -1,17 +1,52 @@
 """The scalar building blocks of the compiled kernels (numba; extra ``fast``): NaN-propagating ``min``/``max`` as
 ``np.minimum``/``np.maximum``, the guarded square root, stop time and distance of :mod:`._backend` and
 :func:`~.chain.braked_position`, each written in the NumPy path's evaluation order (see :mod:`._fast`), and the
-array types of the kernels' explicit signatures."""
+array types of the kernels' explicit signatures.
+
+**The kernels' on-disk cache.** numba keys a cached kernel on the stamp of the file that defines it, but the helpers
+a kernel calls from another file (these, :mod:`._fast_responsible`'s, :mod:`._fast_plan`'s) are compiled into it:
+an edit there would leave the kernel's cached machine code stale. Every kernel module imports this one first, and
+:func:`drop_stale_caches` runs once per process: when any kernel source changed since the stamp it keeps in
+``__pycache__``, it deletes every kernel module's in-tree cache (``__pycache__/<module>.*.nbi|nbc``), so the next
+call compiles afresh. (A ``NUMBA_CACHE_DIR`` cache is not cleared: there, clear it by hand after editing a kernel.)
+"""
 
 from __future__ import annotations
 
+import hashlib
 import math
+from pathlib import Path
 
 import numba
 import numpy as np
 from numba import types
 
 _INF = math.inf
+_PACKAGE = Path(__file__).resolve().parents[1]
+#: Every module with a compiled kernel or its helpers.
+KERNEL_SOURCES = tuple(sorted(p for sub in ("safety", "shield", "sim") for p in (_PACKAGE / sub).glob("_fast*.py")))
+
+
+def drop_stale_caches(sources=KERNEL_SOURCES, stamp: Path | None = None) -> bool:
+    """Delete the in-tree numba caches of every module of ``sources`` when any of them changed since the last call
+    (a SHA-256 of their bytes, kept in ``stamp``, by default beside this module's cache). Returns whether it
+    deleted; never raises (a read-only install has nothing stale: its sources do not change)."""
+    try:
+        digest = hashlib.sha256(b"".join(p.read_bytes() for p in sources)).hexdigest()
+        stamp = stamp or Path(__file__).resolve().parent / "__pycache__" / "safelane_kernels.sha256"
+        if stamp.is_file() and stamp.read_text() == digest:
+            return False
+        for source in sources:
+            for cached in (source.parent / "__pycache__").glob(f"{source.stem}.*.nb[ic]"):
+                cached.unlink(missing_ok=True)
+        stamp.parent.mkdir(exist_ok=True)
+        stamp.write_text(digest)
+        return True
+    except OSError:
+        return False
+
+
+drop_stale_caches()
 
 # One explicit signature (compiled at import, or loaded from the cache): read-only 1-D arrays of any layout, so
 # contiguous inputs, broadcast scalars (stride 0) and read-only views all take the same machine code.

@@ -35,7 +35,7 @@ FLOAT_PARTS = (
 BOOL_PARTS = ("exists", "lead_ok", "follow_ok", "nothing", "follows_leader")
 
 
-@numba.njit(inline="always")
+@numba.njit(error_model="numpy", nogil=True)
 def _plan_parts(py, vy, p, v, p1, v1, a1, fp, fv, aggr, margin, fmargin, a_a, a_d, a_y, y_safe, lat_tol, tol):
     """One element of :func:`plan_kernel`: ``(floats, flags)`` as tuples in the orders of :data:`FLOAT_PARTS` and
     :data:`BOOL_PARTS`."""

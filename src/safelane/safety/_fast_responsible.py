@@ -21,7 +21,7 @@ from ._fast_base import _F, _INF, _max, _min, _sqrt, readonly
 _RESPONSIBLE_SIGNATURE = types.void(*(_F,) * 5, types.float64, types.Array(types.float64, 1, "C"))
 
 
-@numba.njit(inline="always")
+@numba.njit(error_model="numpy", nogil=True)
 def _responsible_bound(slack, vf, vl, d, b, dt):
     """:func:`~.responsible.responsible_bound` (the smallest of :func:`~.responsible.responsible_bounds`)."""
     inf = _INF
@@ -79,7 +79,7 @@ def _advance(x, v, a, dt):  # _motion.advance -> (x', v')
     return x + v * ts + 0.5 * a * ts * ts, (0.0 if ts < dt else _max(v + a * dt, 0.0))
 
 
-@numba.njit(inline="always")
+@numba.njit(error_model="numpy", nogil=True)
 def _pair_min_gap(slack, v_f, a_f, v_l, a_l, dt):  # responsible.pair_min_gap
     ts_f = _stop_within(v_f, a_f, dt)
     ts_l = _stop_within(v_l, a_l, dt)
@@ -97,7 +97,7 @@ def _pair_min_gap(slack, v_f, a_f, v_l, a_l, dt):  # responsible.pair_min_gap
     return _min(slack, lowest)
 
 
-@numba.njit(inline="always")
+@numba.njit(error_model="numpy", nogil=True)
 def _min_follow_decel(slack, v_f, v_l, a_l, half, tol):  # chain._min_follow_decel_array
     edge = _max(slack + half, 0.0) if slack >= -tol else slack
     s = slack if slack > half else edge
@@ -116,7 +116,7 @@ def _min_follow_decel(slack, v_f, v_l, a_l, half, tol):  # chain._min_follow_dec
     return _INF
 
 
-@numba.njit(inline="always")
+@numba.njit(error_model="numpy", nogil=True)
 def _responsible_ok(a, slack, v_f, v_l, lead_decel, brake, dt, tol, half, feas_tol):  # responsible.responsible_ok
     in_period = _pair_min_gap(slack, v_f, a, v_l, -lead_decel, dt) >= -tol
     xf, vf = _advance(0.0, v_f, a, dt)

@@ -96,7 +96,7 @@ _FOLLOWER_SIGNATURE = types.void(
 )  # fmt: skip
 
 
-@numba.njit(inline="always")
+@numba.njit(error_model="numpy", nogil=True)
 def _responsible_accel(a_wanted, slack, v_f, v_l, lead_decel, a_x_d, dt, eps):  # responsible.responsible_accel
     bound = _responsible_bound(slack, v_f, v_l, lead_decel, a_x_d, dt)
     return a_wanted if bound > a_wanted else _max(bound - eps, -a_x_d)
