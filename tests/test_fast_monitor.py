@@ -57,17 +57,21 @@ def test_the_kernel_gives_the_numpy_paths_flags(monkeypatch, m):
 
 
 @needs_numba
-def test_small_batches_and_the_switch_keep_the_numpy_path(monkeypatch):
+def test_the_kernel_runs_from_its_threshold_and_not_below_or_with_the_switch(monkeypatch):
     from safelane.shield import _fast_monitor
 
-    monkeypatch.setattr(_fast_monitor, "observe_breaches", lambda *a: pytest.fail("the kernel ran"))
+    calls = []
+    real = _fast_monitor.observe_breaches
+    monkeypatch.setattr(_fast_monitor, "observe_breaches", lambda *a: calls.append(len(a[0].first_s)) or real(*a))
     monkeypatch.delenv("SAFELANE_NO_NUMBA", raising=False)
-    last = _snapshot(np.random.default_rng(1), monitor.FAST_MIN_ROWS - 1, 3)
-    situation = SimpleNamespace(chain_x=last.chain_x, f_x=last.f_x)
-    observe_breaches(Breach.none(monitor.FAST_MIN_ROWS - 1), last, situation, PRM, 1.0)
+    for rows in (monitor.FAST_MIN_ROWS - 1, monitor.FAST_MIN_ROWS):
+        last = _snapshot(np.random.default_rng(rows), rows, 3)
+        observe_breaches(Breach.none(rows), last, SimpleNamespace(chain_x=last.chain_x, f_x=last.f_x), PRM, 1.0)
+    assert calls == [monitor.FAST_MIN_ROWS]
     monkeypatch.setenv("SAFELANE_NO_NUMBA", "1")
     last = _snapshot(np.random.default_rng(2), 500, 3)
     observe_breaches(Breach.none(500), last, SimpleNamespace(chain_x=last.chain_x, f_x=last.f_x), PRM, 1.0)
+    assert len(calls) == 1
 
 
 @needs_numba

@@ -10,11 +10,26 @@ from __future__ import annotations
 import numpy as np
 
 from ..params import Params
+from ..safety.evasion import fast_kernel
 from .kinematics import Fleet, Motion, crossing_knots, extrema, free_max, gap_extrema, windowed_gap_extrema
 
 
 def _rows(m: Motion, rows) -> Motion:
     return Motion(*(getattr(m, f)[rows] for f in ("t", "x", "v", "acc")))
+
+
+#: :func:`ego_checks` runs the compiled kernel (:mod:`._fast_checks`) from this many scenarios on.
+FAST_MIN_ROWS = 64
+
+
+def checks_kernel():
+    """The compiled checks' module :mod:`._fast_checks`, or ``None`` where
+    :func:`~safelane.safety.evasion.fast_kernel` is ``None`` (numba missing, or ``SAFELANE_NO_NUMBA=1``)."""
+    if fast_kernel() is None:
+        return None
+    from . import _fast_checks
+
+    return _fast_checks
 
 
 def ego_checks(
@@ -37,8 +52,12 @@ def ego_checks(
     the period are evaluated exactly (a bound on how far a gap can move in one period —
     ``|Δv| dt + (a_max,ego + a_max,others) dt²/2`` — filters the rest); the result is the same, faster. The
     reported minimum gaps to F and L1 are exact where the pair came that near, and sampled at the period's ends
-    (while the ego is in the conflict zone) where it stayed farther.
+    (while the ego is in the conflict zone) where it stayed farther. From :data:`FAST_MIN_ROWS` scenarios on (and
+    without switches inside the period) it runs the compiled kernel (:mod:`._fast_checks`) where numba imports and
+    ``SAFELANE_NO_NUMBA`` is not ``1``: the same bits, the NumPy path below is the reference.
     """
+    if others.switch is None and len(lon.x) >= FAST_MIN_ROWS and (kernel := checks_kernel()) is not None:
+        return kernel.ego_checks(b, prm, s, lon, lat, others, conflict_level, overlap_level, plan)
     dt = prm.dt
     bsz = len(lon.x)
     max_level = max(conflict_level, overlap_level)
