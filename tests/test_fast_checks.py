@@ -136,3 +136,46 @@ def test_the_kernel_gives_the_numpy_paths_bits_on_pairs_at_the_edges(monkeypatch
     collided, violated, gap_f, gap_l1 = reference
     assert 0 < collided.sum() < violated.sum() < len(collided)
     assert np.isfinite(gap_f).sum() > 1000 and (gap_l1 < 5.0).sum() > 1000
+
+
+@needs_numba
+def test_the_lane_kernel_gives_the_numpy_paths_bits(monkeypatch):
+    """``lane_checks`` on 20,000 synthetic chains: gaps at, just inside and beyond the margins (``p_m`` and
+    ``p_m_human``) and the vehicle length, vehicles at rest all period, stopping inside it, at equal speeds, invalid
+    slots — with and without the kernel."""
+    from types import SimpleNamespace
+
+    from safelane import Params
+    from safelane.sim.kinematics import Fleet
+
+    prm = Params()
+    rng = np.random.default_rng(17)
+    bsz, k = 20_000, 6
+    pick = lambda p: rng.random((bsz, k)) < p  # noqa: E731
+    human = pick(0.3)
+    margin = np.where(human, prm.p_m_human, prm.p_m)
+    gaps = rng.uniform(0.0, 25.0, (bsz, k))
+    gaps = np.where(pick(0.2), margin - rng.choice([0.0, 5e-10, 0.3], (bsz, k)), gaps)
+    gaps = np.where(pick(0.05), prm.vehicle_length * rng.uniform(0.5, 1.0, (bsz, k)), gaps)
+    x = np.cumsum(gaps, axis=1)
+    v = np.where(pick(0.2), 0.0, rng.uniform(0.0, 30.0, (bsz, k)))
+    v = np.where(pick(0.2), rng.uniform(0.0, 0.4, (bsz, k)), v)  # stopping inside the period
+    v[:, 1:] = np.where(pick(0.2)[:, 1:], v[:, :-1], v[:, 1:])  # equal speeds
+    acc = np.where(pick(0.4), -prm.a_x_d, np.where(pick(0.2), 0.0, rng.uniform(-prm.a_x_d, prm.a_x_a, (bsz, k))))
+    fleet = Fleet.constant(*(np.asfortranarray(a) for a in (x, v, acc)), prm.dt)
+    b = SimpleNamespace(valid=np.asfortranarray(pick(0.95)), human=np.asfortranarray(human))
+    calls = []
+    from safelane.sim import _fast_checks
+
+    real = _fast_checks.lane_checks
+    monkeypatch.setattr(_fast_checks, "lane_checks", lambda *a: calls.append(1) or real(*a))
+    monkeypatch.delenv("SAFELANE_NO_NUMBA", raising=False)
+    fast = checks.lane_checks(b, prm, fleet)
+    monkeypatch.setenv("SAFELANE_NO_NUMBA", "1")
+    reference = checks.lane_checks(b, prm, fleet)
+    assert calls == [1]
+    for name, a, r in zip(("collided", "violated", "min_ratio"), fast, reference, strict=True):
+        same = (a == r) | (np.isnan(a) & np.isnan(r)) if a.dtype.kind == "f" else a == r
+        assert same.all(), f"{name} differs at {np.flatnonzero(~same)[:5]}"
+    collided, violated, ratio = reference
+    assert 0 < collided.sum() < violated.sum() < bsz and np.isfinite(ratio).sum() > bsz // 2

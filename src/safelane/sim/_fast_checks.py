@@ -49,14 +49,20 @@ def _free_max(y0, vy0, a, dt):  # _motion.free_max
     return _max(_max(y0, end), vertex)
 
 
-@numba.njit(error_model="numpy", nogil=True)
-def _quadratic(d0, dv0, ra, y0, vy0, ay, level, dt):  # checks._windowed_quadratic (with _quadratic_extrema)
+@numba.njit(inline="always")
+def _quadratic_extrema(d0, dv0, ra, dt):  # checks._quadratic_extrema
     end = d0 + dv0 * dt + 0.5 * ra * dt * dt
     tau = -dv0 / ra if ra != 0.0 else -1.0
     inside = tau > 0.0 and tau < dt
     vertex = d0 + dv0 * tau + 0.5 * ra * tau * tau
     lo = _min(_min(d0, end), vertex if (inside and ra > 0.0) else _INF)
     hi = _max(_max(d0, end), vertex if (inside and ra < 0.0) else -_INF)
+    return lo, hi
+
+
+@numba.njit(error_model="numpy", nogil=True)
+def _quadratic(d0, dv0, ra, y0, vy0, ay, level, dt):  # checks._windowed_quadratic
+    lo, hi = _quadratic_extrema(d0, dv0, ra, dt)
     if not -_free_max(-y0, -vy0, -ay, dt) <= level:
         return lo, hi
     # checks._window_crossings: the window cut by the lateral crossings of the level (kinematics.crossing_knots)
@@ -237,3 +243,52 @@ def ego_checks(b, prm: Params, s, lon, lat, others, conflict_level: float, overl
         min_gap_f[r[f0]] = np.minimum(min_gap_f[r[f0]], -c_max[f0])
         min_gap_l1[r[l1]] = np.minimum(min_gap_l1[r[l1]], c_min[l1])
     return collided, violated, min_gap_f, min_gap_l1
+
+
+_LANE_SIGNATURE = types.void(_MB, _M, _M, _M, _M, _M, _M, _M, _V, types.float64, types.float64, _OUT_B, _OUT_B, _OUT_V)
+
+
+@numba.njit(_LANE_SIGNATURE, cache=True, nogil=True, error_model="numpy")
+def lane_kernel(valid, margin, x, v, acc, t_stop, x_end, v_end, row_acc, dt, length, collided, violated, min_ratio):
+    """:func:`~.checks.lane_checks` per scenario and consecutive pair (``valid``/``margin`` ``(B, K-1)``): the
+    near-pair filter, the sampled ratios of the far pairs, the exact minimum of the near ones (one quadratic, or
+    ``stop_pair_extrema`` where one of the two stops inside the period)."""
+    bsz, k = x.shape
+    for b in range(bsz):
+        slack = row_acc[b] * dt * dt + 1e-6
+        ratio = _INF
+        hit, close = False, False
+        for c in range(k - 1):
+            if not valid[b, c]:
+                continue
+            m = margin[b, c]
+            gap0 = x[b, c + 1] - x[b, c]
+            near = gap0 - abs(v[b, c + 1] - v[b, c]) * dt < m + slack
+            if near and gap0 >= m:  # both at rest all period keep their gap: no exact check needed
+                rest0 = v_end[b, c] == 0.0 and v[b, c] == 0.0 and x_end[b, c] == x[b, c]
+                rest1 = v_end[b, c + 1] == 0.0 and v[b, c + 1] == 0.0 and x_end[b, c + 1] == x[b, c + 1]
+                near = not (rest0 and rest1)
+            if not near:
+                ratio = _min(ratio, _min(gap0, x_end[b, c + 1] - x_end[b, c]) / m)
+                continue
+            if t_stop[b, c] >= dt and t_stop[b, c + 1] >= dt:
+                low = _quadratic_extrema(gap0, v[b, c + 1] - v[b, c], acc[b, c + 1] - acc[b, c], dt)[0]
+            else:
+                low = _stop_pair(x[b, c], v[b, c], acc[b, c], t_stop[b, c], x[b, c + 1], v[b, c + 1], acc[b, c + 1],
+                                 t_stop[b, c + 1], dt)[0]  # fmt: skip
+            hit = hit or low < length
+            close = close or low < m - 1e-9
+            ratio = _min(ratio, low / m)
+        collided[b], violated[b], min_ratio[b] = hit, close, ratio
+
+
+def lane_checks(b, prm: Params, others, pairs):
+    """:func:`~.checks.lane_checks` through :func:`lane_kernel` (a fleet without switches)."""
+    valid, margin = pairs
+    bsz = len(others.x)
+    collided, violated, min_ratio = np.empty(bsz, bool), np.empty(bsz, bool), np.empty(bsz)
+    lane_kernel(
+        valid, np.asarray(margin, dtype=np.float64), others.x, others.v, others.acc, others.t_stop, others.x_end,
+        others.v_end, others.row_max_abs_acc(), prm.dt, prm.vehicle_length, collided, violated, min_ratio,
+    )  # fmt: skip
+    return collided, violated, min_ratio
