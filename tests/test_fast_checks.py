@@ -17,6 +17,7 @@ from test_fast_core import needs_numba
 
 
 def _tables(monkeypatch, batch, cfg, params=None, traffic=None):
+    """``(kernel's table, NumPy path's table, kernel calls with the kernel, kernel calls with the switch)``."""
     from safelane.sim import _fast_checks
 
     calls = []
@@ -24,10 +25,11 @@ def _tables(monkeypatch, batch, cfg, params=None, traffic=None):
     monkeypatch.setattr(_fast_checks, "ego_checks", lambda *a: calls.append(1) or real(*a))
     monkeypatch.delenv("SAFELANE_NO_NUMBA", raising=False)
     fast = simulate_batch(batch, seed=2, config=cfg, params=params, traffic=traffic).table
+    with_kernel = len(calls)
     monkeypatch.setenv("SAFELANE_NO_NUMBA", "1")
     reference = simulate_batch(batch, seed=2, config=cfg, params=params, traffic=traffic).table
     monkeypatch.delenv("SAFELANE_NO_NUMBA")
-    return fast, reference, len(calls)
+    return fast, reference, with_kernel, len(calls) - with_kernel
 
 
 def _batch(n_leaders, decel, per_variant=150, p_v=0.0):
@@ -53,8 +55,8 @@ def test_the_closed_loop_gives_the_same_table_with_and_without_the_kernel(monkey
     if case == "realistic":
         preset = load_preset("realistic")
         cfg, params = preset.sim, preset.params
-    fast, reference, calls = _tables(monkeypatch, batch, cfg, params)
-    assert calls > 50  # the kernel ran (nearly) every period
+    fast, reference, calls, with_switch = _tables(monkeypatch, batch, cfg, params)
+    assert calls > 50 and with_switch == 0  # the kernel ran (nearly) every period, and never with the switch
     different = [c for c in reference.columns if not fast[c].equals(reference[c])]
     assert not different, different
     if case == "unsupervised":  # collisions and p_m violations: the pair extrema decide them
@@ -73,19 +75,25 @@ def test_profiles_that_switch_inside_a_period_keep_the_numpy_path(monkeypatch):
     times = np.tile([0.0, 1.05, 2.57], (n, 1))  # switches off the period grid
     accels = np.tile([0.0, -6.0, 1.0], (n, 1))
     profiled = with_last_profile(batch, times, accels)
-    fast, reference, calls = _tables(monkeypatch, profiled, SimConfig())
+    fast, reference, calls, with_switch = _tables(monkeypatch, profiled, SimConfig())
     assert fast.equals(reference)
-    assert calls < 100  # not in the periods with a switch (those take the NumPy path)
+    assert 0 < calls < 100 and with_switch == 0  # not in the periods with a switch (those take the NumPy path)
 
 
 @needs_numba
-def test_small_batches_keep_the_numpy_path(monkeypatch):
+@pytest.mark.parametrize("name", ["ego_checks", "lane_checks"])
+def test_the_kernels_run_from_their_threshold_on(monkeypatch, name):
     from safelane.sim import _fast_checks
 
-    monkeypatch.setattr(_fast_checks, "ego_checks", lambda *a: pytest.fail("the kernel ran"))
+    calls = []
+    real = getattr(_fast_checks, name)
+    monkeypatch.setattr(_fast_checks, name, lambda *a: calls.append(1) or real(*a))
     monkeypatch.delenv("SAFELANE_NO_NUMBA", raising=False)
-    batch = paper_scenarios("CV_all", 3, 5.0, checks.FAST_MIN_ROWS - 1, np.random.default_rng(0))
-    simulate_batch(batch, seed=0, config=SimConfig())
+    for rows in (checks.FAST_MIN_ROWS - 1, checks.FAST_MIN_ROWS):
+        batch = paper_scenarios("CV_all", 3, 5.0, rows, np.random.default_rng(rows))
+        before = len(calls)
+        simulate_batch(batch, seed=0, config=SimConfig())
+        assert (len(calls) > before) == (rows >= checks.FAST_MIN_ROWS), rows
 
 
 def _pairs(rng, bsz: int, k: int):

@@ -282,7 +282,7 @@ def lane_kernel(valid, margin, x, v, acc, t_stop, x_end, v_end, row_acc, dt, len
         collided[b], violated[b], min_ratio[b] = hit, close, ratio
 
 
-def lane_checks(b, prm: Params, others, pairs):
+def lane_checks(prm: Params, others, pairs):
     """:func:`~.checks.lane_checks` through :func:`lane_kernel` (a fleet without switches)."""
     valid, margin = pairs
     bsz = len(others.x)

@@ -232,7 +232,7 @@ def lane_checks(b, prm: Params, others: Fleet, pairs=None):
     dt = prm.dt
     valid, margin = pairs if pairs is not None else lane_pairs(b, prm)
     if others.switch is None and len(others.x) >= FAST_MIN_ROWS and (kernel := checks_kernel()) is not None:
-        return kernel.lane_checks(b, prm, others, (valid, margin))  # compiled, the same bits (_fast_checks)
+        return kernel.lane_checks(prm, others, (valid, margin))  # compiled, the same bits (_fast_checks)
     x0, v0 = others.x, others.v
     gap0 = x0[:, 1:] - x0[:, :-1]
     gap1 = others.x_end[:, 1:] - others.x_end[:, :-1]
