@@ -62,9 +62,9 @@ def _same_bits(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     return (a == b) | (np.isnan(a) & np.isnan(b))
 
 
-def _cases():
-    rng = np.random.default_rng(13)
-    n = 40_000
+def _cases(seed: int = 13, n: int = 40_000):
+    """Random states, knife edges with human-driven margins, knife edges at ``p_m``: ``(name, states, human)``."""
+    rng = np.random.default_rng(seed)
     humans = (rng.random(n) < 0.3, rng.random(n) < 0.3)
     return [
         ("random", evasion_inputs(rng, (n,)), humans),

@@ -15,7 +15,7 @@ import pytest
 from safelane import Params
 from safelane.safety import evasion as ev
 from safelane.safety._backend import ARRAY
-from test_fast_core import _inputs, _same_bits, knife_edges, needs_numba
+from test_fast_core import _cases, _inputs, _same_bits, knife_edges, needs_numba
 from test_safety_shapes import evasion_inputs
 
 PARAMS = Params()
@@ -45,19 +45,8 @@ def _assert_same(fast, slow, name):
         assert same.all(), f"{name}: {key} differs at {np.flatnonzero(~same)[:5]}"
 
 
-def _cases():
-    rng = np.random.default_rng(23)
-    n = 30_000
-    humans = (rng.random(n) < 0.3, rng.random(n) < 0.3)
-    return [
-        ("random", evasion_inputs(rng, (n,)), humans),
-        ("knife edges", knife_edges(rng, n), humans),
-        ("knife edges, p_m everywhere", knife_edges(rng, n), (False, False)),
-    ]
-
-
 @needs_numba
-@pytest.mark.parametrize("name,states,human", _cases(), ids=lambda x: x if isinstance(x, str) else "")
+@pytest.mark.parametrize("name,states,human", _cases(23, 30_000), ids=lambda x: x if isinstance(x, str) else "")
 def test_plan_kernel_gives_every_part_bit_for_bit(name, states, human, monkeypatch):
     args = _inputs(states, human)
     fast, slow = _both(monkeypatch, args)
