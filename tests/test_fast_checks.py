@@ -187,3 +187,45 @@ def test_the_lane_kernel_gives_the_numpy_paths_bits(monkeypatch):
         assert same.all(), f"{name} differs at {np.flatnonzero(~same)[:5]}"
     collided, violated, ratio = reference
     assert 0 < collided.sum() < violated.sum() < bsz and np.isfinite(ratio).sum() > bsz // 2
+
+
+def _random_motions(rng, n: int, knots: int, x0, v0, a_scale: float):
+    """``n`` piecewise-constant-acceleration motions over ``[0, 0.1]`` with ``knots`` knots (some repeated: zero-length
+    segments), integrated exactly."""
+    from safelane.sim.kinematics import Motion
+
+    inner = np.sort(rng.uniform(0.0, 0.1, (n, knots - 2)), axis=1)
+    inner = np.where(rng.random(inner.shape) < 0.2, np.roll(inner, 1, axis=1), inner)  # repeated knots
+    t = np.sort(np.column_stack([np.zeros(n), inner, np.full(n, 0.1)]), axis=1)
+    acc = rng.uniform(-a_scale, a_scale, (n, knots - 1)) * (rng.random((n, knots - 1)) > 0.15)
+    x, v = np.empty((n, knots)), np.empty((n, knots))
+    x[:, 0], v[:, 0] = x0, v0
+    for j in range(knots - 1):
+        span = t[:, j + 1] - t[:, j]
+        x[:, j + 1] = x[:, j] + v[:, j] * span + 0.5 * acc[:, j] * span * span
+        v[:, j + 1] = v[:, j] + acc[:, j] * span
+    return Motion(t=t, x=x, v=v, acc=acc)
+
+
+@needs_numba
+@pytest.mark.parametrize("lateral_knots", [2, 8])
+def test_the_general_path_kernel_gives_windowed_gap_extremas_bits(lateral_knots):
+    """The exact general path (an ego on its evasion plan, several segments) compiled: ``windowed_gap_extrema`` over
+    ``crossing_knots`` of the lateral motion, on random multi-segment motions with zero-length segments, lateral
+    motions crossing the level once, twice or not at all, and motions exactly at the level."""
+    from safelane.sim import _fast_checks
+    from safelane.sim.kinematics import crossing_knots, windowed_gap_extrema
+
+    rng = np.random.default_rng(lateral_knots)
+    n, level = 20_000, 0.85
+    behind = _random_motions(rng, n, 8, rng.uniform(-5.0, 5.0, n), rng.uniform(0.0, 30.0, n), 6.0)
+    ahead = _random_motions(rng, n, 3, rng.uniform(-12.0, 12.0, n), rng.uniform(0.0, 30.0, n), 6.0)
+    y0 = np.where(rng.random(n) < 0.1, level, level + rng.uniform(-0.1, 0.1, n))
+    lateral = _random_motions(rng, n, lateral_knots, y0, rng.uniform(-1.5, 1.5, n), 3.0)
+    lo, hi = windowed_gap_extrema(behind, ahead, lateral, crossing_knots(lateral, level), level)
+    got_lo, got_hi = _fast_checks._general(behind, ahead, lateral, level)
+    for name, a, r in (("min", got_lo, lo), ("max", got_hi, hi)):
+        same = (a == r) | (np.isnan(a) & np.isnan(r))
+        assert same.all(), f"{name} differs at {np.flatnonzero(~same)[:5]}: {a[~same][:3]} vs {r[~same][:3]}"
+    windowed = np.isfinite(lo)
+    assert 0.2 < windowed.mean() < 0.99  # windows empty, partial and whole

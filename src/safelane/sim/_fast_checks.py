@@ -21,7 +21,7 @@ from numba import types
 from ..params import Params
 from ..safety._fast_base import _max, _min
 from .checks import _rows
-from .kinematics import crossing_knots, extrema, windowed_gap_extrema
+from .kinematics import extrema
 
 _INF = np.inf
 _M = types.Array(types.float64, 2, "A", readonly=True)
@@ -197,6 +197,86 @@ def ego_kernel(
         min_gap_f[b], min_gap_l1[b] = gap_f, gap_l1
 
 
+_K = types.Array(types.float64, 2, "A", readonly=True)
+_GENERAL_SIGNATURE = types.void(*(_K,) * 12, types.float64, _OUT_V, _OUT_V)
+
+
+@numba.njit(inline="always")
+def _at(t, x, v, acc, p, tq):  # kinematics.Motion.at for row p at time tq: (x, v)
+    seg = 0
+    for j in range(1, t.shape[1] - 1):
+        if t[p, j] <= tq:
+            seg += 1
+    tau = tq - t[p, seg]
+    a = acc[p, seg]
+    return x[p, seg] + v[p, seg] * tau + 0.5 * a * tau * tau, v[p, seg] + a * tau
+
+
+@numba.njit(_GENERAL_SIGNATURE, cache=True, nogil=True, error_model="numpy")
+def general_kernel(bt, bx, bv, bacc, at, ax, av, aacc, lt, lx, lv, lacc, level, lo, hi):
+    """:func:`~.kinematics.windowed_gap_extrema` of ``ahead − behind`` (``b*``, ``a*``: the motions' knots ``t``,
+    ``x``, ``v`` and segment accelerations, one row per pair) over the instants where the lateral motion (``l*``)
+    is above ``level``, its window from :func:`~.kinematics.crossing_knots` — the NumPy functions' arithmetic per
+    pair, knots merged and sorted as theirs."""
+    nl = lt.shape[1]
+    size = bt.shape[1] + at.shape[1] + nl + 2 * (nl - 1)
+    knots = np.empty(size)
+    for p in range(lo.shape[0]):
+        k = 0
+        for j in range(bt.shape[1]):
+            knots[k] = bt[p, j]
+            k += 1
+        for j in range(at.shape[1]):
+            knots[k] = at[p, j]
+            k += 1
+        for j in range(nl):
+            knots[k] = lt[p, j]
+            k += 1
+        for root in range(2):  # crossing_knots: each segment's roots of x(t) = level inside it (else its start)
+            for j in range(nl - 1):
+                t0, span = lt[p, j], lt[p, j + 1] - lt[p, j]
+                y0, v0, a = lx[p, j] - level, lv[p, j], lacc[p, j]
+                disc = v0 * v0 - 2.0 * a * y0
+                rt = np.sqrt(_max(disc, 0.0))
+                if a != 0.0 and disc >= 0.0:
+                    r = ((-v0 - rt) if root == 0 else (-v0 + rt)) / a
+                elif root == 0 and a == 0.0 and v0 != 0.0:
+                    r = -y0 / v0
+                else:
+                    r = -1.0
+                knots[k] = t0 + r if (r > 0.0 and r < span) else t0
+                k += 1
+        knots.sort()
+        low, high = _INF, -_INF
+        xa, va = _at(at, ax, av, aacc, p, knots[0])
+        xb, vb = _at(bt, bx, bv, bacc, p, knots[0])
+        d0, dv0 = xa - xb, va - vb
+        for j in range(size - 1):
+            xa, va = _at(at, ax, av, aacc, p, knots[j + 1])
+            xb, vb = _at(bt, bx, bv, bacc, p, knots[j + 1])
+            d1, dv1 = xa - xb, va - vb
+            mid = 0.5 * (knots[j] + knots[j + 1])
+            if _at(lt, lx, lv, lacc, p, mid)[0] > level:
+                span = knots[j + 1] - knots[j]
+                ra = (dv1 - dv0) / span if span > 0.0 else 0.0
+                tau = -dv0 / ra if ra != 0.0 else -1.0
+                inside = tau > 0.0 and tau < span
+                vertex = d0 + dv0 * tau + 0.5 * ra * tau * tau
+                low = _min(low, _min(_min(d0, d1), vertex if (inside and ra > 0.0) else _INF))
+                high = _max(high, _max(_max(d0, d1), vertex if (inside and ra < 0.0) else -_INF))
+            d0, dv0 = d1, dv1
+        lo[p], hi[p] = low, high
+
+
+def _general(ego_lon, ahead, ego_lat, level: float):
+    """:func:`general_kernel` on three :class:`~.kinematics.Motion` of one row per pair: ``(min, max)``."""
+    f = lambda a: np.ascontiguousarray(a, dtype=np.float64)  # noqa: E731
+    lo, hi = np.empty(len(ego_lon.t)), np.empty(len(ego_lon.t))
+    motions = [f(getattr(m, name)) for m in (ego_lon, ahead, ego_lat) for name in ("t", "x", "v", "acc")]
+    general_kernel(*motions, level, lo, hi)
+    return lo, hi
+
+
 def ego_checks(b, prm: Params, s, lon, lat, others, conflict_level: float, overlap_level: float, plan=None):
     """:func:`~.checks.ego_checks` through :func:`ego_kernel`, the general pairs through NumPy's exact path."""
     dt = prm.dt
@@ -233,9 +313,7 @@ def ego_checks(b, prm: Params, s, lon, lat, others, conflict_level: float, overl
             for pg, m_lon, m_lat, index in groups:
                 if pg.size:
                     idx = r[pg] if index is None else index[r[pg]]
-                    ego_lon, ego_lat = _rows(m_lon, idx), _rows(m_lat, idx)
-                    knots = crossing_knots(ego_lat, level)
-                    lo[pg], hi[pg] = windowed_gap_extrema(ego_lon, others.motion(r[pg], c[pg]), ego_lat, knots, level)
+                    lo[pg], hi[pg] = _general(_rows(m_lon, idx), others.motion(r[pg], c[pg]), _rows(m_lat, idx), level)
         length = prm.vehicle_length
         collided[r[(o_min < length) & (o_max > -length)]] = True
         violated[r[(c_min < prm.p_m - 1e-9) & (c_max > -prm.p_m + 1e-9)]] = True
