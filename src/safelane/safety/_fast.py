@@ -157,9 +157,9 @@ def _leader_search(T, gap0, d0, p, v, p1, v1, a1, margin, a_a, a_d, s, s_a, l1_s
 
 
 @numba.njit(error_model="numpy", nogil=True)
-def _follow_min(T, p, v, u, V, t2, match, p1, v1, a1, fp, fv, aggr, fmargin, a_a, a_d, c_ev, l1_stop, tol, early):
+def _follow_min(T, p, v, u, V, t2, match, p1, v1, a1, fp, fv, aggr, fmargin, a_a, a_d, s, l1_stop, tol, early):
     """The follower gap of Eq. 9: its minimum over the seven candidates clipped to ``[0, T]``; ``early`` stops once
-    it is below ``-tol`` (the minimum only falls: the verdict is known)."""
+    it is below ``-tol`` (the minimum only falls: the verdict is known). ``s`` is ``a_a + a_d``."""
     f_stop = _stop_time(fv, a_d)
     fgap = _follow_gap(0.0 * T, p, v, u, V, t2, match, p1, v1, a1, fp, fv, aggr, fmargin, a_a, a_d, l1_stop, f_stop)
     if T != 0.0:
@@ -172,7 +172,7 @@ def _follow_min(T, p, v, u, V, t2, match, p1, v1, a1, fp, fv, aggr, fmargin, a_a
             elif j == 2:
                 cand = f_stop
             elif j == 3:
-                cand = (fv - v) / c_ev
+                cand = (fv - v) / s
             elif j == 4:
                 cand = (fv - v1) / m1 if m1 != 0.0 else 0.0
             else:
@@ -219,7 +219,6 @@ def exists_kernel(
     want_gaps = gaps.shape[1] == n and n > 0
     s = a_a + a_d
     s_a = s * a_a
-    c_ev = a_a + a_d
     for i in range(n):
         T = _lateral_time(ego_py[i], ego_vy[i], a_y, y_safe, lat_tol)
         if T <= 0.0 and not want_gaps:
@@ -259,7 +258,7 @@ def exists_kernel(
             follow_margin[i],
             a_a,
             a_d,
-            c_ev,
+            s,
             l1_stop,
             tol,
             not want_gaps,

@@ -19,7 +19,7 @@ from numba import types
 from ..params import Params
 from ..safety._backend import ARRAY, FEASIBILITY_TOL_M
 from ..safety._fast_base import _B, _F, _max
-from ..safety._fast_plan import _plan_parts
+from ..safety._fast_plan import BOOL_PARTS, FLOAT_PARTS, _plan_parts
 from ..safety._fast_responsible import _advance, _pair_min_gap
 from ..safety.lateral import LATERAL_TOL_M
 from ..safety.plan import plan_from_core
@@ -70,8 +70,6 @@ def candidate_kernel(
 def check_candidate(ego_x, ego_y, ego_vx, ego_vy, a_x, a_y, l1_x, l1_v, l1_decel, f_x, f_v, f_aggressive,
                     prm: Params, completion) -> Verdict:  # fmt: skip
     """:func:`~.decide.check_candidate` without an own-lane leader, through :func:`candidate_kernel`."""
-    from ..safety._fast_plan import BOOL_PARTS, FLOAT_PARTS
-
     args = [np.asarray(a, dtype=np.float64) for a in (ego_x, ego_y, ego_vx, ego_vy, a_x, a_y, l1_x, l1_v, l1_decel,
                                                       f_x, f_v)]  # fmt: skip
     n = max(a.size for a in args)
