@@ -32,6 +32,29 @@ _SIGNATURE = types.void(
 )
 
 
+@numba.njit(error_model="numpy", nogil=True)
+def _candidate(x, y, vx, vy, ax, ay, x1, v1, d1, xf, vf, aggr, a_a, a_d, a_ym, y_safe, p_m, dt, level, lat_tol, tol):
+    """One row of :func:`candidate_kernel`: ``(state, period_ok, completing, parts, bits)`` — the predicted states
+    (:data:`STATES`), the period's verdict, whether the step completes, and the plan from the predicted state
+    (``_fast_plan.FLOAT_PARTS``, ``_fast_plan.BOOL_PARTS``)."""
+    ex, evx = _advance(x, vx, ax, dt)
+    ey = y + vy * dt + 0.5 * ay * dt * dt
+    evy = vy + ay * dt
+    lx, lv = _advance(x1, v1, -d1, dt)
+    a_f = a_a if aggr else -a_d
+    fx, fv = _advance(xf, vf, a_f, dt)
+    # free_max(ego_y, ego_vy, a_y, dt): the largest lateral position over the period
+    tau = -vy / ay if ay < 0.0 else -1.0
+    vertex = y + 0.5 * vy * tau if (tau > 0.0 and tau < dt) else -np.inf
+    conflict = _max(_max(y, ey), vertex) > y_safe + lat_tol
+    gap_l = _pair_min_gap(x1 - x - p_m, vx, ax, v1, -d1, dt)
+    gap_f = _pair_min_gap(x - xf - p_m, vf, a_f, vx, ax, dt)
+    period_ok = (not conflict) or (gap_l >= -tol and gap_f >= -tol)
+    parts, bits = _plan_parts(ey, evy, ex, evx, lx, lv, d1, fx, fv, aggr, p_m, p_m, a_a, a_d, a_ym, y_safe, lat_tol,
+                              tol)  # fmt: skip
+    return (ex, ey, evx, evy, lx, lv, fx, fv), period_ok, ey >= level, parts, bits
+
+
 @numba.njit(_SIGNATURE, cache=True, nogil=True, error_model="numpy")
 def candidate_kernel(
     ego_x, ego_y, ego_vx, ego_vy, a_x, a_y, l1_x, l1_v, l1_decel, f_x, f_v, f_aggr, a_a, a_d, a_ym, y_safe, p_m, dt,
@@ -40,25 +63,12 @@ def candidate_kernel(
     """Per row: ``floats`` ``(18, n)`` — :data:`STATES`, then ``_fast_plan.FLOAT_PARTS``; ``flags`` ``(7, n)`` —
     ``period_ok``, ``completing``, then ``_fast_plan.BOOL_PARTS``."""
     for i in range(floats.shape[1]):
-        x, y, vx, vy, ax, ay = ego_x[i], ego_y[i], ego_vx[i], ego_vy[i], a_x[i], a_y[i]
-        x1, v1, d1, xf, vf, aggr = l1_x[i], l1_v[i], l1_decel[i], f_x[i], f_v[i], f_aggr[i]
-        ex, evx = _advance(x, vx, ax, dt)
-        ey = y + vy * dt + 0.5 * ay * dt * dt
-        evy = vy + ay * dt
-        lx, lv = _advance(x1, v1, -d1, dt)
-        a_f = a_a if aggr else -a_d
-        fx, fv = _advance(xf, vf, a_f, dt)
-        # free_max(ego_y, ego_vy, a_y, dt): the largest lateral position over the period
-        tau = -vy / ay if ay < 0.0 else -1.0
-        vertex = y + 0.5 * vy * tau if (tau > 0.0 and tau < dt) else -np.inf
-        conflict = _max(_max(y, ey), vertex) > y_safe + lat_tol
-        gap_l = _pair_min_gap(x1 - x - p_m, vx, ax, v1, -d1, dt)
-        gap_f = _pair_min_gap(x - xf - p_m, vf, a_f, vx, ax, dt)
-        flags[0, i] = (not conflict) or (gap_l >= -tol and gap_f >= -tol)
-        flags[1, i] = ey >= level
-        parts, bits = _plan_parts(ey, evy, ex, evx, lx, lv, d1, fx, fv, aggr, p_m, p_m, a_a, a_d, a_ym, y_safe,
-                                  lat_tol, tol)  # fmt: skip
-        state = (ex, ey, evx, evy, lx, lv, fx, fv)
+        state, period_ok, completing, parts, bits = _candidate(
+            ego_x[i], ego_y[i], ego_vx[i], ego_vy[i], a_x[i], a_y[i], l1_x[i], l1_v[i], l1_decel[i], f_x[i], f_v[i],
+            f_aggr[i], a_a, a_d, a_ym, y_safe, p_m, dt, level, lat_tol, tol,
+        )  # fmt: skip
+        flags[0, i] = period_ok
+        flags[1, i] = completing
         for j in range(8):
             floats[j, i] = state[j]
         for j in range(10):

@@ -23,6 +23,27 @@ _SIGNATURE = types.void(
 )  # fmt: skip
 
 
+@numba.njit(error_model="numpy", nogil=True)
+def _breach_row(chain_x, chain_v, bounds, now_x, n_connected, plan_l1_decel, f_x, f_v, f_limit, active, now_f_x,
+                same_chain, dt, tol):  # fmt: skip
+    """One scenario of :func:`breach_kernel` (its chain as ``(M,)`` arrays): the four flags."""
+    l1 = leader = last = False
+    if same_chain:
+        for i in range(chain_x.shape[0]):
+            p, v, d = chain_x[i], chain_v[i], bounds[i]
+            behind = now_x[i] < _braked(p, v, d, dt, _stop_time(v, d)) - tol
+            if i < n_connected:
+                leader = leader or behind
+            elif i == n_connected:
+                last = last or behind
+        p, v, d = chain_x[0], chain_v[0], plan_l1_decel
+        l1 = active and now_x[0] < _braked(p, v, d, dt, _stop_time(v, d)) - tol
+    limit = f_limit
+    highest, _ = _advance(f_x, f_v, 0.0 if limit == np.inf or limit == -np.inf else limit, dt)
+    follower = (limit == limit and limit != np.inf and limit != -np.inf) and now_f_x > highest + tol
+    return l1, leader, last, follower
+
+
 @numba.njit(_SIGNATURE, cache=True, nogil=True, error_model="numpy")
 def breach_kernel(
     chain_x, chain_v, bounds, now_x, n_connected, plan_l1_decel, f_x, f_v, f_limit, active, now_f_x, same_chain, dt,
@@ -31,25 +52,12 @@ def breach_kernel(
     """Write the period's breach flags (``(B, 4)`` of the first four :data:`~.monitor.BREACH_KINDS`) into ``flags``:
     ``chain_x``/``chain_v``/``bounds`` the snapshot's chain, ``now_x`` the chain now (read only where
     ``same_chain``: the chain kept its length)."""
-    bsz, m = chain_x.shape
-    for b in range(bsz):
-        l1 = leader = last = False
-        if same_chain:
-            for i in range(m):
-                p, v, d = chain_x[b, i], chain_v[b, i], bounds[b, i]
-                behind = now_x[b, i] < _braked(p, v, d, dt, _stop_time(v, d)) - tol
-                if i < n_connected[b]:
-                    leader = leader or behind
-                elif i == n_connected[b]:
-                    last = last or behind
-            p, v, d = chain_x[b, 0], chain_v[b, 0], plan_l1_decel[b]
-            l1 = active[b] and now_x[b, 0] < _braked(p, v, d, dt, _stop_time(v, d)) - tol
-        limit = f_limit[b]
-        highest, _ = _advance(f_x[b], f_v[b], 0.0 if limit == np.inf or limit == -np.inf else limit, dt)
-        flags[b, 0] = l1
-        flags[b, 1] = leader
-        flags[b, 2] = last
-        flags[b, 3] = (limit == limit and limit != np.inf and limit != -np.inf) and now_f_x[b] > highest + tol
+    for b in range(chain_x.shape[0]):
+        now = now_x[b] if same_chain else now_x[0]
+        flags[b, 0], flags[b, 1], flags[b, 2], flags[b, 3] = _breach_row(
+            chain_x[b], chain_v[b], bounds[b], now, n_connected[b], plan_l1_decel[b], f_x[b], f_v[b], f_limit[b],
+            active[b], now_f_x[b], same_chain, dt, tol,
+        )  # fmt: skip
 
 
 def observe_breaches(prev: Breach, last, situation, prm, t_now: float) -> Breach:

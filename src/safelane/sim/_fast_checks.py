@@ -143,6 +143,55 @@ def _stop_pair(x1, v1, a1, t1, x2, v2, a2, t2, dt):  # checks.stop_pair_extrema:
     return lo, hi
 
 
+@numba.njit(error_model="numpy", nogil=True)
+def _ego_row(
+    valid, sx, sv, ego_x, ego_vx, x0, v0, acc0, t1, x_end, y0, vy0, ay0, y_end, on_plan, plan_y_max, plan_x_end,
+    plan_y_end, ox, ov, oacc, ots, ox_end, row_acc, dt, p_m, a_lim, conflict, overlap, length, max_level, gap_f,
+    gap_l1, general,
+):  # fmt: skip
+    """One scenario of :func:`ego_kernel` (its target-lane vehicles as ``(K,)`` arrays): ``(collided, violated,
+    gap_f, gap_l1)`` with the running minimum gaps updated; ``general[c]`` marks the pairs left to the general
+    path."""
+    if on_plan:
+        y_max, xe, ye = plan_y_max, plan_x_end, plan_y_end
+    else:
+        y_max, xe, ye = _free_max(y0, vy0, ay0, dt), x_end, y_end
+    settled = (not on_plan) and -_free_max(-y0, -vy0, -ay0, dt) > max_level
+    threshold = p_m + 0.5 * (a_lim + row_acc) * dt * dt + 1e-6
+    in_zone = y_max > conflict
+    hit, close = False, False
+    for c in range(sx.shape[0]):
+        d0 = sx[c] - ego_x
+        near = valid[c] and (abs(d0) - abs(sv[c] - ego_vx) * dt < threshold) and in_zone
+        if not near:
+            if c < 2 and valid[c]:  # checks._far_gaps: sampled at the period's ends in the conflict zone
+                sign = -1.0 if c == 0 else 1.0
+                g0 = sign * d0 if y0 > conflict else _INF
+                g1 = sign * (ox_end[c] - xe) if ye > conflict else _INF
+                if c == 0:
+                    gap_f = _min(gap_f, _min(g0, g1))
+                else:
+                    gap_l1 = _min(gap_l1, _min(g0, g1))
+            continue
+        if (not on_plan) and t1 >= dt and ots[c] >= dt:  # one quadratic over the period
+            dd, dv, ra = ox[c] - x0, ov[c] - v0, oacc[c] - acc0
+            c_min, c_max = _quadratic(dd, dv, ra, y0, vy0, ay0, conflict, dt)
+            o_min, o_max = _quadratic(dd, dv, ra, y0, vy0, ay0, overlap, dt)
+        elif settled:  # someone stops inside the period, the ego beyond both levels all period
+            c_min, c_max = _stop_pair(x0, v0, acc0, t1, ox[c], ov[c], oacc[c], ots[c], dt)
+            o_min, o_max = c_min, c_max
+        else:
+            general[c] = True
+            continue
+        hit = hit or (o_min < length and o_max > -length)
+        close = close or (c_min < p_m - 1e-9 and c_max > -p_m + 1e-9)
+        if c == 0:
+            gap_f = _min(gap_f, -c_max)
+        elif c == 1:
+            gap_l1 = _min(gap_l1, c_min)
+    return hit, close, gap_f, gap_l1
+
+
 @numba.njit(_SIGNATURE, cache=True, nogil=True, error_model="numpy")
 def ego_kernel(
     valid, sx, sv, ego_x, ego_vx, x0, v0, acc0, t1, x_end, y0, vy0, ay0, y_end, planned, plan_y_max, plan_x_end,
@@ -152,49 +201,13 @@ def ego_kernel(
     """Per scenario ``b``: ``collided[b]``, ``violated[b]``, the running ``min_gap_f[b]``/``min_gap_l1[b]`` (updated
     in place) over the far pairs and the near pairs of the two common kinds; ``general[b, c]`` marks the near pairs
     left to the exact general path."""
-    bsz, k = sx.shape
-    for b in range(bsz):
-        on_plan = planned[b]
-        if on_plan:
-            y_max, xe, ye = plan_y_max[b], plan_x_end[b], plan_y_end[b]
-        else:
-            y_max, xe, ye = _free_max(y0[b], vy0[b], ay0[b], dt), x_end[b], y_end[b]
-        settled = (not on_plan) and -_free_max(-y0[b], -vy0[b], -ay0[b], dt) > max_level
-        threshold = p_m + 0.5 * (a_lim + row_acc[b]) * dt * dt + 1e-6
-        in_zone = y_max > conflict
-        hit, close = False, False
-        gap_f, gap_l1 = min_gap_f[b], min_gap_l1[b]
-        for c in range(k):
-            d0 = sx[b, c] - ego_x[b]
-            near = valid[b, c] and (abs(d0) - abs(sv[b, c] - ego_vx[b]) * dt < threshold) and in_zone
-            if not near:
-                if c < 2 and valid[b, c]:  # checks._far_gaps: sampled at the period's ends in the conflict zone
-                    sign = -1.0 if c == 0 else 1.0
-                    g0 = sign * d0 if y0[b] > conflict else _INF
-                    g1 = sign * (ox_end[b, c] - xe) if ye > conflict else _INF
-                    if c == 0:
-                        gap_f = _min(gap_f, _min(g0, g1))
-                    else:
-                        gap_l1 = _min(gap_l1, _min(g0, g1))
-                continue
-            if (not on_plan) and t1[b] >= dt and ots[b, c] >= dt:  # one quadratic over the period
-                dd, dv, ra = ox[b, c] - x0[b], ov[b, c] - v0[b], oacc[b, c] - acc0[b]
-                c_min, c_max = _quadratic(dd, dv, ra, y0[b], vy0[b], ay0[b], conflict, dt)
-                o_min, o_max = _quadratic(dd, dv, ra, y0[b], vy0[b], ay0[b], overlap, dt)
-            elif settled:  # someone stops inside the period, the ego beyond both levels all period
-                c_min, c_max = _stop_pair(x0[b], v0[b], acc0[b], t1[b], ox[b, c], ov[b, c], oacc[b, c], ots[b, c], dt)
-                o_min, o_max = c_min, c_max
-            else:
-                general[b, c] = True
-                continue
-            hit = hit or (o_min < length and o_max > -length)
-            close = close or (c_min < p_m - 1e-9 and c_max > -p_m + 1e-9)
-            if c == 0:
-                gap_f = _min(gap_f, -c_max)
-            elif c == 1:
-                gap_l1 = _min(gap_l1, c_min)
-        collided[b], violated[b] = hit, close
-        min_gap_f[b], min_gap_l1[b] = gap_f, gap_l1
+    for b in range(sx.shape[0]):
+        collided[b], violated[b], min_gap_f[b], min_gap_l1[b] = _ego_row(
+            valid[b], sx[b], sv[b], ego_x[b], ego_vx[b], x0[b], v0[b], acc0[b], t1[b], x_end[b], y0[b], vy0[b],
+            ay0[b], y_end[b], planned[b], plan_y_max[b], plan_x_end[b], plan_y_end[b], ox[b], ov[b], oacc[b], ots[b],
+            ox_end[b], row_acc[b], dt, p_m, a_lim, conflict, overlap, length, max_level, min_gap_f[b], min_gap_l1[b],
+            general[b],
+        )  # fmt: skip
 
 
 _K = types.Array(types.float64, 2, "A", readonly=True)
@@ -202,14 +215,66 @@ _GENERAL_SIGNATURE = types.void(*(_K,) * 12, types.float64, _OUT_V, _OUT_V)
 
 
 @numba.njit(inline="always")
-def _at(t, x, v, acc, p, tq):  # kinematics.Motion.at for row p at time tq: (x, v)
+def _at(t, x, v, acc, tq):  # kinematics.Motion.at for one motion (knots t, x, v; segment accelerations) at tq: (x, v)
     seg = 0
-    for j in range(1, t.shape[1] - 1):
-        if t[p, j] <= tq:
+    for j in range(1, t.shape[0] - 1):
+        if t[j] <= tq:
             seg += 1
-    tau = tq - t[p, seg]
-    a = acc[p, seg]
-    return x[p, seg] + v[p, seg] * tau + 0.5 * a * tau * tau, v[p, seg] + a * tau
+    tau = tq - t[seg]
+    a = acc[seg]
+    return x[seg] + v[seg] * tau + 0.5 * a * tau * tau, v[seg] + a * tau
+
+
+@numba.njit(error_model="numpy", nogil=True)
+def _general_pair(bt, bx, bv, bacc, at, ax, av, aacc, lt, lx, lv, lacc, level, knots):
+    """One pair of :func:`general_kernel` (1-D motions; ``knots`` scratch of the merged size): ``(min, max)``."""
+    nl = lt.shape[0]
+    size = bt.shape[0] + at.shape[0] + nl + 2 * (nl - 1)
+    k = 0
+    for j in range(bt.shape[0]):
+        knots[k] = bt[j]
+        k += 1
+    for j in range(at.shape[0]):
+        knots[k] = at[j]
+        k += 1
+    for j in range(nl):
+        knots[k] = lt[j]
+        k += 1
+    for root in range(2):  # crossing_knots: each segment's roots of x(t) = level inside it (else its start)
+        for j in range(nl - 1):
+            t0, span = lt[j], lt[j + 1] - lt[j]
+            y0, v0, a = lx[j] - level, lv[j], lacc[j]
+            disc = v0 * v0 - 2.0 * a * y0
+            rt = np.sqrt(_max(disc, 0.0))
+            if a != 0.0 and disc >= 0.0:
+                r = ((-v0 - rt) if root == 0 else (-v0 + rt)) / a
+            elif root == 0 and a == 0.0 and v0 != 0.0:
+                r = -y0 / v0
+            else:
+                r = -1.0
+            knots[k] = t0 + r if (r > 0.0 and r < span) else t0
+            k += 1
+    merged = knots[:size]
+    merged.sort()
+    low, high = _INF, -_INF
+    xa, va = _at(at, ax, av, aacc, merged[0])
+    xb, vb = _at(bt, bx, bv, bacc, merged[0])
+    d0, dv0 = xa - xb, va - vb
+    for j in range(size - 1):
+        xa, va = _at(at, ax, av, aacc, merged[j + 1])
+        xb, vb = _at(bt, bx, bv, bacc, merged[j + 1])
+        d1, dv1 = xa - xb, va - vb
+        mid = 0.5 * (merged[j] + merged[j + 1])
+        if _at(lt, lx, lv, lacc, mid)[0] > level:
+            span = merged[j + 1] - merged[j]
+            ra = (dv1 - dv0) / span if span > 0.0 else 0.0
+            tau = -dv0 / ra if ra != 0.0 else -1.0
+            inside = tau > 0.0 and tau < span
+            vertex = d0 + dv0 * tau + 0.5 * ra * tau * tau
+            low = _min(low, _min(_min(d0, d1), vertex if (inside and ra > 0.0) else _INF))
+            high = _max(high, _max(_max(d0, d1), vertex if (inside and ra < 0.0) else -_INF))
+        d0, dv0 = d1, dv1
+    return low, high
 
 
 @numba.njit(_GENERAL_SIGNATURE, cache=True, nogil=True, error_model="numpy")
@@ -219,53 +284,10 @@ def general_kernel(bt, bx, bv, bacc, at, ax, av, aacc, lt, lx, lv, lacc, level, 
     is above ``level``, its window from :func:`~.kinematics.crossing_knots` — the NumPy functions' arithmetic per
     pair, knots merged and sorted as theirs."""
     nl = lt.shape[1]
-    size = bt.shape[1] + at.shape[1] + nl + 2 * (nl - 1)
-    knots = np.empty(size)
+    knots = np.empty(bt.shape[1] + at.shape[1] + nl + 2 * (nl - 1))
     for p in range(lo.shape[0]):
-        k = 0
-        for j in range(bt.shape[1]):
-            knots[k] = bt[p, j]
-            k += 1
-        for j in range(at.shape[1]):
-            knots[k] = at[p, j]
-            k += 1
-        for j in range(nl):
-            knots[k] = lt[p, j]
-            k += 1
-        for root in range(2):  # crossing_knots: each segment's roots of x(t) = level inside it (else its start)
-            for j in range(nl - 1):
-                t0, span = lt[p, j], lt[p, j + 1] - lt[p, j]
-                y0, v0, a = lx[p, j] - level, lv[p, j], lacc[p, j]
-                disc = v0 * v0 - 2.0 * a * y0
-                rt = np.sqrt(_max(disc, 0.0))
-                if a != 0.0 and disc >= 0.0:
-                    r = ((-v0 - rt) if root == 0 else (-v0 + rt)) / a
-                elif root == 0 and a == 0.0 and v0 != 0.0:
-                    r = -y0 / v0
-                else:
-                    r = -1.0
-                knots[k] = t0 + r if (r > 0.0 and r < span) else t0
-                k += 1
-        knots.sort()
-        low, high = _INF, -_INF
-        xa, va = _at(at, ax, av, aacc, p, knots[0])
-        xb, vb = _at(bt, bx, bv, bacc, p, knots[0])
-        d0, dv0 = xa - xb, va - vb
-        for j in range(size - 1):
-            xa, va = _at(at, ax, av, aacc, p, knots[j + 1])
-            xb, vb = _at(bt, bx, bv, bacc, p, knots[j + 1])
-            d1, dv1 = xa - xb, va - vb
-            mid = 0.5 * (knots[j] + knots[j + 1])
-            if _at(lt, lx, lv, lacc, p, mid)[0] > level:
-                span = knots[j + 1] - knots[j]
-                ra = (dv1 - dv0) / span if span > 0.0 else 0.0
-                tau = -dv0 / ra if ra != 0.0 else -1.0
-                inside = tau > 0.0 and tau < span
-                vertex = d0 + dv0 * tau + 0.5 * ra * tau * tau
-                low = _min(low, _min(_min(d0, d1), vertex if (inside and ra > 0.0) else _INF))
-                high = _max(high, _max(_max(d0, d1), vertex if (inside and ra < 0.0) else -_INF))
-            d0, dv0 = d1, dv1
-        lo[p], hi[p] = low, high
+        lo[p], hi[p] = _general_pair(bt[p], bx[p], bv[p], bacc[p], at[p], ax[p], av[p], aacc[p], lt[p], lx[p], lv[p],
+                                     lacc[p], level, knots)  # fmt: skip
 
 
 def _general(ego_lon, ahead, ego_lat, level: float):
@@ -326,38 +348,44 @@ def ego_checks(b, prm: Params, s, lon, lat, others, conflict_level: float, overl
 _LANE_SIGNATURE = types.void(_MB, _M, _M, _M, _M, _M, _M, _M, _V, types.float64, types.float64, _OUT_B, _OUT_B, _OUT_V)
 
 
+@numba.njit(error_model="numpy", nogil=True)
+def _lane_row(valid, margin, x, v, acc, t_stop, x_end, v_end, row_acc, dt, length):
+    """One scenario of :func:`lane_kernel` (``(K-1,)`` pairs, ``(K,)`` vehicles): ``(collided, violated,
+    min_ratio)``."""
+    slack = row_acc * dt * dt + 1e-6
+    ratio = _INF
+    hit, close = False, False
+    for c in range(x.shape[0] - 1):
+        if not valid[c]:
+            continue
+        m = margin[c]
+        gap0 = x[c + 1] - x[c]
+        near = gap0 - abs(v[c + 1] - v[c]) * dt < m + slack
+        if near and gap0 >= m:  # both at rest all period keep their gap: no exact check needed
+            rest0 = v_end[c] == 0.0 and v[c] == 0.0 and x_end[c] == x[c]
+            rest1 = v_end[c + 1] == 0.0 and v[c + 1] == 0.0 and x_end[c + 1] == x[c + 1]
+            near = not (rest0 and rest1)
+        if not near:
+            ratio = _min(ratio, _min(gap0, x_end[c + 1] - x_end[c]) / m)
+            continue
+        if t_stop[c] >= dt and t_stop[c + 1] >= dt:
+            low = _quadratic_extrema(gap0, v[c + 1] - v[c], acc[c + 1] - acc[c], dt)[0]
+        else:
+            low = _stop_pair(x[c], v[c], acc[c], t_stop[c], x[c + 1], v[c + 1], acc[c + 1], t_stop[c + 1], dt)[0]
+        hit = hit or low < length
+        close = close or low < m - 1e-9
+        ratio = _min(ratio, low / m)
+    return hit, close, ratio
+
+
 @numba.njit(_LANE_SIGNATURE, cache=True, nogil=True, error_model="numpy")
 def lane_kernel(valid, margin, x, v, acc, t_stop, x_end, v_end, row_acc, dt, length, collided, violated, min_ratio):
     """:func:`~.checks.lane_checks` per scenario and consecutive pair (``valid``/``margin`` ``(B, K-1)``): the
     near-pair filter, the sampled ratios of the far pairs, the exact minimum of the near ones (one quadratic, or
     ``stop_pair_extrema`` where one of the two stops inside the period)."""
-    bsz, k = x.shape
-    for b in range(bsz):
-        slack = row_acc[b] * dt * dt + 1e-6
-        ratio = _INF
-        hit, close = False, False
-        for c in range(k - 1):
-            if not valid[b, c]:
-                continue
-            m = margin[b, c]
-            gap0 = x[b, c + 1] - x[b, c]
-            near = gap0 - abs(v[b, c + 1] - v[b, c]) * dt < m + slack
-            if near and gap0 >= m:  # both at rest all period keep their gap: no exact check needed
-                rest0 = v_end[b, c] == 0.0 and v[b, c] == 0.0 and x_end[b, c] == x[b, c]
-                rest1 = v_end[b, c + 1] == 0.0 and v[b, c + 1] == 0.0 and x_end[b, c + 1] == x[b, c + 1]
-                near = not (rest0 and rest1)
-            if not near:
-                ratio = _min(ratio, _min(gap0, x_end[b, c + 1] - x_end[b, c]) / m)
-                continue
-            if t_stop[b, c] >= dt and t_stop[b, c + 1] >= dt:
-                low = _quadratic_extrema(gap0, v[b, c + 1] - v[b, c], acc[b, c + 1] - acc[b, c], dt)[0]
-            else:
-                low = _stop_pair(x[b, c], v[b, c], acc[b, c], t_stop[b, c], x[b, c + 1], v[b, c + 1], acc[b, c + 1],
-                                 t_stop[b, c + 1], dt)[0]  # fmt: skip
-            hit = hit or low < length
-            close = close or low < m - 1e-9
-            ratio = _min(ratio, low / m)
-        collided[b], violated[b], min_ratio[b] = hit, close, ratio
+    for b in range(x.shape[0]):
+        collided[b], violated[b], min_ratio[b] = _lane_row(valid[b], margin[b], x[b], v[b], acc[b], t_stop[b],
+                                                           x_end[b], v_end[b], row_acc[b], dt, length)  # fmt: skip
 
 
 def lane_checks(prm: Params, others, pairs):

@@ -32,6 +32,25 @@ _SIGNATURE = types.void(
 )  # fmt: skip
 
 
+@numba.njit(error_model="numpy", nogil=True)
+def _leader_accel(slack, v_f, v_l, d, own, task, violating, pick, decel_last, a_x_d, dt, eps, tol, half):
+    """One connected leader's acceleration (:func:`leader_kernel`'s element): ``slack`` to the vehicle ahead, its
+    bound ``d`` and the leader's own bound ``own``."""
+    want = _min(task, _responsible_bound(slack, v_f, v_l, d, own, dt) - eps)
+    # The closed form is exact where the own bound is at least the one ahead: else confirm it — unless the answer is
+    # -own either way (want < -own: the maximum below is -own whatever the check says).
+    ok = True
+    if own < d and not want < -own:
+        ok = _responsible_ok(want, slack, v_f, v_l, d, own, dt, tol, half, tol)
+    a_conn = _max(want if ok else -own, -own)
+    if violating:
+        z = _min(_min_follow_decel(slack, v_f, v_l, d, half, tol), a_x_d)
+        lo = _min(z, decel_last)
+        hi = _max(z, decel_last)
+        a_conn = -(lo + pick * (hi - lo))
+    return a_conn
+
+
 @numba.njit(_SIGNATURE, cache=True, nogil=True, error_model="numpy")
 def leader_kernel(
     x, v, margin, is_last, acts, bounds, task, a_last, decel_last, any_violation, violating, pick, a_x_d, dt, eps,
@@ -44,24 +63,11 @@ def leader_kernel(
         for b in range(bsz):
             if not acts[b, i]:
                 continue
-            slack = x[b, i + 1] - x[b, i] - margin[b, i]
-            v_f = v[b, i]
-            v_l = v[b, i + 1]
-            d = bounds[b, i + 1]
-            own = bounds[b, i]
-            want = _min(task[b, i], _responsible_bound(slack, v_f, v_l, d, own, dt) - eps)
-            # The closed form is exact where the own bound is at least the one ahead: else confirm it — unless the
-            # answer is -own either way (want < -own: the maximum below is -own whatever the check says).
-            ok = True
-            if own < d and not want < -own:
-                ok = _responsible_ok(want, slack, v_f, v_l, d, own, dt, tol, half, tol)
-            a_conn = _max(want if ok else -own, -own)
-            if any_violation and violating[b, i]:
-                z = _min(_min_follow_decel(slack, v_f, v_l, d, half, tol), a_x_d)
-                lo = _min(z, decel_last[b])
-                hi = _max(z, decel_last[b])
-                a_conn = -(lo + pick[b, i] * (hi - lo))
-            acc[b, i] = a_conn
+            breaks = any_violation and violating[b, i]
+            acc[b, i] = _leader_accel(
+                x[b, i + 1] - x[b, i] - margin[b, i], v[b, i], v[b, i + 1], bounds[b, i + 1], bounds[b, i],
+                task[b, i], breaks, pick[b, i] if breaks else 0.0, decel_last[b], a_x_d, dt, eps, tol, half,
+            )  # fmt: skip
     for i in range(k):
         for b in range(bsz):
             if is_last[b, i]:
@@ -102,6 +108,26 @@ def _responsible_accel(a_wanted, slack, v_f, v_l, lead_decel, a_x_d, dt, eps):  
     return a_wanted if bound > a_wanted else _max(bound - eps, -a_x_d)
 
 
+@numba.njit(error_model="numpy", nogil=True)
+def _follower_accel(fx, fv, lx, lv, ex, evx, aggr, completed, gap0, has_wanted, wanted, ignores_ego, p_m, a_x_a,
+                    a_x_d, open_decel, open_gap_m, dt, eps):  # fmt: skip
+    """F's acceleration (:func:`follower_kernel`'s element)."""
+    gap_ego = ex - fx
+    gap_l1 = lx - fx
+    if has_wanted:
+        want = wanted
+    elif aggr:
+        want = _min(_max(0.5 * (gap_l1 - p_m - 1.0) + 1.5 * (lv - fv), -a_x_d), a_x_a)
+    elif gap_ego < gap0 + open_gap_m:
+        want = -open_decel
+    else:
+        want = _min(_max(evx - fv, -open_decel), open_decel)
+    a = _responsible_accel(want, gap_l1 - p_m, fv, lv, a_x_d, a_x_d, dt, eps)
+    if gap_ego > 0.0 and ((not aggr) or completed) and not ignores_ego:
+        a = _responsible_accel(a, gap_ego - p_m, fv, evx, a_x_d, a_x_d, dt, eps)
+    return a
+
+
 @numba.njit(_FOLLOWER_SIGNATURE, cache=True, nogil=True, error_model="numpy")
 def follower_kernel(
     f_x, f_v, l1_x, l1_v, ego_x, ego_vx, aggressive, completed, gap0, has_wanted, wanted, ignores_ego, p_m, a_x_a,
@@ -109,22 +135,10 @@ def follower_kernel(
 ):  # fmt: skip
     """:func:`~.behaviours.follower_accel` per scenario into ``out``; ``wanted`` is read only where ``has_wanted``."""
     for i in range(out.shape[0]):
-        fx, fv, lx, lv, ex, evx = f_x[i], f_v[i], l1_x[i], l1_v[i], ego_x[i], ego_vx[i]
-        aggr = aggressive[i]
-        gap_ego = ex - fx
-        gap_l1 = lx - fx
-        if has_wanted:
-            want = wanted[i]
-        elif aggr:
-            want = _min(_max(0.5 * (gap_l1 - p_m - 1.0) + 1.5 * (lv - fv), -a_x_d), a_x_a)
-        elif gap_ego < gap0[i] + open_gap_m:
-            want = -open_decel
-        else:
-            want = _min(_max(evx - fv, -open_decel), open_decel)
-        a = _responsible_accel(want, gap_l1 - p_m, fv, lv, a_x_d, a_x_d, dt, eps)
-        if gap_ego > 0.0 and ((not aggr) or completed[i]) and not ignores_ego:
-            a = _responsible_accel(a, gap_ego - p_m, fv, evx, a_x_d, a_x_d, dt, eps)
-        out[i] = a
+        out[i] = _follower_accel(
+            f_x[i], f_v[i], l1_x[i], l1_v[i], ego_x[i], ego_vx[i], aggressive[i], completed[i], gap0[i], has_wanted,
+            wanted[i], ignores_ego, p_m, a_x_a, a_x_d, open_decel, open_gap_m, dt, eps,
+        )  # fmt: skip
 
 
 def follower_accel(f_x, f_v, l1_x, l1_v, ego_x, ego_vx, aggressive, completed, gap0, prm: Params, open_decel: float,
@@ -147,24 +161,31 @@ _CHAIN_SIGNATURE = types.void(
 )
 
 
+@numba.njit(error_model="numpy", nogil=True)
+def _chain_row(x, v, promise, margin, a_x_d, half, tol, bounds):
+    """One scenario of :func:`chain_kernel` (``x``, ``v``, ``bounds`` ``(K,)``; ``promise``, ``margin`` ``(N,)``):
+    writes ``bounds``, returns ``unsafe``."""
+    k = x.shape[0]
+    a_ahead = a_x_d
+    broken = False
+    bounds[0] = a_x_d
+    bounds[k - 1] = a_x_d
+    for i in range(k - 3, -1, -1):  # link i: L(i+1) behind L(i+2), slots i+1 and i+2
+        slack = x[i + 2] - x[i + 1] - margin[i]
+        z = _min_follow_decel(slack, v[i + 1], v[i + 2], a_ahead, half, tol)
+        broken = broken | (z > a_x_d)
+        a_ahead = _min(_max(promise[i], z), a_x_d)
+        bounds[i + 1] = a_ahead
+    return broken
+
+
 @numba.njit(_CHAIN_SIGNATURE, cache=True, nogil=True, error_model="numpy")
 def chain_kernel(x, v, promise, margin, a_x_d, half, tol, bounds, unsafe):
     """:meth:`~.step.ClosedLoop.chain` per scenario: the scan of :func:`safelane.safety.chain.propagate_chain` from
     ``L(N+1)`` (``a_x_d``) down to ``L1`` into ``bounds`` (``(B, K)``, F's slot ``a_x_d``) and ``unsafe``.
     ``promise``, ``margin``: ``(N, B)`` rows of the links ``L1..LN``."""
-    bsz, k = x.shape
-    for b in range(bsz):
-        a_ahead = a_x_d
-        broken = False
-        bounds[b, 0] = a_x_d
-        bounds[b, k - 1] = a_x_d
-        for i in range(k - 3, -1, -1):  # link i: L(i+1) behind L(i+2), slots i+1 and i+2
-            slack = x[b, i + 2] - x[b, i + 1] - margin[i, b]
-            z = _min_follow_decel(slack, v[b, i + 1], v[b, i + 2], a_ahead, half, tol)
-            broken = broken | (z > a_x_d)
-            a_ahead = _min(_max(promise[i, b], z), a_x_d)
-            bounds[b, i + 1] = a_ahead
-        unsafe[b] = broken
+    for b in range(x.shape[0]):
+        unsafe[b] = _chain_row(x[b], v[b], promise[:, b], margin[:, b], a_x_d, half, tol, bounds[b])
 
 
 def chain_bounds(x, v, promise, margin, prm: Params):
