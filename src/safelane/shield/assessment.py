@@ -51,9 +51,18 @@ def update(state: AssessmentState, f_speed, t: float, dt: float, threshold: floa
     history = np.concatenate([state.history[:, 1:], f_speed[:, None]], axis=1)
     count = state.count + 1
     times = (np.arange(window) - (window - 1) / 2.0) * dt
-    slope = history @ times / (times @ times)
+    slope = _dot(history, times) / _dot(times[None, :], times)[0]
     full = count >= window
     latched = state.latched | (full & (slope >= threshold))
     aggressive = latched | np.where(full & (slope <= -threshold), False, state.aggressive)
     first = np.where(np.isnan(state.first_collaborative_s) & ~aggressive, t, state.first_collaborative_s)
     return AssessmentState(history, count, aggressive, latched, first)
+
+
+def _dot(rows, weights):
+    """``rows @ weights`` summed left to right in a fixed order: a BLAS product's rounding depends on the build, the
+    CPU and the array's layout, which would make the belief (a threshold on the slope) machine-dependent."""
+    out = rows[:, 0] * weights[0]
+    for j in range(1, len(weights)):
+        out = out + rows[:, j] * weights[j]
+    return out

@@ -1,0 +1,509 @@
+"""Optional compiled closed loop (numba, extra ``fast``): every period of every scenario in one compiled loop.
+
+:func:`loop_kernel` runs a whole batch, scenario by scenario, period by period, with the state held in scalars and
+small per-scenario arrays — no per-period NumPy arrays, no Python between the parts. One period is
+:meth:`~.step.ClosedLoop.step` for the settings it covers (:func:`fused_loop` says which): observe, the expert
+planner, the chain analysis, **the shield** (:func:`safelane.shield.core.step`: the observed assessment, the
+assumption monitor, proceed / hesitate / abort with the commit guard, the held plan, the responsible follow after
+completion), the paper's traffic with the worst-case leader rule, the exact motion and the continuous-time checks.
+It is built from the row functions of the part kernels (``_candidate``, ``_breach_row``, ``_chain_row``,
+``_leader_accel``, ``_follower_accel``, ``_ego_row``, ``_general_pair``, ``_lane_row``), each tested bit for bit
+against its NumPy function, and writes the held plan's evaluation (``decide.plan_motion``, ``EvasionPlan.state``)
+and the glue in the NumPy path's evaluation order: the results table is the NumPy path's, bit for bit
+(``tests/test_fast_loop.py``, several variants, sizes and settings).
+
+Everything else — another planner, traffic model or hook, leader rule, completion rule or assessment, the
+real-world settings (own lane, sensing errors, delay, V2X emulation, sensor noise), promise violations, L(N+1)
+profiles, RSS rows, traces or recorded observations — takes the period-by-period path (:mod:`.step`), whose parts
+are compiled where they have kernels; ``SAFELANE_NO_NUMBA=1`` gives the NumPy path, the reference, and
+``SAFELANE_NO_FUSED=1`` the period-by-period path with its part kernels (what ``benchmarks/bench_core.py`` compares).
+"""
+
+from __future__ import annotations
+
+import os
+from types import SimpleNamespace
+
+import numba
+import numpy as np
+
+from ..params import Params
+from ..planners.base import ExpertPlanner
+from ..planners.variants import VARIANT_NAMES, VARIANTS
+from ..safety._backend import FEASIBILITY_TOL_M
+from ..safety._fast import _ego_position
+from ..safety._fast_base import _braked, _max, _min, _stop_time
+from ..safety._fast_responsible import _min_follow_decel, _responsible_bound
+from ..safety.lateral import LATERAL_TOL_M
+from ..safety.responsible import ROOT_EPS_MPS2
+from ..shield.decide import ABORT, COMPLETED, HESITATE, PROCEED
+from ..shield.monitor import BREACH_KINDS, TOL_M, Breach
+from ..shield._fast_decide import _candidate
+from ..shield._fast_monitor import _breach_row
+from ._fast_checks import _ego_row, _free_max, _general_pair, _lane_row
+from ._fast_traffic import _chain_row, _follower_accel, _leader_accel, _responsible_accel
+
+_INF = np.inf
+#: Scalars of :func:`loop_kernel`'s ``prm`` vector, in order.
+PRM = (
+    "dt", "a_x_a", "a_x_d", "a_y_m", "y_safe", "p_m", "lane_width", "y_boundary", "vehicle_length", "conflict",
+    "overlap", "lat_tol", "tol", "eps", "monitor_tol", "brake_start_s", "assess_threshold", "open_decel",
+    "open_gap_m", "k_p", "k_v", "gap_fraction", "brake_comfort", "omega2", "two_omega",
+)  # fmt: skip
+#: The plan fields the loop holds per scenario (the ones its evaluation needs), in order.
+PLAN = (
+    "ego_px", "ego_py", "ego_vx", "ego_vy", "l1_p", "l1_v", "l1_decel", "t_x1", "v_switch", "t_brake_end",
+    "t_y_f", "t_y_switch", "y_acc_1", "y_acc_2", "t_y_end",
+)  # fmt: skip
+#: Float outputs per scenario.
+OUT_F = ("t_complete", "min_gap_f", "min_gap_l1", "min_lane_ratio", "first_collaborative_s", "breach_first_s")
+#: Bool outputs per scenario.
+OUT_B = ("completed", "collided", "violated", "leader_collided", "leader_violated", "aggressive")
+#: :func:`fused_loop` takes batches from this many scenarios on.
+FUSED_MIN_ROWS = 64
+
+
+@numba.njit(inline="always")
+def _clip(a, lo, hi):  # np.clip
+    return _min(_max(a, lo), hi)
+
+
+@numba.njit(inline="always")
+def _fleet(x, v, a, dt):  # kinematics.Fleet.constant for one vehicle: (acc, t_stop, x_end, v_end)
+    ts = _min(v / -a, dt) if a < 0.0 else dt
+    if ts <= 0.0:
+        a, ts = 0.0, dt
+    xs = x + v * ts + 0.5 * a * ts * ts
+    vs = 0.0 if ts < dt else _max(v + a * ts, 0.0)
+    return a, ts, xs, vs
+
+
+@numba.njit(error_model="numpy", nogil=True)
+def _plan_sample(tq, plan, follows, a_a, a_d):
+    """``EvasionPlan.state`` at ``tq`` of a plan held as :data:`PLAN` values (no own-lane leader): ``(px, py, vx,
+    vy)``."""
+    p, py0, v, vy0, p1, v1, a1, u, V, t2, T, t_1, acc_1, acc_2, t_end = plan
+    tt = _min(tq, T)
+    l1_stop = _stop_time(v1, a1)
+    px = _ego_position(tt, p, v, u, V, t2, follows, p1, v1, a1, a_a, a_d, l1_stop)
+    # longitudinal.ego_speed
+    ta = _min(tt, u)
+    tb = _max(_min(tt, t2) - u, 0.0)
+    own = v + a_a * ta - a_d * tb
+    vx = _max(v1 - a1 * tt, 0.0) if (follows and tt > t2) else _max(own, 0.0)
+    px = px + vx * _max(tq - tt, 0.0)
+    # lateral.lateral_state
+    ta = _min(tq, t_1)
+    y = py0 + vy0 * ta + 0.5 * acc_1 * ta * ta
+    vy = vy0 + acc_1 * ta
+    tb = _max(_min(tq, t_end) - t_1, 0.0)
+    y = y + vy * tb + 0.5 * acc_2 * tb * tb
+    vy = vy + acc_2 * tb
+    return px, y, vx, vy
+
+
+@numba.njit(error_model="numpy", nogil=True)
+def _plan_motion(plan, follows, age, dt, a_a, a_d, kt, kx, kv, ky, kvy, kax, kay):
+    """``decide.plan_motion`` and ``Motion.from_samples`` of one held plan on ``[age, age + dt]``: the 8 knots into
+    ``kt``, the samples into ``kx, kv, ky, kvy``, the segment accelerations into ``kax, kay``."""
+    l1_v, l1_decel = plan[5], plan[6]
+    l1_stop = l1_v / l1_decel if l1_decel > 0.0 else _INF
+    kt[0] = 0.0
+    kt[1] = _clip(plan[7] - age, 0.0, dt)  # t_x1
+    kt[2] = _clip(plan[9] - age, 0.0, dt)  # t_brake_end
+    kt[3] = _clip(l1_stop - age, 0.0, dt)
+    kt[4] = _clip(plan[10] - age, 0.0, dt)  # t_y_f
+    kt[5] = _clip(plan[11] - age, 0.0, dt)  # t_y_switch
+    kt[6] = _clip(plan[14] - age, 0.0, dt)  # t_y_end
+    kt[7] = dt
+    kt.sort()
+    for j in range(8):
+        kx[j], ky[j], kv[j], kvy[j] = _plan_sample(age + kt[j], plan, follows, a_a, a_d)
+    for j in range(7):
+        span = kt[j + 1] - kt[j]
+        kax[j] = (kv[j + 1] - kv[j]) / span if span > 0.0 else 0.0
+        kay[j] = (kvy[j + 1] - kvy[j]) / span if span > 0.0 else 0.0
+
+
+@numba.njit(inline="always")
+def _motion_max(t, x, v):  # kinematics.extrema(m)[1]
+    hi = x[0]
+    for j in range(1, t.shape[0]):
+        hi = _max(hi, x[j])
+    top = -_INF
+    for j in range(t.shape[0] - 1):
+        span = t[j + 1] - t[j]
+        ra = (v[j + 1] - v[j]) / span if span > 0.0 else 0.0
+        tau = -v[j] / ra if ra != 0.0 else -1.0
+        if tau > 0.0 and tau < span and ra < 0.0:
+            top = _max(top, x[j] + v[j] * tau + 0.5 * ra * tau * tau)
+    return _max(hi, top)
+
+
+@numba.njit(cache=True, nogil=True, error_model="numpy")
+def loop_kernel(
+    n_steps, prm, window, x_init, v_init, ego_init, valid, n_connected, f_connected, f_aggressive, uses, promise,
+    chain_margin, margin, is_last, acts, v_desired, promise_decel, promise_accel, decel_last, gap0, lane_valid,
+    lane_margin, plan_init, follows_init, out_f, out_b, counts, n_invalid, breach_flags, bad_step,
+):  # fmt: skip
+    """Run every scenario of the batch through ``n_steps`` periods and the final observation (see the module
+    docstring). Per scenario ``b``: inputs as :class:`~.step.ClosedLoop`'s arrays (``promise``, ``chain_margin``:
+    ``(N, B)``; ``uses``: ``(B, 3)`` the variant's flags; ``plan_init``: ``(B, len(PLAN))`` the initial plan);
+    outputs :data:`OUT_F`, :data:`OUT_B`, ``counts (B, 3)``, ``n_invalid``, ``breach_flags (B, 5)``, and
+    ``bad_step`` (the first period whose state is not finite, ``-1`` if none)."""
+    dt, a_a, a_d, a_ym, y_safe, p_m, lane_w, y_bound, length, conflict, overlap = prm[:11]
+    lat_tol, tol, eps, mon_tol, brake_start, thr, open_decel, open_gap = prm[11:19]
+    k_p, k_v, gap_frac, brake_comfort, om2, two_om = prm[19:25]
+    half = 0.5 * tol
+    a_lim = _max(a_a, a_d)
+    max_level = _max(conflict, overlap)
+    bsz, k = x_init.shape
+    m = k - 1
+    x, v, acc, cap = np.empty(k), np.empty(k), np.empty(k), np.empty(k)
+    bounds = np.empty(k)
+    f_acc, f_ts, f_xe, f_ve = np.empty(k), np.empty(k), np.empty(k), np.empty(k)
+    snap_x, snap_v, snap_bounds = np.empty(m), np.empty(m), np.empty(m)
+    history = np.empty(window)
+    general = np.zeros(k, np.bool_)
+    plan = np.empty(plan_init.shape[1])
+    kt, kx, kv, ky, kvy, kax, kay = np.empty(8), np.empty(8), np.empty(8), np.empty(8), np.empty(8), np.empty(8), np.empty(8)
+    scratch = np.empty(64)
+    lon_t, lon_x, lon_v, lon_a = np.empty(3), np.empty(3), np.empty(3), np.empty(2)
+    lat_t, lat_x, lat_v, lat_a = np.empty(2), np.empty(2), np.empty(2), np.empty(1)
+    o_t, o_x, o_v, o_a = np.empty(3), np.empty(3), np.empty(3), np.empty(2)
+    lo, hi = np.empty(2), np.empty(2)
+    times = np.empty(window)
+    for j in range(window):
+        times[j] = (j - (window - 1) / 2.0) * dt
+    den = times[0] * times[0]
+    for j in range(1, window):
+        den = den + times[j] * times[j]
+    for b in range(bsz):
+        for i in range(k):
+            x[i], v[i], acc[i], cap[i] = x_init[b, i], v_init[b, i], 0.0, _INF
+        ex, ey, evx, evy = ego_init[b, 0], ego_init[b, 1], ego_init[b, 2], ego_init[b, 3]
+        for j in range(plan.shape[0]):
+            plan[j] = plan_init[b, j]
+        follows = follows_init[b]
+        plan_t0, plan_f_aggr = 0.0, True
+        uses_chain, uses_f_v2x, uses_assess = uses[b, 0], uses[b, 1], uses[b, 2]
+        nc = n_connected[b]
+        trusted = uses_f_v2x and f_connected[b]  # F connected and collaborative (a connected F declares itself so)
+        completed, t_complete = False, np.nan
+        collided = violated = l_collided = l_violated = False
+        gap_f, gap_l1, lane_ratio = _INF, _INF, _INF
+        n_pro = n_hes = n_abo = n_inv = 0
+        for j in range(window):
+            history[j] = 0.0
+        count, aggressive, latched, first_collab = 0, True, False, np.nan
+        br = [False, False, False, False]
+        first_s = np.nan
+        has_last = False
+        snap_fx = snap_fv = snap_limit = snap_l1d = 0.0
+        snap_active = False
+        bad = -1
+        t = 0.0
+        for step in range(n_steps + 1):
+            # --- the monitor's view of the last period (core.step / core.observe; after the last: finish) ---
+            if has_last:
+                f0, f1, f2, f3 = _breach_row(snap_x, snap_v, snap_bounds, x[1:], nc, snap_l1d, snap_fx, snap_fv,
+                                             snap_limit, snap_active, x[0], True, dt, mon_tol)  # fmt: skip
+                new = (f0 and not br[0]) or (f1 and not br[1]) or (f2 and not br[2]) or (f3 and not br[3])
+                if first_s != first_s and new:
+                    first_s = t
+                br[0], br[1], br[2], br[3] = br[0] or f0, br[1] or f1, br[2] or f2, br[3] or f3
+            if step == n_steps:
+                break
+            # --- observe, the expert planner (planners.base.ExpertPlanner), the proposal checked ---
+            mid = x[0] + gap_frac * (x[1] - x[0])
+            ax_n = _max(k_p * (mid - ex) + k_v * (v[1] - evx), -brake_comfort)
+            ay_n = om2 * (lane_w - ey) - two_om * evy
+            ax_n, ay_n = _clip(ax_n, -a_d, a_a), _clip(ay_n, -a_ym, a_ym)
+            ok = (ax_n == ax_n and abs(ax_n) != _INF) and (ay_n == ay_n and abs(ay_n) != _INF)
+            ok = ok and (ax_n >= -a_d - 1e-9) and (ax_n <= a_a + 1e-9) and (abs(ay_n) <= a_ym + 1e-9)
+            invalid = not ok
+            a_x = _clip(ax_n if ok else 0.0, -a_d, a_a)
+            a_y = _clip(ay_n if ok else 0.0, -a_ym, a_ym)
+            # --- the chain analysis (ClosedLoop.chain) ---
+            unsafe = _chain_row(x, v, promise[:, b], chain_margin[:, b], a_d, half, tol, bounds)
+            # --- the shield: assessment, worst cases ---
+            for j in range(window - 1):
+                history[j] = history[j + 1]
+            history[window - 1] = v[0]
+            count += 1
+            num = history[0] * times[0]
+            for j in range(1, window):
+                num = num + history[j] * times[j]
+            slope = num / den
+            full = count >= window
+            latched = latched or (full and slope >= thr)
+            aggressive = latched or (False if (full and slope <= -thr) else aggressive)
+            if first_collab != first_collab and not aggressive:
+                first_collab = t
+            l1_decel = bounds[1] if (uses_chain and not unsafe) else a_d
+            f_aggr = False if trusted else (aggressive if uses_assess else True)
+            if br[0] or br[1] or br[2] or br[3]:
+                l1_decel, f_aggr = a_d, True
+            a_yh = _clip(-evy / dt, -a_ym, a_ym)
+            active = not completed
+            # --- proceed / hesitate / abort (decide.check_candidate with the commit guard) ---
+            behaviour = COMPLETED
+            completing = False
+            if active:
+                behaviour = ABORT
+                for code in range(2):
+                    if code == 0 and invalid:
+                        continue
+                    lateral = a_y if code == 0 else a_yh
+                    state, period_ok, crossing, parts, bits = _candidate(
+                        ex, ey, evx, evy, a_x, lateral, x[1], v[1], l1_decel, x[0], v[0], f_aggr, a_a, a_d, a_ym,
+                        y_safe, p_m, dt, y_bound, lat_tol, tol,
+                    )  # fmt: skip
+                    if crossing:  # decide.commit_guard on the predicted states
+                        pex, pevx, plx, plv, pfx, pfv = state[0], state[2], state[4], state[5], state[6], state[7]
+                        z_l = _min_follow_decel(plx - pex - p_m, pevx, plv, l1_decel, half, tol)
+                        z_f = _min_follow_decel(pex - pfx - p_m, pfv, pevx, a_d, half, tol)
+                        keep = period_ok and (z_l <= a_d and z_f <= a_d)
+                    else:
+                        keep = period_ok and bits[0]
+                    if keep:
+                        behaviour = PROCEED if code == 0 else HESITATE
+                        completing = crossing
+                        # plan_from_core: the plan from the predicted state
+                        plan[0], plan[1], plan[2], plan[3] = state[0], state[1], state[2], state[3]
+                        plan[4], plan[5], plan[6] = state[4], state[5], l1_decel
+                        plan[7], plan[8], plan[9] = parts[5], parts[6], parts[7]
+                        plan[10], plan[11], plan[12], plan[13], plan[14] = parts[0], parts[1], parts[2], parts[3], parts[4]
+                        follows = bits[4]
+                        plan_f_aggr = f_aggr
+                        break
+            ax_cmd = a_x
+            ay_cmd = a_yh if behaviour == HESITATE else a_y
+            if completed:  # after completion: centre in the target lane, follow L1 responsibly
+                ax_cmd = _responsible_accel(a_x, x[1] - ex - p_m, evx, v[1], l1_decel, a_d, dt, eps)
+                ay_cmd = _clip(0.8 * (lane_w - ey) - 1.6 * evy, -a_ym, a_ym)
+            on_plan = behaviour == ABORT
+            if on_plan:  # the aborting rows follow their held plan, exactly
+                age = _max(t + 0.0 - plan_t0, 0.0)
+                _plan_motion(plan, follows, age, dt, a_a, a_d, kt, kx, kv, ky, kvy, kax, kay)
+                first = 0
+                for j in range(7):
+                    if kt[j + 1] - kt[j] > 0.0:
+                        first = j
+                        break
+                span = kt[first + 1] - kt[first]
+                ax_cmd = (kv[first + 1] - kv[first]) / span
+                ay_cmd = (kvy[first + 1] - kvy[first]) / span
+            if behaviour == PROCEED or behaviour == HESITATE:
+                plan_t0 = t + 0.0 + dt
+            # For the monitor at the next period: what a responsible follower of the ego could do this period.
+            limit = _INF
+            if active and not plan_f_aggr and ex - x[0] > 0.0:
+                limit = _max(_responsible_bound(ex - x[0] - p_m, v[0], evx, a_d, a_d, dt), -a_d)
+            for i in range(m):
+                snap_x[i], snap_v[i], snap_bounds[i] = x[i + 1], v[i + 1], bounds[i + 1]
+            snap_fx, snap_fv, snap_limit, snap_l1d, snap_active = x[0], v[0], limit, plan[6], active
+            has_last = True
+            # --- traffic (behaviours: worst-case leaders, F) on the running minimum of the chain bounds ---
+            for i in range(k):
+                cap[i] = _min(cap[i], bounds[i])
+            a_last = -decel_last[b] if t + 1e-9 >= brake_start else 0.0
+            for i in range(k):
+                a_i = 0.0
+                if 1 <= i < k - 1 and acts[b, i]:
+                    task = _min(_max(0.5 * (v_desired[b, i] - v[i]), -promise_decel[b, i]), promise_accel[b, i])
+                    a_i = _leader_accel(x[i + 1] - x[i] - margin[b, i], v[i], v[i + 1], cap[i + 1], cap[i], task,
+                                        False, 0.0, decel_last[b], a_d, dt, eps, tol, half)  # fmt: skip
+                if is_last[b, i]:
+                    a_i = a_last
+                acc[i] = a_i
+            acc[0] = _follower_accel(x[0], v[0], x[1], v[1], ex, evx, f_aggressive[b], completed, gap0[b], False, 0.0,
+                                     False, p_m, a_a, a_d, open_decel, open_gap, dt, eps)  # fmt: skip
+            row_acc = 0.0
+            for i in range(k):
+                f_acc[i], f_ts[i], f_xe[i], f_ve[i] = _fleet(x[i], v[i], acc[i], dt)
+                row_acc = _max(row_acc, abs(f_acc[i]))
+            # --- the ego's motion: a constant command, or the held plan ---
+            l_acc, l_ts, l_xe, l_ve = _fleet(ex, evx, ax_cmd, dt)
+            ey1 = ey + evy * dt + 0.5 * ay_cmd * dt * dt
+            evy1 = evy + ay_cmd * dt
+            # --- the checks (checks.ego_checks, lane_checks) ---
+            for i in range(k):
+                general[i] = False
+            p_ymax = _motion_max(kt, ky, kvy) if on_plan else 0.0
+            p_xend = kx[7] if on_plan else 0.0
+            p_yend = ky[7] if on_plan else 0.0
+            hit, close, gap_f, gap_l1 = _ego_row(
+                valid[b], x, v, ex, evx, ex, evx, l_acc, l_ts, l_xe, ey, evy, ay_cmd, ey1, on_plan, p_ymax,
+                p_xend, p_yend, x, v, f_acc, f_ts, f_xe, row_acc, dt, p_m,
+                a_lim, conflict, overlap, length, max_level, gap_f, gap_l1, general,
+            )  # fmt: skip
+            for c in range(k):
+                if not general[c]:
+                    continue
+                o_t[0], o_t[1], o_t[2] = 0.0, f_ts[c], dt
+                o_x[0], o_x[1], o_x[2] = x[c], f_xe[c], f_xe[c]
+                o_v[0], o_v[1], o_v[2] = v[c], f_ve[c], f_ve[c]
+                o_a[0], o_a[1] = f_acc[c], 0.0
+                for n_level in range(2):
+                    level = conflict if n_level == 0 else overlap
+                    if on_plan:
+                        lo[n_level], hi[n_level] = _general_pair(kt, kx, kv, kax[:7], o_t, o_x, o_v, o_a, kt, ky, kvy,
+                                                                 kay[:7], level, scratch)  # fmt: skip
+                    else:
+                        lon_t[0], lon_t[1], lon_t[2] = 0.0, l_ts, dt
+                        lon_x[0], lon_x[1], lon_x[2] = ex, l_xe, l_xe
+                        lon_v[0], lon_v[1], lon_v[2] = evx, l_ve, l_ve
+                        lon_a[0], lon_a[1] = l_acc, 0.0
+                        lat_t[0], lat_t[1] = 0.0, dt
+                        lat_x[0], lat_x[1] = ey, ey1
+                        lat_v[0], lat_v[1] = evy, evy1
+                        lat_a[0] = ay_cmd
+                        lo[n_level], hi[n_level] = _general_pair(lon_t, lon_x, lon_v, lon_a, o_t, o_x, o_v, o_a, lat_t,
+                                                                 lat_x, lat_v, lat_a, level, scratch)  # fmt: skip
+                hit = hit or (lo[1] < length and hi[1] > -length)
+                close = close or (lo[0] < p_m - 1e-9 and hi[0] > -p_m + 1e-9)
+                if c == 0:
+                    gap_f = _min(gap_f, -hi[0])
+                elif c == 1:
+                    gap_l1 = _min(gap_l1, lo[0])
+            l_hit, l_close, ratio = _lane_row(lane_valid[b], lane_margin[b], x, v, f_acc, f_ts, f_xe, f_ve, row_acc,
+                                              dt, length)  # fmt: skip
+            # --- advance (ClosedLoop.check_and_advance) ---
+            if on_plan:
+                ex, evx, ey, evy = kx[7], kv[7], ky[7], kvy[7]
+            else:
+                ex, evx, ey, evy = l_xe, l_ve, ey1, evy1
+            for i in range(k):
+                x[i], v[i] = f_xe[i], f_ve[i]
+            completing = completing and active
+            if completing and not completed:
+                t_complete = t + dt
+            completed = completed or completing
+            collided, violated = collided or hit, violated or close
+            l_collided, l_violated = l_collided or l_hit, l_violated or l_close
+            lane_ratio = _min(lane_ratio, ratio)
+            if behaviour == PROCEED:
+                n_pro += 1
+            elif behaviour == HESITATE:
+                n_hes += 1
+            elif behaviour == ABORT:
+                n_abo += 1
+            if invalid and active:
+                n_inv += 1
+            t = t + dt
+            finite = abs(ex) < _INF and abs(ey) < _INF and abs(evx) < _INF and abs(evy) < _INF
+            for i in range(k):
+                finite = finite and abs(x[i]) < _INF and abs(v[i]) < _INF
+            if not finite:
+                bad = step
+                break
+        out_f[b, 0], out_f[b, 1], out_f[b, 2], out_f[b, 3] = t_complete, gap_f, gap_l1, lane_ratio
+        out_f[b, 4], out_f[b, 5] = first_collab, first_s
+        out_b[b, 0], out_b[b, 1], out_b[b, 2] = completed, collided, violated
+        out_b[b, 3], out_b[b, 4], out_b[b, 5] = l_collided, l_violated, aggressive
+        counts[b, 0], counts[b, 1], counts[b, 2] = n_pro, n_hes, n_abo
+        n_invalid[b] = n_inv
+        for j in range(4):
+            breach_flags[b, j] = br[j]
+        breach_flags[b, 4] = False
+        bad_step[b] = bad
+
+
+def fused_loop(batch, prm: Params, cfg, nominal, traffic, trace: bool, record_observations: bool):
+    """This module where :func:`run` covers the run, else ``None`` (see the module docstring)."""
+    from ..safety.evasion import fast_kernel
+
+    if fast_kernel() is None or os.environ.get("SAFELANE_NO_FUSED", "") == "1":
+        return None
+    if trace or record_observations or traffic is not None or len(batch) < FUSED_MIN_ROWS:
+        return None
+    if type(nominal) is not ExpertPlanner:
+        return None
+    defaults = dict(
+        brake_start_s=cfg.brake_start_s, assessment="observed", completion="commit_guard", sensor_noise_std=0.0,
+        supervised=True, v2x_loss=0.0, v2x_latency_periods=0, leader_rule="worst_case", follower_ignores_ego=False,
+        monitor=True, own_lane=False, sensing_error=False, actuation_delay_s=0.0,
+    )  # fmt: skip
+    if any(getattr(cfg, name) != value for name, value in defaults.items()):
+        return None
+    if batch.l0_x is not None or batch.last_profile_t is not None or (batch.p_v > 0.0).any():
+        return None
+    if any(VARIANTS[name].rule != "paper" for name in np.asarray(VARIANT_NAMES)[np.unique(batch.variant)]):
+        return None
+    import sys
+
+    return sys.modules[__name__]
+
+
+def run(sim, n_steps: int):
+    """The final :class:`~.step.SimState`'s fields that :func:`~.results.results_table` reads, from
+    :func:`loop_kernel` on :class:`~.step.ClosedLoop` ``sim``'s arrays."""
+    from ..shield.policies import variant_flags
+    from ..sim.traffic import TRAFFIC_MODELS
+
+    b, prm, cfg, nominal = sim.b, sim.prm, sim.cfg, sim.nominal
+    start = sim.initial_state()
+    traffic = sim.traffic_step
+    assert isinstance(traffic, type(TRAFFIC_MODELS["paper"].bind(b, sim.seed, prm, cfg)))
+    n = len(b)
+    conflict = prm.y_safe + LATERAL_TOL_M
+    overlap = prm.lane_width - prm.vehicle_width
+    values = dict(
+        dt=prm.dt, a_x_a=prm.a_x_a, a_x_d=prm.a_x_d, a_y_m=prm.a_y_m, y_safe=prm.y_safe, p_m=prm.p_m,
+        lane_width=prm.lane_width, y_boundary=prm.y_boundary, vehicle_length=prm.vehicle_length, conflict=conflict,
+        overlap=overlap, lat_tol=LATERAL_TOL_M, tol=FEASIBILITY_TOL_M, eps=ROOT_EPS_MPS2, monitor_tol=TOL_M,
+        brake_start_s=cfg.brake_start_s, assess_threshold=cfg.assess_threshold, open_decel=cfg.follower_open_decel,
+        open_gap_m=cfg.follower_open_gap_m, k_p=nominal.k_p, k_v=nominal.k_v, gap_fraction=nominal.gap_fraction,
+        brake_comfort=nominal.brake_comfort, omega2=nominal.omega**2, two_omega=2.0 * nominal.omega,
+    )  # fmt: skip
+    prm_vec = np.array([float(values[name]) for name in PRM])
+    plan = start.shield.plan
+    plan_init = np.ascontiguousarray(np.stack([np.asarray(getattr(plan, name), np.float64) for name in PLAN], 1))
+    uses = np.ascontiguousarray(np.stack(variant_flags(b.variant, n), 1))
+    c = np.ascontiguousarray
+    out_f, out_b = np.empty((n, len(OUT_F))), np.empty((n, len(OUT_B)), np.bool_)
+    counts, n_invalid = np.empty((n, 3), np.int64), np.empty(n, np.int64)
+    flags, bad = np.empty((n, len(BREACH_KINDS)), np.bool_), np.empty(n, np.int64)
+    is_last, acts = traffic.roles
+    loop_kernel(
+        n_steps, prm_vec, cfg.assess_window, c(b.x), c(b.v),
+        c(np.stack([b.ego_x, b.ego_y, b.ego_vx, b.ego_vy], 1)), c(b.valid), c(b.n_connected.astype(np.int64)),
+        c(b.connected[:, 0]), c(b.follower_aggressive), uses, c(sim.chain_promise), c(sim.chain_margin),
+        c(traffic.margin), c(is_last), c(acts), c(traffic.v_desired), c(b.promise_decel), c(b.promise_accel),
+        c(b.decel_last.astype(np.float64)), c(traffic.gap0), c(sim.lane_pairs[0]), c(sim.lane_pairs[1]), plan_init,
+        c(np.asarray(plan.follows_leader, np.bool_)), out_f, out_b, counts, n_invalid, flags, bad,
+    )  # fmt: skip
+    if (bad >= 0).any():
+        step = int(bad[bad >= 0].min())
+        rows = np.flatnonzero(bad == step)
+        ids = b.scenario_id[rows][:5].tolist()
+        raise FloatingPointError(
+            f"non-finite simulator state at t = {(step + 1) * prm.dt:.1f} s in scenario(s) {ids} ({rows.size} in "
+            "all): a bug in a behaviour model or hook, not an outcome"
+        )
+    f = dict(zip(OUT_F, out_f.T, strict=True))
+    o = dict(zip(OUT_B, out_b.T, strict=True))
+    belief = SimpleNamespace(aggressive=o["aggressive"], first_collaborative_s=f["first_collaborative_s"])
+    return SimpleNamespace(
+        completed=o["completed"], collided=o["collided"], violated=o["violated"],
+        leader_collided=o["leader_collided"], leader_violated=o["leader_violated"], t_complete=f["t_complete"],
+        min_gap_f=f["min_gap_f"], min_gap_l1=f["min_gap_l1"], min_lane_ratio=f["min_lane_ratio"], counts=counts,
+        belief=belief, n_invalid=n_invalid, breach=Breach(flags=flags, first_s=f["breach_first_s"]),
+        initial_safe=start.initial_safe, l0=None,
+    )  # fmt: skip
+
+
+def concat(parts):
+    """One result of :func:`run` from the results of consecutive chunks of scenarios."""
+
+    def cat(name):
+        return np.concatenate([getattr(p, name) for p in parts])
+
+    names = ("completed", "collided", "violated", "leader_collided", "leader_violated", "t_complete", "min_gap_f",
+             "min_gap_l1", "min_lane_ratio", "counts", "n_invalid", "initial_safe")  # fmt: skip
+    belief = SimpleNamespace(**{name: np.concatenate([getattr(p.belief, name) for p in parts])
+                                for name in ("aggressive", "first_collaborative_s")})  # fmt: skip
+    breach = Breach(flags=np.concatenate([p.breach.flags for p in parts]),
+                    first_s=np.concatenate([p.breach.first_s for p in parts]))  # fmt: skip
+    return SimpleNamespace(**{name: cat(name) for name in names}, belief=belief, breach=breach, l0=None)
