@@ -13,7 +13,9 @@ import pytest
 
 from safelane.sim import SimConfig, checks, concat, paper_scenarios, simulate_batch
 from safelane.sim.preset import load_preset
-from test_fast_core import needs_numba
+from test_fast_core import needs_numba, period_by_period  # noqa: F401 (a fixture)
+
+pytestmark = pytest.mark.usefixtures("period_by_period")
 
 
 def _tables(monkeypatch, batch, cfg, params=None, traffic=None):

@@ -27,6 +27,13 @@ HAS_NUMBA = importlib.util.find_spec("numba") is not None
 needs_numba = pytest.mark.skipif(not HAS_NUMBA, reason="numba is not installed (extra 'fast'): no kernel to compare")
 
 
+@pytest.fixture
+def period_by_period(monkeypatch):
+    """The closed loop period by period (``SAFELANE_NO_FUSED=1``), so that a simulation runs the part kernels a test
+    is about rather than the compiled loop (``sim/_fast_loop.py``), which covers the default settings."""
+    monkeypatch.setenv("SAFELANE_NO_FUSED", "1")
+
+
 def knife_edges(rng: np.random.Generator, n: int) -> dict:
     """``n`` states on the boundaries where the closed forms switch case or a gap sits exactly at its margin."""
     prm = PARAMS

@@ -119,6 +119,7 @@ def test_the_simulator_gives_the_same_table_with_and_without_the_kernel(monkeypa
     calls = []
     real = _fast.responsible
     monkeypatch.setattr(_fast, "responsible", lambda *a: calls.append(1) or real(*a))
+    monkeypatch.setenv("SAFELANE_NO_FUSED", "1")  # the period-by-period path, which calls this kernel
 
     planners = ("CV_all", "CV_none")
     batch = concat([paper_scenarios(p, 3, 5.0, 150, np.random.default_rng(k)) for k, p in enumerate(planners)])

@@ -18,7 +18,7 @@ from numba import types
 
 from ..params import Params
 from ..safety._backend import ARRAY, FEASIBILITY_TOL_M
-from ..safety._fast_base import _B, _F, _max
+from ..safety._fast_base import _B, _F, _max, row_function
 from ..safety._fast_plan import BOOL_PARTS, FLOAT_PARTS, _plan_parts
 from ..safety._fast_responsible import _advance, _pair_min_gap
 from ..safety.lateral import LATERAL_TOL_M
@@ -32,7 +32,7 @@ _SIGNATURE = types.void(
 )
 
 
-@numba.njit(error_model="numpy", nogil=True)
+@row_function
 def _candidate(x, y, vx, vy, ax, ay, x1, v1, d1, xf, vf, aggr, a_a, a_d, a_ym, y_safe, p_m, dt, level, lat_tol, tol):
     """One row of :func:`candidate_kernel`: ``(state, period_ok, completing, parts, bits)`` — the predicted states
     (:data:`STATES`), the period's verdict, whether the step completes, and the plan from the predicted state

@@ -10,7 +10,7 @@ import numba
 import numpy as np
 from numba import types
 
-from ..safety._fast_base import _braked, _stop_time
+from ..safety._fast_base import _braked, _stop_time, row_function
 from ..safety._fast_responsible import _advance
 from .monitor import BREACH_KINDS, TOL_M, Breach
 
@@ -23,21 +23,22 @@ _SIGNATURE = types.void(
 )  # fmt: skip
 
 
-@numba.njit(error_model="numpy", nogil=True)
-def _breach_row(chain_x, chain_v, bounds, now_x, n_connected, plan_l1_decel, f_x, f_v, f_limit, active, now_f_x,
-                same_chain, dt, tol):  # fmt: skip
-    """One scenario of :func:`breach_kernel` (its chain as ``(M,)`` arrays): the four flags."""
+@row_function
+def _breach_row(chain_x, chain_v, bounds, r, now_x, nr, off, n_connected, plan_l1_decel, f_x, f_v, f_limit, active,
+                now_f_x, same_chain, dt, tol):  # fmt: skip
+    """One scenario of :func:`breach_kernel`: row ``r`` of the snapshot's chain (``(., M)``), the chain now at row
+    ``nr``, columns from ``off`` of ``now_x``; the four flags."""
     l1 = leader = last = False
     if same_chain:
-        for i in range(chain_x.shape[0]):
-            p, v, d = chain_x[i], chain_v[i], bounds[i]
-            behind = now_x[i] < _braked(p, v, d, dt, _stop_time(v, d)) - tol
+        for i in range(chain_x.shape[1]):
+            p, v, d = chain_x[r, i], chain_v[r, i], bounds[r, i]
+            behind = now_x[nr, i + off] < _braked(p, v, d, dt, _stop_time(v, d)) - tol
             if i < n_connected:
                 leader = leader or behind
             elif i == n_connected:
                 last = last or behind
-        p, v, d = chain_x[0], chain_v[0], plan_l1_decel
-        l1 = active and now_x[0] < _braked(p, v, d, dt, _stop_time(v, d)) - tol
+        p, v, d = chain_x[r, 0], chain_v[r, 0], plan_l1_decel
+        l1 = active and now_x[nr, off] < _braked(p, v, d, dt, _stop_time(v, d)) - tol
     limit = f_limit
     highest, _ = _advance(f_x, f_v, 0.0 if limit == np.inf or limit == -np.inf else limit, dt)
     follower = (limit == limit and limit != np.inf and limit != -np.inf) and now_f_x > highest + tol
@@ -53,10 +54,9 @@ def breach_kernel(
     ``chain_x``/``chain_v``/``bounds`` the snapshot's chain, ``now_x`` the chain now (read only where
     ``same_chain``: the chain kept its length)."""
     for b in range(chain_x.shape[0]):
-        now = now_x[b] if same_chain else now_x[0]
         flags[b, 0], flags[b, 1], flags[b, 2], flags[b, 3] = _breach_row(
-            chain_x[b], chain_v[b], bounds[b], now, n_connected[b], plan_l1_decel[b], f_x[b], f_v[b], f_limit[b],
-            active[b], now_f_x[b], same_chain, dt, tol,
+            chain_x, chain_v, bounds, b, now_x, b if same_chain else 0, 0, n_connected[b], plan_l1_decel[b], f_x[b],
+            f_v[b], f_limit[b], active[b], now_f_x[b], same_chain, dt, tol,
         )  # fmt: skip
 
 

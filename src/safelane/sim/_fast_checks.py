@@ -19,7 +19,7 @@ import numpy as np
 from numba import types
 
 from ..params import Params
-from ..safety._fast_base import _max, _min
+from ..safety._fast_base import _max, _min, row_function
 from .checks import _rows
 from .kinematics import extrema
 
@@ -143,15 +143,22 @@ def _stop_pair(x1, v1, a1, t1, x2, v2, a2, t2, dt):  # checks.stop_pair_extrema:
     return lo, hi
 
 
-@numba.njit(error_model="numpy", nogil=True)
-def _ego_row(
-    valid, sx, sv, ego_x, ego_vx, x0, v0, acc0, t1, x_end, y0, vy0, ay0, y_end, on_plan, plan_y_max, plan_x_end,
-    plan_y_end, ox, ov, oacc, ots, ox_end, row_acc, dt, p_m, a_lim, conflict, overlap, length, max_level, gap_f,
-    gap_l1, general,
-):  # fmt: skip
-    """One scenario of :func:`ego_kernel` (its target-lane vehicles as ``(K,)`` arrays): ``(collided, violated,
-    gap_f, gap_l1)`` with the running minimum gaps updated; ``general[c]`` marks the pairs left to the general
-    path."""
+@row_function
+def _ego_row(valid, vb, sx, sv, r, ego, lon, lat, plan, fleet, row_acc, consts, gaps, general):
+    """One scenario of :func:`ego_kernel`: row ``vb`` of ``valid``, row ``r`` of the vehicles' arrays (``sx``, ``sv``,
+    ``fleet``'s, ``general``; 2-D, indexed in place: a row view or an out-of-line call with arrays costs more than
+    the row's arithmetic: ``_fast_base.row_function``). ``ego``: ``(x, vx)`` at the start; ``lon``: ``(x0, v0,
+    acc0, t1, x_end)``; ``lat``: ``(y0, vy0, ay0, y_end)``; ``plan``: ``(on_plan, y_max, x_end, y_end)``; ``fleet``:
+    ``(x, v, acc, t_stop, x_end)``; ``consts``: ``(dt, p_m, a_lim, conflict, overlap, length, max_level)``;
+    ``gaps``: the running ``(gap_f, gap_l1)``. Returns ``(collided, violated, gap_f, gap_l1)``; ``general[r, c]``
+    marks the pairs left to the general path."""
+    ego_x, ego_vx = ego
+    x0, v0, acc0, t1, x_end = lon
+    y0, vy0, ay0, y_end = lat
+    on_plan, plan_y_max, plan_x_end, plan_y_end = plan
+    ox, ov, oacc, ots, ox_end = fleet
+    dt, p_m, a_lim, conflict, overlap, length, max_level = consts
+    gap_f, gap_l1 = gaps
     if on_plan:
         y_max, xe, ye = plan_y_max, plan_x_end, plan_y_end
     else:
@@ -160,28 +167,28 @@ def _ego_row(
     threshold = p_m + 0.5 * (a_lim + row_acc) * dt * dt + 1e-6
     in_zone = y_max > conflict
     hit, close = False, False
-    for c in range(sx.shape[0]):
-        d0 = sx[c] - ego_x
-        near = valid[c] and (abs(d0) - abs(sv[c] - ego_vx) * dt < threshold) and in_zone
+    for c in range(sx.shape[1]):
+        d0 = sx[r, c] - ego_x
+        near = valid[vb, c] and (abs(d0) - abs(sv[r, c] - ego_vx) * dt < threshold) and in_zone
         if not near:
-            if c < 2 and valid[c]:  # checks._far_gaps: sampled at the period's ends in the conflict zone
+            if c < 2 and valid[vb, c]:  # checks._far_gaps: sampled at the period's ends in the conflict zone
                 sign = -1.0 if c == 0 else 1.0
                 g0 = sign * d0 if y0 > conflict else _INF
-                g1 = sign * (ox_end[c] - xe) if ye > conflict else _INF
+                g1 = sign * (ox_end[r, c] - xe) if ye > conflict else _INF
                 if c == 0:
                     gap_f = _min(gap_f, _min(g0, g1))
                 else:
                     gap_l1 = _min(gap_l1, _min(g0, g1))
             continue
-        if (not on_plan) and t1 >= dt and ots[c] >= dt:  # one quadratic over the period
-            dd, dv, ra = ox[c] - x0, ov[c] - v0, oacc[c] - acc0
+        if (not on_plan) and t1 >= dt and ots[r, c] >= dt:  # one quadratic over the period
+            dd, dv, ra = ox[r, c] - x0, ov[r, c] - v0, oacc[r, c] - acc0
             c_min, c_max = _quadratic(dd, dv, ra, y0, vy0, ay0, conflict, dt)
             o_min, o_max = _quadratic(dd, dv, ra, y0, vy0, ay0, overlap, dt)
         elif settled:  # someone stops inside the period, the ego beyond both levels all period
-            c_min, c_max = _stop_pair(x0, v0, acc0, t1, ox[c], ov[c], oacc[c], ots[c], dt)
+            c_min, c_max = _stop_pair(x0, v0, acc0, t1, ox[r, c], ov[r, c], oacc[r, c], ots[r, c], dt)
             o_min, o_max = c_min, c_max
         else:
-            general[c] = True
+            general[r, c] = True
             continue
         hit = hit or (o_min < length and o_max > -length)
         close = close or (c_min < p_m - 1e-9 and c_max > -p_m + 1e-9)
@@ -201,12 +208,13 @@ def ego_kernel(
     """Per scenario ``b``: ``collided[b]``, ``violated[b]``, the running ``min_gap_f[b]``/``min_gap_l1[b]`` (updated
     in place) over the far pairs and the near pairs of the two common kinds; ``general[b, c]`` marks the near pairs
     left to the exact general path."""
+    fleet = (ox, ov, oacc, ots, ox_end)
+    consts = (dt, p_m, a_lim, conflict, overlap, length, max_level)
     for b in range(sx.shape[0]):
         collided[b], violated[b], min_gap_f[b], min_gap_l1[b] = _ego_row(
-            valid[b], sx[b], sv[b], ego_x[b], ego_vx[b], x0[b], v0[b], acc0[b], t1[b], x_end[b], y0[b], vy0[b],
-            ay0[b], y_end[b], planned[b], plan_y_max[b], plan_x_end[b], plan_y_end[b], ox[b], ov[b], oacc[b], ots[b],
-            ox_end[b], row_acc[b], dt, p_m, a_lim, conflict, overlap, length, max_level, min_gap_f[b], min_gap_l1[b],
-            general[b],
+            valid, b, sx, sv, b, (ego_x[b], ego_vx[b]), (x0[b], v0[b], acc0[b], t1[b], x_end[b]),
+            (y0[b], vy0[b], ay0[b], y_end[b]), (planned[b], plan_y_max[b], plan_x_end[b], plan_y_end[b]), fleet,
+            row_acc[b], consts, (min_gap_f[b], min_gap_l1[b]), general,
         )  # fmt: skip
 
 
@@ -348,30 +356,31 @@ def ego_checks(b, prm: Params, s, lon, lat, others, conflict_level: float, overl
 _LANE_SIGNATURE = types.void(_MB, _M, _M, _M, _M, _M, _M, _M, _V, types.float64, types.float64, _OUT_B, _OUT_B, _OUT_V)
 
 
-@numba.njit(error_model="numpy", nogil=True)
-def _lane_row(valid, margin, x, v, acc, t_stop, x_end, v_end, row_acc, dt, length):
-    """One scenario of :func:`lane_kernel` (``(K-1,)`` pairs, ``(K,)`` vehicles): ``(collided, violated,
-    min_ratio)``."""
+@row_function
+def _lane_row(valid, margin, pb, x, v, acc, t_stop, x_end, v_end, r, row_acc, dt, length):
+    """One scenario of :func:`lane_kernel`: row ``pb`` of the pairs' ``valid``/``margin`` (``(., K-1)``), row ``r``
+    of the vehicles' arrays (indexed in place, as :func:`_ego_row`). Returns ``(collided, violated, min_ratio)``."""
     slack = row_acc * dt * dt + 1e-6
     ratio = _INF
     hit, close = False, False
-    for c in range(x.shape[0] - 1):
-        if not valid[c]:
+    for c in range(x.shape[1] - 1):
+        if not valid[pb, c]:
             continue
-        m = margin[c]
-        gap0 = x[c + 1] - x[c]
-        near = gap0 - abs(v[c + 1] - v[c]) * dt < m + slack
+        m = margin[pb, c]
+        gap0 = x[r, c + 1] - x[r, c]
+        near = gap0 - abs(v[r, c + 1] - v[r, c]) * dt < m + slack
         if near and gap0 >= m:  # both at rest all period keep their gap: no exact check needed
-            rest0 = v_end[c] == 0.0 and v[c] == 0.0 and x_end[c] == x[c]
-            rest1 = v_end[c + 1] == 0.0 and v[c + 1] == 0.0 and x_end[c + 1] == x[c + 1]
+            rest0 = v_end[r, c] == 0.0 and v[r, c] == 0.0 and x_end[r, c] == x[r, c]
+            rest1 = v_end[r, c + 1] == 0.0 and v[r, c + 1] == 0.0 and x_end[r, c + 1] == x[r, c + 1]
             near = not (rest0 and rest1)
         if not near:
-            ratio = _min(ratio, _min(gap0, x_end[c + 1] - x_end[c]) / m)
+            ratio = _min(ratio, _min(gap0, x_end[r, c + 1] - x_end[r, c]) / m)
             continue
-        if t_stop[c] >= dt and t_stop[c + 1] >= dt:
-            low = _quadratic_extrema(gap0, v[c + 1] - v[c], acc[c + 1] - acc[c], dt)[0]
+        if t_stop[r, c] >= dt and t_stop[r, c + 1] >= dt:
+            low = _quadratic_extrema(gap0, v[r, c + 1] - v[r, c], acc[r, c + 1] - acc[r, c], dt)[0]
         else:
-            low = _stop_pair(x[c], v[c], acc[c], t_stop[c], x[c + 1], v[c + 1], acc[c + 1], t_stop[c + 1], dt)[0]
+            low = _stop_pair(x[r, c], v[r, c], acc[r, c], t_stop[r, c], x[r, c + 1], v[r, c + 1], acc[r, c + 1],
+                             t_stop[r, c + 1], dt)[0]  # fmt: skip
         hit = hit or low < length
         close = close or low < m - 1e-9
         ratio = _min(ratio, low / m)
@@ -384,8 +393,8 @@ def lane_kernel(valid, margin, x, v, acc, t_stop, x_end, v_end, row_acc, dt, len
     near-pair filter, the sampled ratios of the far pairs, the exact minimum of the near ones (one quadratic, or
     ``stop_pair_extrema`` where one of the two stops inside the period)."""
     for b in range(x.shape[0]):
-        collided[b], violated[b], min_ratio[b] = _lane_row(valid[b], margin[b], x[b], v[b], acc[b], t_stop[b],
-                                                           x_end[b], v_end[b], row_acc[b], dt, length)  # fmt: skip
+        collided[b], violated[b], min_ratio[b] = _lane_row(valid, margin, b, x, v, acc, t_stop, x_end, v_end, b,
+                                                           row_acc[b], dt, length)  # fmt: skip
 
 
 def lane_checks(prm: Params, others, pairs):

@@ -159,12 +159,18 @@ def loop_kernel(
     max_level = _max(conflict, overlap)
     bsz, k = x_init.shape
     m = k - 1
-    x, v, acc, cap = np.empty(k), np.empty(k), np.empty(k), np.empty(k)
-    bounds = np.empty(k)
-    f_acc, f_ts, f_xe, f_ve = np.empty(k), np.empty(k), np.empty(k), np.empty(k)
-    snap_x, snap_v, snap_bounds = np.empty(m), np.empty(m), np.empty(m)
+    # One scenario's vehicles: (1, K) arrays for the row functions, which index rows in place; 1-D views for the loop.
+    x2, v2, bounds2, f_acc2, f_ts2, f_xe2, f_ve2 = (np.empty((1, k)), np.empty((1, k)), np.empty((1, k)),
+                                                   np.empty((1, k)), np.empty((1, k)), np.empty((1, k)),
+                                                   np.empty((1, k)))  # fmt: skip
+    x, v, bounds, f_acc, f_ts, f_xe, f_ve = x2[0], v2[0], bounds2[0], f_acc2[0], f_ts2[0], f_xe2[0], f_ve2[0]
+    acc, cap = np.empty(k), np.empty(k)
+    snap_x2, snap_v2, snap_b2 = np.empty((1, m)), np.empty((1, m)), np.empty((1, m))
+    snap_x, snap_v, snap_bounds = snap_x2[0], snap_v2[0], snap_b2[0]
     history = np.empty(window)
-    general = np.zeros(k, np.bool_)
+    general2 = np.zeros((1, k), np.bool_)
+    general = general2[0]
+    consts = (dt, p_m, a_lim, conflict, overlap, length, max_level)
     plan = np.empty(plan_init.shape[1])
     kt, kx, kv, ky, kvy, kax, kay = np.empty(8), np.empty(8), np.empty(8), np.empty(8), np.empty(8), np.empty(8), np.empty(8)
     scratch = np.empty(64)
@@ -206,7 +212,7 @@ def loop_kernel(
         for step in range(n_steps + 1):
             # --- the monitor's view of the last period (core.step / core.observe; after the last: finish) ---
             if has_last:
-                f0, f1, f2, f3 = _breach_row(snap_x, snap_v, snap_bounds, x[1:], nc, snap_l1d, snap_fx, snap_fv,
+                f0, f1, f2, f3 = _breach_row(snap_x2, snap_v2, snap_b2, 0, x2, 0, 1, nc, snap_l1d, snap_fx, snap_fv,
                                              snap_limit, snap_active, x[0], True, dt, mon_tol)  # fmt: skip
                 new = (f0 and not br[0]) or (f1 and not br[1]) or (f2 and not br[2]) or (f3 and not br[3])
                 if first_s != first_s and new:
@@ -225,7 +231,7 @@ def loop_kernel(
             a_x = _clip(ax_n if ok else 0.0, -a_d, a_a)
             a_y = _clip(ay_n if ok else 0.0, -a_ym, a_ym)
             # --- the chain analysis (ClosedLoop.chain) ---
-            unsafe = _chain_row(x, v, promise[:, b], chain_margin[:, b], a_d, half, tol, bounds)
+            unsafe = _chain_row(x2, v2, 0, promise, chain_margin, b, a_d, half, tol, bounds2)
             # --- the shield: assessment, worst cases ---
             for j in range(window - 1):
                 history[j] = history[j + 1]
@@ -334,9 +340,9 @@ def loop_kernel(
             p_xend = kx[7] if on_plan else 0.0
             p_yend = ky[7] if on_plan else 0.0
             hit, close, gap_f, gap_l1 = _ego_row(
-                valid[b], x, v, ex, evx, ex, evx, l_acc, l_ts, l_xe, ey, evy, ay_cmd, ey1, on_plan, p_ymax,
-                p_xend, p_yend, x, v, f_acc, f_ts, f_xe, row_acc, dt, p_m,
-                a_lim, conflict, overlap, length, max_level, gap_f, gap_l1, general,
+                valid, b, x2, v2, 0, (ex, evx), (ex, evx, l_acc, l_ts, l_xe), (ey, evy, ay_cmd, ey1),
+                (on_plan, p_ymax, p_xend, p_yend), (x2, v2, f_acc2, f_ts2, f_xe2), row_acc, consts, (gap_f, gap_l1),
+                general2,
             )  # fmt: skip
             for c in range(k):
                 if not general[c]:
@@ -367,8 +373,8 @@ def loop_kernel(
                     gap_f = _min(gap_f, -hi[0])
                 elif c == 1:
                     gap_l1 = _min(gap_l1, lo[0])
-            l_hit, l_close, ratio = _lane_row(lane_valid[b], lane_margin[b], x, v, f_acc, f_ts, f_xe, f_ve, row_acc,
-                                              dt, length)  # fmt: skip
+            l_hit, l_close, ratio = _lane_row(lane_valid, lane_margin, b, x2, v2, f_acc2, f_ts2, f_xe2, f_ve2, 0,
+                                              row_acc, dt, length)  # fmt: skip
             # --- advance (ClosedLoop.check_and_advance) ---
             if on_plan:
                 ex, evx, ey, evy = kx[7], kv[7], ky[7], kvy[7]

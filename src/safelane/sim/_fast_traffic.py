@@ -19,7 +19,7 @@ from numba import types
 
 from ..params import Params
 from ..safety._backend import FEASIBILITY_TOL_M
-from ..safety._fast_base import _max, _min
+from ..safety._fast_base import _max, _min, row_function
 from ..safety._fast_responsible import _min_follow_decel, _responsible_bound, _responsible_ok
 from ..safety.responsible import ROOT_EPS_MPS2
 
@@ -32,7 +32,7 @@ _SIGNATURE = types.void(
 )  # fmt: skip
 
 
-@numba.njit(error_model="numpy", nogil=True)
+@row_function
 def _leader_accel(slack, v_f, v_l, d, own, task, violating, pick, decel_last, a_x_d, dt, eps, tol, half):
     """One connected leader's acceleration (:func:`leader_kernel`'s element): ``slack`` to the vehicle ahead, its
     bound ``d`` and the leader's own bound ``own``."""
@@ -108,7 +108,7 @@ def _responsible_accel(a_wanted, slack, v_f, v_l, lead_decel, a_x_d, dt, eps):  
     return a_wanted if bound > a_wanted else _max(bound - eps, -a_x_d)
 
 
-@numba.njit(error_model="numpy", nogil=True)
+@row_function
 def _follower_accel(fx, fv, lx, lv, ex, evx, aggr, completed, gap0, has_wanted, wanted, ignores_ego, p_m, a_x_a,
                     a_x_d, open_decel, open_gap_m, dt, eps):  # fmt: skip
     """F's acceleration (:func:`follower_kernel`'s element)."""
@@ -161,21 +161,21 @@ _CHAIN_SIGNATURE = types.void(
 )
 
 
-@numba.njit(error_model="numpy", nogil=True)
-def _chain_row(x, v, promise, margin, a_x_d, half, tol, bounds):
-    """One scenario of :func:`chain_kernel` (``x``, ``v``, ``bounds`` ``(K,)``; ``promise``, ``margin`` ``(N,)``):
-    writes ``bounds``, returns ``unsafe``."""
-    k = x.shape[0]
+@row_function
+def _chain_row(x, v, r, promise, margin, col, a_x_d, half, tol, bounds):
+    """One scenario of :func:`chain_kernel`: row ``r`` of ``x``, ``v`` and ``bounds`` (``(., K)``), column ``col`` of
+    ``promise``, ``margin`` (``(N, .)``); writes ``bounds[r]``, returns ``unsafe``."""
+    k = x.shape[1]
     a_ahead = a_x_d
     broken = False
-    bounds[0] = a_x_d
-    bounds[k - 1] = a_x_d
+    bounds[r, 0] = a_x_d
+    bounds[r, k - 1] = a_x_d
     for i in range(k - 3, -1, -1):  # link i: L(i+1) behind L(i+2), slots i+1 and i+2
-        slack = x[i + 2] - x[i + 1] - margin[i]
-        z = _min_follow_decel(slack, v[i + 1], v[i + 2], a_ahead, half, tol)
+        slack = x[r, i + 2] - x[r, i + 1] - margin[i, col]
+        z = _min_follow_decel(slack, v[r, i + 1], v[r, i + 2], a_ahead, half, tol)
         broken = broken | (z > a_x_d)
-        a_ahead = _min(_max(promise[i], z), a_x_d)
-        bounds[i + 1] = a_ahead
+        a_ahead = _min(_max(promise[i, col], z), a_x_d)
+        bounds[r, i + 1] = a_ahead
     return broken
 
 
@@ -185,7 +185,7 @@ def chain_kernel(x, v, promise, margin, a_x_d, half, tol, bounds, unsafe):
     ``L(N+1)`` (``a_x_d``) down to ``L1`` into ``bounds`` (``(B, K)``, F's slot ``a_x_d``) and ``unsafe``.
     ``promise``, ``margin``: ``(N, B)`` rows of the links ``L1..LN``."""
     for b in range(x.shape[0]):
-        unsafe[b] = _chain_row(x[b], v[b], promise[:, b], margin[:, b], a_x_d, half, tol, bounds[b])
+        unsafe[b] = _chain_row(x, v, b, promise, margin, b, a_x_d, half, tol, bounds)
 
 
 def chain_bounds(x, v, promise, margin, prm: Params):
