@@ -202,7 +202,7 @@ def loop_kernel(
         for j in range(window):
             history[j] = 0.0
         count, aggressive, latched, first_collab = 0, True, False, np.nan
-        br = [False, False, False, False]
+        br0 = br1 = br2 = br3 = False
         first_s = np.nan
         has_last = False
         snap_fx = snap_fv = snap_limit = snap_l1d = 0.0
@@ -214,10 +214,10 @@ def loop_kernel(
             if has_last:
                 f0, f1, f2, f3 = _breach_row(snap_x2, snap_v2, snap_b2, 0, x2, 0, 1, nc, snap_l1d, snap_fx, snap_fv,
                                              snap_limit, snap_active, x[0], True, dt, mon_tol)  # fmt: skip
-                new = (f0 and not br[0]) or (f1 and not br[1]) or (f2 and not br[2]) or (f3 and not br[3])
+                new = (f0 and not br0) or (f1 and not br1) or (f2 and not br2) or (f3 and not br3)
                 if first_s != first_s and new:
                     first_s = t
-                br[0], br[1], br[2], br[3] = br[0] or f0, br[1] or f1, br[2] or f2, br[3] or f3
+                br0, br1, br2, br3 = br0 or f0, br1 or f1, br2 or f2, br3 or f3
             if step == n_steps:
                 break
             # --- observe, the expert planner (planners.base.ExpertPlanner), the proposal checked ---
@@ -248,7 +248,7 @@ def loop_kernel(
                 first_collab = t
             l1_decel = bounds[1] if (uses_chain and not unsafe) else a_d
             f_aggr = False if trusted else (aggressive if uses_assess else True)
-            if br[0] or br[1] or br[2] or br[3]:
+            if br0 or br1 or br2 or br3:
                 l1_decel, f_aggr = a_d, True
             a_yh = _clip(-evy / dt, -a_ym, a_ym)
             active = not completed
@@ -334,8 +334,6 @@ def loop_kernel(
             ey1 = ey + evy * dt + 0.5 * ay_cmd * dt * dt
             evy1 = evy + ay_cmd * dt
             # --- the checks (checks.ego_checks, lane_checks) ---
-            for i in range(k):
-                general[i] = False
             p_ymax = _motion_max(kt, ky, kvy) if on_plan else 0.0
             p_xend = kx[7] if on_plan else 0.0
             p_yend = ky[7] if on_plan else 0.0
@@ -347,6 +345,7 @@ def loop_kernel(
             for c in range(k):
                 if not general[c]:
                     continue
+                general[c] = False  # (for the next period)
                 o_t[0], o_t[1], o_t[2] = 0.0, f_ts[c], dt
                 o_x[0], o_x[1], o_x[2] = x[c], f_xe[c], f_xe[c]
                 o_v[0], o_v[1], o_v[2] = v[c], f_ve[c], f_ve[c]
@@ -410,8 +409,7 @@ def loop_kernel(
         out_b[b, 3], out_b[b, 4], out_b[b, 5] = l_collided, l_violated, aggressive
         counts[b, 0], counts[b, 1], counts[b, 2] = n_pro, n_hes, n_abo
         n_invalid[b] = n_inv
-        for j in range(4):
-            breach_flags[b, j] = br[j]
+        breach_flags[b, 0], breach_flags[b, 1], breach_flags[b, 2], breach_flags[b, 3] = br0, br1, br2, br3
         breach_flags[b, 4] = False
         bad_step[b] = bad
 
