@@ -2,16 +2,17 @@
 
 Prints, never asserts (timings depend on the machine and on what else runs on it):
 
-* the kernel's JIT compile time — a fresh process with an empty numba cache (``NUMBA_CACHE_DIR`` a new temporary
-  directory) imports :mod:`safelane.safety._fast`, then a second process loads it from that cache; ``import numba``
-  alone is timed too, since it is part of both;
+* the kernels' JIT compile time — a fresh process with an empty numba cache (``NUMBA_CACHE_DIR`` a new temporary
+  directory) imports the part kernels and runs the fused loop once, then a second process loads both from that
+  cache; ``import numba`` alone is timed too, since it is part of both;
 * ``evasion_exists`` checks/s at batch 10^6 (``bench_safety``'s realistic states) on the NumPy path
   (``SAFELANE_NO_NUMBA=1``) and on the kernel, through the public function (input validation included), the two
   interleaved, best of ``--repeat`` rounds each, with the verdicts compared; beside the wall-clock rate, the rate
   per CPU second of this process (on a shared machine the wall clock also counts time the process waited);
-* the closed-loop simulator's vehicle-steps/s at N = 3, batch 10^4 (``bench_sim``'s setting), with and without
-  ``SAFELANE_NO_NUMBA`` interleaved (the simulator's shield calls ``evasion_core`` for its plans, not
-  ``evasion_exists``, so the two are expected to match).
+* the closed-loop simulator's vehicle-steps/s at N = 3, batch 10^4 (``bench_sim``'s setting) on three paths,
+  interleaved, with their tables compared: the NumPy path (``SAFELANE_NO_NUMBA=1``), the loop period by period with
+  its part kernels (``SAFELANE_NO_FUSED=1``: the previous implementation) and the fused loop (the default,
+  ``sim/_fast_loop.py``); then the period-by-period paths' time part by part.
 
 The pass/MISS words compare the rate per CPU second with the target (a one-core figure that a loaded machine
 does not halve); the wall-clock rate is printed beside it.
@@ -49,28 +50,32 @@ TARGET_CHECKS = 6e6  # checks/s at batch 1e6, one core
 TARGET_SIM = 15e6  # vehicle-steps/s at N = 3, batch 1e4, one core
 _COMPILE = """
 import time
+import numpy as np
 import safelane.safety
 t0 = time.perf_counter()
 import numba
 t1 = time.perf_counter()
 from safelane.safety import _fast, _fast_plan
 from safelane.shield import _fast_decide, _fast_monitor
-from safelane.sim import _fast_traffic
+from safelane.sim import _fast_checks, _fast_traffic, paper_scenarios, simulate_batch
 t2 = time.perf_counter()
-print(t1 - t0, t2 - t1)
+simulate_batch(paper_scenarios("CV_all", 3, 5.0, 64, np.random.default_rng(0)))  # compiles the fused loop
+t3 = time.perf_counter()
+print(t1 - t0, t2 - t1, t3 - t2)
 """
 
 
-def compile_times() -> tuple[float, float, float]:
-    """``(import numba, compile with an empty cache, load from the cache)`` in seconds, each in a fresh process: every
-    kernel module (the evasion check, the plan, the candidate check, the monitor, the traffic)."""
+def compile_times() -> tuple[float, float, float, float, float]:
+    """``(import numba, part kernels with an empty cache, part kernels from the cache, fused loop with an empty cache,
+    fused loop from the cache)`` in seconds, each in a fresh process (the part kernels compile at import; the fused
+    loop at its first run, here 64 scenarios)."""
     with tempfile.TemporaryDirectory() as cache:
         env = dict(os.environ, NUMBA_CACHE_DIR=cache)
         runs = []
         for _ in range(2):
             out = subprocess.run([sys.executable, "-c", _COMPILE], env=env, capture_output=True, text=True, check=True)
             runs.append([float(x) for x in out.stdout.split()])
-    return runs[1][0], runs[0][1], runs[1][1]
+    return runs[1][0], runs[0][1], runs[1][1], runs[0][2], runs[1][2]
 
 
 def timed(fn) -> tuple[float, float]:
@@ -95,17 +100,21 @@ def _same(a, b) -> bool:
     return np.array_equal(a, b, equal_nan=a.dtype.kind in "fc")
 
 
-def numpy_path(fn):
-    """``fn`` with ``SAFELANE_NO_NUMBA=1`` (the NumPy reference path)."""
+def with_env(fn, name: str = "SAFELANE_NO_NUMBA"):
+    """``fn`` with ``name=1``: ``SAFELANE_NO_NUMBA`` the NumPy reference path, ``SAFELANE_NO_FUSED`` the closed loop
+    period by period with its part kernels (the previous implementation)."""
 
     def call():
-        os.environ["SAFELANE_NO_NUMBA"] = "1"
+        os.environ[name] = "1"
         try:
             return fn()
         finally:
-            del os.environ["SAFELANE_NO_NUMBA"]
+            del os.environ[name]
 
     return call
+
+
+numpy_path = with_env
 
 
 #: The closed loop's parts timed separately: (label, module, class or None, attribute) of the functions wrapped with
@@ -167,10 +176,11 @@ def main(argv=None) -> None:
     else:
         import numba
 
-        numba_import, cold, warm = compile_times()
+        numba_import, cold, warm, loop_cold, loop_warm = compile_times()
         print(
-            f"kernel (numba {numba.__version__}): compile {cold:.2f} s with an empty cache, {warm:.2f} s loaded from "
-            f"the cache (cache=True); import numba itself {numba_import:.2f} s"
+            f"kernels (numba {numba.__version__}): the part kernels compile in {cold:.2f} s with an empty cache, "
+            f"{warm:.2f} s loaded from the cache (cache=True); the fused loop in {loop_cold:.2f} s, {loop_warm:.2f} s "
+            f"from the cache (first run of 64 scenarios included); import numba itself {numba_import:.2f} s"
         )
 
     with threadpool_limits(1):
@@ -196,26 +206,33 @@ def main(argv=None) -> None:
         batch = paper_scenarios("CV_all", 3, 5.0, n_sim, np.random.default_rng(3))
         work = (3 + 3) * steps * n_sim
         run = lambda: simulate_batch(batch, seed=0, params=prm, config=cfg).table  # noqa: E731
-        tables = [run(), numpy_path(run)()]
-        identical = all(_same(tables[0][k], tables[1][k]) for k in tables[0])
-        best = interleaved({"NumPy path": numpy_path(run), "default": run}, repeat)
-        print(f"\nsimulate_batch, CV_all, N = 3, batch {n_sim:,}, {steps} steps; results identical: {identical}")
+        periods = with_env(run, "SAFELANE_NO_FUSED")
+        tables = [run(), periods(), numpy_path(run)()]
+        identical = all(_same(t[k], tables[0][k]) for t in tables[1:] for k in tables[0])
+        paths = {"NumPy path": numpy_path(run), "per period": periods, "fused loop": run}
+        best = interleaved(paths, repeat)
+        print(
+            f"\nsimulate_batch, CV_all, N = 3, batch {n_sim:,}, {steps} steps; results identical on the three paths: "
+            f"{identical}"
+        )
         for name, (w, c) in best.items():
             mark = "pass" if work / c >= TARGET_SIM else "MISS"
+            ratio = "" if name == "NumPy path" else f"   {best['NumPy path'][1] / c:4.2f}x CPU"
             print(
                 f"  {name:<11} {work / w / 1e6:6.2f} M vehicle-steps/s wall ({w:5.2f} s), {work / c / 1e6:6.2f} M per "
-                f"CPU s   target >= {TARGET_SIM / 1e6:g} M: {mark}"
+                f"CPU s{ratio}   target >= {TARGET_SIM / 1e6:g} M: {mark}"
             )
-        # Where the time goes, part by part (one more run of each path, CPU seconds, timers included)
+        # Where the period-by-period path's time goes, part by part (one more run of each path, CPU seconds, timers
+        # included; the fused loop has no parts to time)
         numpy_parts, numpy_total = part_times(numpy_path(run))
-        parts, total = part_times(run) if kernel is not None else (numpy_parts, numpy_total)
-        print(f"\n  {'part (CPU s per run)':<48} {'NumPy path':>10} {'default':>9} {'ratio':>7}")
+        parts, total = part_times(periods) if kernel is not None else (numpy_parts, numpy_total)
+        print(f"\n  {'part (CPU s per run)':<48} {'NumPy path':>10} {'per period':>10} {'ratio':>7}")
         rows = [*((label, numpy_parts[label], parts[label]) for label, *_ in PARTS)]
         rows.append(("the rest (nominal planner, observation, glue)", numpy_total - sum(numpy_parts.values()),
                      total - sum(parts.values())))  # fmt: skip
         rows.append(("whole run", numpy_total, total))
         for label, a, b in rows:
-            print(f"  {label:<48} {a:10.3f} {b:9.3f} {a / b:6.2f}x")
+            print(f"  {label:<48} {a:10.3f} {b:10.3f} {a / b:6.2f}x")
     load = os.getloadavg()
     print(f"\nload average at the end: {load[0]:.1f} {load[1]:.1f} {load[2]:.1f} on {os.cpu_count()} logical CPUs")
 

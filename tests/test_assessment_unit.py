@@ -8,6 +8,8 @@ switches to "collaborative" unless latched; the belief is kept otherwise; the fi
 
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 import pytest
 
@@ -120,3 +122,28 @@ def test_first_collaborative_time_is_kept_once_set():
     assert not state.aggressive[0]
     flat = assess.update(state, np.array([speeds[0, -1]] * 1), 9.0, dt, 0.2)  # a cruise period: belief kept
     assert not flat.aggressive[0] and flat.first_collaborative_s[0] == state.first_collaborative_s[0]
+
+
+def test_the_slope_is_summed_left_to_right_whatever_the_layout_of_the_history():
+    """The slope's dot products in a fixed order (``assessment._dot``): the same bits as plain Python's left-to-right
+    sum, for a C- and an F-ordered history alike (a BLAS product rounds differently by layout, build and CPU, which
+    made the belief at its threshold machine-dependent; the compiled loop sums in this order too)."""
+    rng = np.random.default_rng(5)
+    history = rng.uniform(0.0, 40.0, (500, 5))
+    times = (np.arange(5) - 2.0) * 0.1
+    expected = []
+    for row in history:
+        total = row[0] * times[0]
+        for h, w in zip(row[1:], times[1:], strict=True):
+            total = total + h * w
+        expected.append(total)
+    for layout in (np.ascontiguousarray(history), np.asfortranarray(history)):
+        assert np.array_equal(assess._dot(layout, times), np.array(expected))
+    state = dataclasses.replace(assess.AssessmentState.start(500, 5), count=np.full(500, 9))  # a full window
+    c_order = assess.update(dataclasses.replace(state, history=np.ascontiguousarray(history)), history[:, 0], 1.0,
+                            0.1, 0.2)  # fmt: skip
+    f_order = assess.update(dataclasses.replace(state, history=np.asfortranarray(history)), history[:, 0], 1.0, 0.1,
+                            0.2)  # fmt: skip
+    assert all(np.array_equal(getattr(c_order, f), getattr(f_order, f), equal_nan=f.endswith("_s"))
+               for f in ("aggressive", "latched", "first_collaborative_s"))  # fmt: skip
+    assert c_order.latched.any() and not c_order.aggressive.all()  # both kinds of evidence occur

@@ -18,6 +18,7 @@ from test_fast_core import needs_numba, period_by_period  # noqa: F401 (a fixtur
 pytestmark = pytest.mark.usefixtures("period_by_period")
 
 
+
 def _tables(monkeypatch, batch, cfg, params=None, traffic=None):
     """``(kernel's table, NumPy path's table, kernel calls with the kernel, kernel calls with the switch)``."""
     from safelane.sim import _fast_checks

@@ -15,9 +15,9 @@ from safelane import Params
 from safelane.shield import monitor
 from safelane.shield.monitor import BREACH_KINDS, Breach, observe_breaches, predicted_positions
 from test_fast_core import needs_numba, period_by_period  # noqa: F401 (a fixture)
+from test_monitor_unit import OFFSETS, _snapshot
 
 pytestmark = pytest.mark.usefixtures("period_by_period")
-from test_monitor_unit import OFFSETS, _snapshot
 
 PRM = Params()
 

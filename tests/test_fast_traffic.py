@@ -18,6 +18,7 @@ from test_fast_core import needs_numba, period_by_period  # noqa: F401 (a fixtur
 
 pytestmark = pytest.mark.usefixtures("period_by_period")
 
+
 PRM = Params()
 
 

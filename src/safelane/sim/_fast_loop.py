@@ -32,15 +32,15 @@ from ..planners.base import ExpertPlanner
 from ..planners.variants import VARIANT_NAMES, VARIANTS
 from ..safety._backend import FEASIBILITY_TOL_M
 from ..safety._fast import _ego_position
-from ..safety._fast_base import _braked, _max, _min, _stop_time
+from ..safety._fast_base import _max, _min, _stop_time
 from ..safety._fast_responsible import _min_follow_decel, _responsible_bound
 from ..safety.lateral import LATERAL_TOL_M
 from ..safety.responsible import ROOT_EPS_MPS2
-from ..shield.decide import ABORT, COMPLETED, HESITATE, PROCEED
-from ..shield.monitor import BREACH_KINDS, TOL_M, Breach
 from ..shield._fast_decide import _candidate
 from ..shield._fast_monitor import _breach_row
-from ._fast_checks import _ego_row, _free_max, _general_pair, _lane_row
+from ..shield.decide import ABORT, COMPLETED, HESITATE, PROCEED
+from ..shield.monitor import BREACH_KINDS, TOL_M, Breach
+from ._fast_checks import _ego_row, _general_pair, _lane_row
 from ._fast_traffic import _chain_row, _follower_accel, _leader_accel, _responsible_accel
 
 _INF = np.inf
@@ -171,8 +171,10 @@ def loop_kernel(
     general2 = np.zeros((1, k), np.bool_)
     general = general2[0]
     consts = (dt, p_m, a_lim, conflict, overlap, length, max_level)
+    fleet = (x2, v2, f_acc2, f_ts2, f_xe2)  # (built once: a tuple of arrays costs reference counts each time)
     plan = np.empty(plan_init.shape[1])
-    kt, kx, kv, ky, kvy, kax, kay = np.empty(8), np.empty(8), np.empty(8), np.empty(8), np.empty(8), np.empty(8), np.empty(8)
+    knots = np.empty((7, 8))  # the held plan's period: knots, samples, segment accelerations (_plan_motion)
+    kt, kx, kv, ky, kvy, kax, kay = knots[0], knots[1], knots[2], knots[3], knots[4], knots[5], knots[6]
     scratch = np.empty(64)
     lon_t, lon_x, lon_v, lon_a = np.empty(3), np.empty(3), np.empty(3), np.empty(2)
     lat_t, lat_x, lat_v, lat_a = np.empty(2), np.empty(2), np.empty(2), np.empty(1)
@@ -279,7 +281,8 @@ def loop_kernel(
                         plan[0], plan[1], plan[2], plan[3] = state[0], state[1], state[2], state[3]
                         plan[4], plan[5], plan[6] = state[4], state[5], l1_decel
                         plan[7], plan[8], plan[9] = parts[5], parts[6], parts[7]
-                        plan[10], plan[11], plan[12], plan[13], plan[14] = parts[0], parts[1], parts[2], parts[3], parts[4]
+                        for j in range(5):
+                            plan[10 + j] = parts[j]
                         follows = bits[4]
                         plan_f_aggr = f_aggr
                         break
@@ -339,7 +342,7 @@ def loop_kernel(
             p_yend = ky[7] if on_plan else 0.0
             hit, close, gap_f, gap_l1 = _ego_row(
                 valid, b, x2, v2, 0, (ex, evx), (ex, evx, l_acc, l_ts, l_xe), (ey, evy, ay_cmd, ey1),
-                (on_plan, p_ymax, p_xend, p_yend), (x2, v2, f_acc2, f_ts2, f_xe2), row_acc, consts, (gap_f, gap_l1),
+                (on_plan, p_ymax, p_xend, p_yend), fleet, row_acc, consts, (gap_f, gap_l1),
                 general2,
             )  # fmt: skip
             for c in range(k):
@@ -444,12 +447,10 @@ def run(sim, n_steps: int):
     """The final :class:`~.step.SimState`'s fields that :func:`~.results.results_table` reads, from
     :func:`loop_kernel` on :class:`~.step.ClosedLoop` ``sim``'s arrays."""
     from ..shield.policies import variant_flags
-    from ..sim.traffic import TRAFFIC_MODELS
 
     b, prm, cfg, nominal = sim.b, sim.prm, sim.cfg, sim.nominal
     start = sim.initial_state()
-    traffic = sim.traffic_step
-    assert isinstance(traffic, type(TRAFFIC_MODELS["paper"].bind(b, sim.seed, prm, cfg)))
+    traffic = sim.traffic_step  # the paper's, bound to the batch (fused_loop covers no other)
     n = len(b)
     conflict = prm.y_safe + LATERAL_TOL_M
     overlap = prm.lane_width - prm.vehicle_width

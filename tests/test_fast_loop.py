@@ -1,0 +1,167 @@
+"""The compiled closed loop (:mod:`safelane.sim._fast_loop`, numba) against the loop period by period: the same
+per-scenario table, column for column and bit for bit, as the period-by-period path with its part kernels
+(``SAFELANE_NO_FUSED=1``) and as the NumPy path (``SAFELANE_NO_NUMBA=1``), on batches that exercise every branch
+(the four variants, aggressive and collaborative F, hesitations, aborts on the held plan, completions, breaches of
+the assumptions, human-driven leaders), with non-default parameters, settings and planner; the dispatch (the loop
+runs exactly where it covers the settings) and its failure path."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from safelane import Params
+from safelane.planners.base import ExpertPlanner
+from safelane.sim import SimConfig, ScenarioConfig, concat, engine, paper_scenarios, simulate_batch
+from test_fast_core import needs_numba
+
+pytestmark = needs_numba
+
+VARIANTS = ("CV_all", "CV_follow", "CV_none", "No_agg_assess")
+MIXED_F = ScenarioConfig(follower_connected_share=0.5)  # non-connected followers, half of them aggressive
+
+
+def _mixed(n_leaders, decel, per_variant=120, scenario=MIXED_F, seed=0):
+    return concat([paper_scenarios(v, n_leaders, decel, per_variant, np.random.default_rng(100 * seed + k), scenario,
+                                   first_id=1000 * k) for k, v in enumerate(VARIANTS)])  # fmt: skip
+
+
+def _three_paths(monkeypatch, batch, **kwargs):
+    """``(fused, period by period, NumPy path)`` tables, and how often the fused loop ran."""
+    from safelane.sim import _fast_loop
+
+    calls = []
+    real = _fast_loop.run
+    monkeypatch.setattr(_fast_loop, "run", lambda *a: calls.append(1) or real(*a))
+    for name in ("SAFELANE_NO_NUMBA", "SAFELANE_NO_FUSED"):
+        monkeypatch.delenv(name, raising=False)
+    fused = simulate_batch(batch, seed=4, **kwargs).table
+    monkeypatch.setenv("SAFELANE_NO_FUSED", "1")
+    periods = simulate_batch(batch, seed=4, **kwargs).table
+    monkeypatch.setenv("SAFELANE_NO_NUMBA", "1")
+    reference = simulate_batch(batch, seed=4, **kwargs).table
+    return fused, periods, reference, len(calls)
+
+
+CASES = {
+    "N = 3, a_N+1 = 5": (lambda: _mixed(3, 5.0), {}),
+    "N = 1, a_N+1 = 9 > a_x_d (breaches)": (lambda: _mixed(1, 9.0, seed=1), {}),
+    "N = 5, a_N+1 = 3, human-driven leaders": (lambda: _mixed(5, 3.0, scenario=ScenarioConfig(follower_connected_share=0.5, human_share=0.5)), {}),
+    "other parameters, settings and planner": (
+        lambda: _mixed(2, 6.0, seed=2),
+        dict(
+            params=Params(a_x_a=2.0, a_x_d=7.0, a_y_m=1.2, p_m=6.0, p_m_human=9.0),
+            config=SimConfig(horizon_s=6.0, brake_start_s=0.7, assess_window=7, assess_threshold=0.3,
+                             follower_open_decel=1.0, follower_open_gap_m=5.0, l1_plan_steps=4),
+            nominal=ExpertPlanner(k_p=0.4, k_v=0.6, omega=0.8, gap_fraction=0.3, brake_comfort=3.0),
+        ),
+    ),  # fmt: skip
+}
+
+
+@pytest.mark.filterwarnings("ignore:a_x_N\\+1_d")
+@pytest.mark.parametrize("case", list(CASES))
+def test_the_fused_loop_gives_the_numpy_paths_table_bit_for_bit(monkeypatch, case):
+    make, kwargs = CASES[case]
+    batch = make()
+    fused, periods, reference, calls = _three_paths(monkeypatch, batch, **kwargs)
+    assert calls == 1
+    assert fused.equals(periods) and fused.equals(reference), case
+    # the batch exercises what the loop holds: every behaviour, completions, the assessment's verdicts
+    assert (reference[["n_proceed", "n_hesitate", "n_abort"]].sum() > 0).all()
+    assert reference["assessed_aggressive"].any() and not reference["assessed_aggressive"].all()
+    if "breaches" in case:  # L(N+1) beyond a_x_d: the monitor's flags; no gap is left to complete into
+        assert reference["assumption_breach"].any() and reference["breach_time_s"].notna().any()
+    else:
+        assert reference["completed"].any() and not reference["completed"].all()
+
+
+def test_progress_runs_the_fused_loop_in_chunks_with_the_same_table(monkeypatch):
+    from safelane.sim import _fast_loop
+
+    batch = _mixed(3, 5.0, per_variant=40)
+    monkeypatch.delenv("SAFELANE_NO_NUMBA", raising=False)
+    whole = simulate_batch(batch, seed=1).table
+    calls = []
+    real = _fast_loop.run
+    monkeypatch.setattr(_fast_loop, "run", lambda *a: calls.append(1) or real(*a))
+    monkeypatch.setattr(engine, "PROGRESS_CHUNK", 50)
+    chunked = simulate_batch(batch, seed=1, progress=True).table
+    assert len(calls) == 4  # 160 scenarios in chunks of at most 50
+    assert chunked.equals(whole)
+
+
+def _covers(batch, cfg=None, nominal=None, traffic=None, trace=False, record=False):
+    return engine.fused_loop(batch, Params(), cfg or SimConfig(), nominal or ExpertPlanner(), traffic, trace, record)
+
+
+def test_the_fused_loop_covers_the_default_settings_from_its_threshold_on(monkeypatch):
+    from safelane.sim import _fast_loop
+
+    monkeypatch.delenv("SAFELANE_NO_NUMBA", raising=False)
+    monkeypatch.delenv("SAFELANE_NO_FUSED", raising=False)
+    rows = _fast_loop.FUSED_MIN_ROWS
+    assert _covers(paper_scenarios("CV_all", 3, 5.0, rows, np.random.default_rng(0))) is _fast_loop
+    assert _covers(paper_scenarios("CV_all", 3, 5.0, rows - 1, np.random.default_rng(0))) is None
+    batch = paper_scenarios("CV_all", 3, 5.0, rows, np.random.default_rng(0))
+    for name in ("SAFELANE_NO_FUSED", "SAFELANE_NO_NUMBA"):
+        monkeypatch.setenv(name, "1")
+        assert _covers(batch) is None, name
+        monkeypatch.delenv(name)
+
+
+UNCOVERED = {
+    "own lane": dict(cfg=SimConfig(own_lane=True)),
+    "sensing errors": dict(cfg=SimConfig(sensing_error=True)),
+    "actuation delay": dict(cfg=SimConfig(actuation_delay_s=0.1)),
+    "V2X loss": dict(cfg=SimConfig(v2x_loss=0.1)),
+    "V2X latency": dict(cfg=SimConfig(v2x_latency_periods=1)),
+    "sensor noise": dict(cfg=SimConfig(sensor_noise_std=0.1)),
+    "unsupervised": dict(cfg=SimConfig(supervised=False)),
+    "reactive leaders": dict(cfg=SimConfig(leader_rule="reactive")),
+    "paper completion": dict(cfg=SimConfig(completion="paper_evasion")),
+    "true assessment": dict(cfg=SimConfig(assessment="truth")),
+    "slow assessment": dict(cfg=SimConfig(assessment="slow")),
+    "monitor off": dict(cfg=SimConfig(monitor=False)),
+    "F ignores the ego": dict(cfg=SimConfig(follower_ignores_ego=True)),
+    "a traffic model": dict(traffic="paper"),
+    "another planner": dict(nominal=lambda obs, prm: (np.zeros(len(obs.p_x)), np.zeros(len(obs.p_x)))),
+    "a subclass of the expert": dict(nominal=type("Mine", (ExpertPlanner,), {})()),
+    "a trace": dict(trace=True),
+    "recorded observations": dict(record=True),
+}
+
+
+@pytest.mark.parametrize("case", list(UNCOVERED))
+def test_the_fused_loop_leaves_every_other_setting_to_the_period_by_period_path(monkeypatch, case):
+    monkeypatch.delenv("SAFELANE_NO_NUMBA", raising=False)
+    monkeypatch.delenv("SAFELANE_NO_FUSED", raising=False)
+    batch = paper_scenarios("CV_all", 3, 5.0, 80, np.random.default_rng(0))
+    assert _covers(batch, **UNCOVERED[case]) is None
+
+
+def test_the_fused_loop_leaves_violations_profiles_and_other_rules_to_the_period_by_period_path(monkeypatch):
+    from safelane.sim.traffic import with_last_profile
+
+    monkeypatch.delenv("SAFELANE_NO_NUMBA", raising=False)
+    monkeypatch.delenv("SAFELANE_NO_FUSED", raising=False)
+    rng = np.random.default_rng(0)
+    assert _covers(paper_scenarios("CV_all", 3, 5.0, 80, rng, p_v=0.1)) is None
+    batch = paper_scenarios("CV_all", 3, 5.0, 80, rng)
+    profiled = with_last_profile(batch, np.tile([0.0, 1.0], (80, 1)), np.tile([0.0, -5.0], (80, 1)))
+    assert _covers(profiled) is None
+    rss = concat([batch, paper_scenarios("RSS", 3, 5.0, 10, rng, first_id=500)])
+    assert _covers(rss) is None
+
+
+def test_a_non_finite_state_raises_naming_the_scenarios_as_the_period_by_period_path(monkeypatch):
+    from safelane.planners.base import ExpertPlanner as Expert
+    from safelane.sim import _fast_loop
+    from safelane.sim.step import ClosedLoop
+
+    monkeypatch.delenv("SAFELANE_NO_NUMBA", raising=False)
+    batch = paper_scenarios("CV_all", 3, 5.0, 70, np.random.default_rng(0), first_id=300)
+    sim = ClosedLoop(batch, 0, Params(), SimConfig(), Expert())
+    sim.b.v[5, 2] = np.inf  # past the batch's validation: what a bug in a behaviour would leave
+    with pytest.raises(FloatingPointError, match=r"scenario\(s\) \[305\]"):
+        _fast_loop.run(sim, 100)
