@@ -427,12 +427,14 @@ def fused_loop(batch, prm: Params, cfg, nominal, traffic, trace: bool, record_ob
         return None
     if type(nominal) is not ExpertPlanner:
         return None
-    defaults = dict(
-        brake_start_s=cfg.brake_start_s, assessment="observed", completion="commit_guard", sensor_noise_std=0.0,
-        supervised=True, v2x_loss=0.0, v2x_latency_periods=0, leader_rule="worst_case", follower_ignores_ego=False,
-        monitor=True, own_lane=False, sensing_error=False, actuation_delay_s=0.0,
+    # The settings the loop implements; the others it reads from cfg (horizon, brake start, the assessment's window
+    # and threshold, F's gap opening) or that only matter with one of these changed.
+    covered = dict(
+        assessment="observed", completion="commit_guard", sensor_noise_std=0.0, supervised=True, v2x_loss=0.0,
+        v2x_latency_periods=0, leader_rule="worst_case", follower_ignores_ego=False, monitor=True, own_lane=False,
+        sensing_error=False, actuation_delay_s=0.0,
     )  # fmt: skip
-    if any(getattr(cfg, name) != value for name, value in defaults.items()):
+    if any(getattr(cfg, name) != value for name, value in covered.items()):
         return None
     if batch.l0_x is not None or batch.last_profile_t is not None or (batch.p_v > 0.0).any():
         return None
