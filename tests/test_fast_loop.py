@@ -12,7 +12,7 @@ import pytest
 
 from safelane import Params
 from safelane.planners.base import ExpertPlanner
-from safelane.sim import SimConfig, ScenarioConfig, concat, engine, paper_scenarios, simulate_batch
+from safelane.sim import ScenarioConfig, SimConfig, concat, engine, paper_scenarios, simulate_batch
 from test_fast_core import needs_numba
 
 pytestmark = needs_numba
@@ -46,16 +46,21 @@ def _three_paths(monkeypatch, batch, **kwargs):
 CASES = {
     "N = 3, a_N+1 = 5": (lambda: _mixed(3, 5.0), {}),
     "N = 1, a_N+1 = 9 > a_x_d (breaches)": (lambda: _mixed(1, 9.0, seed=1), {}),
-    "N = 5, a_N+1 = 3, human-driven leaders": (lambda: _mixed(5, 3.0, scenario=ScenarioConfig(follower_connected_share=0.5, human_share=0.5)), {}),
+    "N = 5, a_N+1 = 3, human-driven leaders": (
+        lambda: _mixed(5, 3.0, scenario=ScenarioConfig(follower_connected_share=0.5, human_share=0.5)),
+        {},
+    ),
     "other parameters, settings and planner": (
         lambda: _mixed(2, 6.0, seed=2),
         dict(
             params=Params(a_x_a=2.0, a_x_d=7.0, a_y_m=1.2, p_m=6.0, p_m_human=9.0),
-            config=SimConfig(horizon_s=6.0, brake_start_s=0.7, assess_window=7, assess_threshold=0.3,
-                             follower_open_decel=1.0, follower_open_gap_m=5.0, l1_plan_steps=4),
+            config=SimConfig(
+                horizon_s=6.0, brake_start_s=0.7, assess_window=7, assess_threshold=0.3, follower_open_decel=1.0,
+                follower_open_gap_m=5.0, l1_plan_steps=4,
+            ),
             nominal=ExpertPlanner(k_p=0.4, k_v=0.6, omega=0.8, gap_fraction=0.3, brake_comfort=3.0),
         ),
-    ),  # fmt: skip
+    ),
 }
 
 
