@@ -1,9 +1,9 @@
-"""The compiled closed loop (:mod:`safelane.sim._fast_loop`, numba) against the loop period by period: the same
-per-scenario table, column for column and bit for bit, as the period-by-period path with its part kernels
-(``SAFELANE_NO_FUSED=1``) and as the NumPy path (``SAFELANE_NO_NUMBA=1``), on batches that exercise every branch
-(the four variants, aggressive and collaborative F, hesitations, aborts on the held plan, completions, breaches of
-the assumptions, human-driven leaders), with non-default parameters, settings and planner; the dispatch (the loop
-runs exactly where it covers the settings) and its failure path."""
+"""The compiled closed loop (:mod:`safelane.sim._fast_loop`, numba; its Python side :mod:`safelane.sim._fused`) against
+the loop period by period: the same per-scenario table, column for column and bit for bit, as the period-by-period
+path with its part kernels (``SAFELANE_NO_FUSED=1``) and as the NumPy path (``SAFELANE_NO_NUMBA=1``), on batches
+that exercise every branch (the four variants, aggressive and collaborative F, hesitations, aborts on the held plan,
+completions, breaches of the assumptions, human-driven leaders), with non-default parameters, settings and planner;
+the dispatch (the loop runs exactly where it covers the settings) and its failure path."""
 
 from __future__ import annotations
 
@@ -12,7 +12,7 @@ import pytest
 
 from safelane import Params
 from safelane.planners.base import ExpertPlanner
-from safelane.sim import ScenarioConfig, SimConfig, concat, engine, paper_scenarios, simulate_batch
+from safelane.sim import ScenarioConfig, SimConfig, _fused, concat, paper_scenarios, simulate_batch
 from test_fast_core import needs_numba
 
 pytestmark = needs_numba
@@ -28,11 +28,9 @@ def _mixed(n_leaders, decel, per_variant=120, scenario=MIXED_F, seed=0):
 
 def _three_paths(monkeypatch, batch, **kwargs):
     """``(fused, period by period, NumPy path)`` tables, and how often the fused loop ran."""
-    from safelane.sim import _fast_loop
-
     calls = []
-    real = _fast_loop.run
-    monkeypatch.setattr(_fast_loop, "run", lambda *a: calls.append(1) or real(*a))
+    real = _fused.run_chunk
+    monkeypatch.setattr(_fused, "run_chunk", lambda *a: calls.append(1) or real(*a))
     for name in ("SAFELANE_NO_NUMBA", "SAFELANE_NO_FUSED"):
         monkeypatch.delenv(name, raising=False)
     fused = simulate_batch(batch, seed=4, **kwargs).table
@@ -82,36 +80,32 @@ def test_the_fused_loop_gives_the_numpy_paths_table_bit_for_bit(monkeypatch, cas
 
 
 def test_progress_runs_the_fused_loop_in_chunks_with_the_same_table(monkeypatch):
-    from safelane.sim import _fast_loop
-
     batch = _mixed(3, 5.0, per_variant=40)
     monkeypatch.delenv("SAFELANE_NO_NUMBA", raising=False)
     whole = simulate_batch(batch, seed=1).table
     calls = []
-    real = _fast_loop.run
-    monkeypatch.setattr(_fast_loop, "run", lambda *a: calls.append(1) or real(*a))
-    monkeypatch.setattr(engine, "PROGRESS_CHUNK", 50)
+    real = _fused.run_chunk
+    monkeypatch.setattr(_fused, "run_chunk", lambda *a: calls.append(1) or real(*a))
+    monkeypatch.setattr(_fused, "PROGRESS_CHUNK", 50)
     chunked = simulate_batch(batch, seed=1, progress=True).table
     assert len(calls) == 4  # 160 scenarios in chunks of at most 50
     assert chunked.equals(whole)
 
 
 def _covers(batch, cfg=None, nominal=None, traffic=None, trace=False, record=False):
-    return engine.fused_loop(batch, Params(), cfg or SimConfig(), nominal or ExpertPlanner(), traffic, trace, record)
+    return _fused.covers(batch, cfg or SimConfig(), nominal or ExpertPlanner(), traffic, trace, record)
 
 
 def test_the_fused_loop_covers_the_default_settings_from_its_threshold_on(monkeypatch):
-    from safelane.sim import _fast_loop
-
     monkeypatch.delenv("SAFELANE_NO_NUMBA", raising=False)
     monkeypatch.delenv("SAFELANE_NO_FUSED", raising=False)
-    rows = _fast_loop.FUSED_MIN_ROWS
-    assert _covers(paper_scenarios("CV_all", 3, 5.0, rows, np.random.default_rng(0))) is _fast_loop
-    assert _covers(paper_scenarios("CV_all", 3, 5.0, rows - 1, np.random.default_rng(0))) is None
+    rows = _fused.FUSED_MIN_ROWS
+    assert _covers(paper_scenarios("CV_all", 3, 5.0, rows, np.random.default_rng(0)))
+    assert not _covers(paper_scenarios("CV_all", 3, 5.0, rows - 1, np.random.default_rng(0)))
     batch = paper_scenarios("CV_all", 3, 5.0, rows, np.random.default_rng(0))
     for name in ("SAFELANE_NO_FUSED", "SAFELANE_NO_NUMBA"):
         monkeypatch.setenv(name, "1")
-        assert _covers(batch) is None, name
+        assert not _covers(batch), name
         monkeypatch.delenv(name)
 
 
@@ -142,7 +136,7 @@ def test_the_fused_loop_leaves_every_other_setting_to_the_period_by_period_path(
     monkeypatch.delenv("SAFELANE_NO_NUMBA", raising=False)
     monkeypatch.delenv("SAFELANE_NO_FUSED", raising=False)
     batch = paper_scenarios("CV_all", 3, 5.0, 80, np.random.default_rng(0))
-    assert _covers(batch, **UNCOVERED[case]) is None
+    assert not _covers(batch, **UNCOVERED[case])
 
 
 def test_the_fused_loop_leaves_violations_profiles_and_other_rules_to_the_period_by_period_path(monkeypatch):
@@ -151,17 +145,16 @@ def test_the_fused_loop_leaves_violations_profiles_and_other_rules_to_the_period
     monkeypatch.delenv("SAFELANE_NO_NUMBA", raising=False)
     monkeypatch.delenv("SAFELANE_NO_FUSED", raising=False)
     rng = np.random.default_rng(0)
-    assert _covers(paper_scenarios("CV_all", 3, 5.0, 80, rng, p_v=0.1)) is None
+    assert not _covers(paper_scenarios("CV_all", 3, 5.0, 80, rng, p_v=0.1))
     batch = paper_scenarios("CV_all", 3, 5.0, 80, rng)
     profiled = with_last_profile(batch, np.tile([0.0, 1.0], (80, 1)), np.tile([0.0, -5.0], (80, 1)))
-    assert _covers(profiled) is None
+    assert not _covers(profiled)
     rss = concat([batch, paper_scenarios("RSS", 3, 5.0, 10, rng, first_id=500)])
-    assert _covers(rss) is None
+    assert not _covers(rss)
 
 
 def test_a_non_finite_state_raises_naming_the_scenarios_as_the_period_by_period_path(monkeypatch):
     from safelane.planners.base import ExpertPlanner as Expert
-    from safelane.sim import _fast_loop
     from safelane.sim.step import ClosedLoop
 
     monkeypatch.delenv("SAFELANE_NO_NUMBA", raising=False)
@@ -169,4 +162,4 @@ def test_a_non_finite_state_raises_naming_the_scenarios_as_the_period_by_period_
     sim = ClosedLoop(batch, 0, Params(), SimConfig(), Expert())
     sim.b.v[5, 2] = np.inf  # past the batch's validation: what a bug in a behaviour would leave
     with pytest.raises(FloatingPointError, match=r"scenario\(s\) \[305\]"):
-        _fast_loop.run(sim, 100)
+        _fused.run(sim, 100)

@@ -2,45 +2,34 @@
 
 :func:`loop_kernel` runs a whole batch, scenario by scenario, period by period, with the state held in scalars and
 small per-scenario arrays — no per-period NumPy arrays, no Python between the parts. One period is
-:meth:`~.step.ClosedLoop.step` for the settings it covers (:func:`fused_loop` says which): observe, the expert
+:meth:`~.step.ClosedLoop.step` for the settings it covers (:func:`._fused.covers` says which): observe, the expert
 planner, the chain analysis, **the shield** (:func:`safelane.shield.core.step`: the observed assessment, the
 assumption monitor, proceed / hesitate / abort with the commit guard, the held plan, the responsible follow after
 completion), the paper's traffic with the worst-case leader rule, the exact motion and the continuous-time checks.
 It is built from the row functions of the part kernels (``_candidate``, ``_breach_row``, ``_chain_row``,
 ``_leader_accel``, ``_follower_accel``, ``_ego_row``, ``_general_pair``, ``_lane_row``), each tested bit for bit
-against its NumPy function, and writes the held plan's evaluation (``decide.plan_motion``, ``EvasionPlan.state``)
-and the glue in the NumPy path's evaluation order: the results table is the NumPy path's, bit for bit
-(``tests/test_fast_loop.py``, several variants, sizes and settings).
+against its NumPy function, with the held plan's evaluation from :mod:`._fast_held`, and writes the glue in the
+NumPy path's evaluation order: the results table is the NumPy path's, bit for bit (``tests/test_fast_loop.py``,
+several variants, sizes and settings).
 
-Everything else — another planner, traffic model or hook, leader rule, completion rule or assessment, the
-real-world settings (own lane, sensing errors, delay, V2X emulation, sensor noise), promise violations, L(N+1)
-profiles, RSS rows, traces or recorded observations — takes the period-by-period path (:mod:`.step`), whose parts
-are compiled where they have kernels; ``SAFELANE_NO_NUMBA=1`` gives the NumPy path, the reference, and
-``SAFELANE_NO_FUSED=1`` the period-by-period path with its part kernels (what ``benchmarks/bench_core.py`` compares).
+:mod:`._fused` is the Python side (where it runs, the arrays in, the results out). Everything else runs period by
+period (:mod:`.step`); ``SAFELANE_NO_NUMBA=1`` gives the NumPy path, the reference, and ``SAFELANE_NO_FUSED=1`` the
+period-by-period path with its part kernels (what ``benchmarks/bench_core.py`` compares).
 """
 
 from __future__ import annotations
 
-import os
-from types import SimpleNamespace
-
 import numba
 import numpy as np
 
-from ..params import Params
-from ..planners.base import ExpertPlanner
-from ..planners.variants import VARIANT_NAMES, VARIANTS
-from ..safety._backend import FEASIBILITY_TOL_M
-from ..safety._fast import _ego_position
-from ..safety._fast_base import _max, _min, _stop_time
+from ..safety._fast_base import _max, _min
 from ..safety._fast_responsible import _min_follow_decel, _responsible_bound
-from ..safety.lateral import LATERAL_TOL_M
-from ..safety.responsible import ROOT_EPS_MPS2
 from ..shield._fast_decide import _candidate
 from ..shield._fast_monitor import _breach_row
 from ..shield.decide import ABORT, COMPLETED, HESITATE, PROCEED
-from ..shield.monitor import BREACH_KINDS, TOL_M, Breach
-from ._fast_checks import _ego_row, _general_pair, _lane_row
+from ._fast_checks import _ego_row, _lane_row
+from ._fast_general import _general_pair
+from ._fast_held import _clip, _fleet, _motion_max, _plan_motion
 from ._fast_traffic import _chain_row, _follower_accel, _leader_accel, _responsible_accel
 
 _INF = np.inf
@@ -59,85 +48,6 @@ PLAN = (
 OUT_F = ("t_complete", "min_gap_f", "min_gap_l1", "min_lane_ratio", "first_collaborative_s", "breach_first_s")
 #: Bool outputs per scenario.
 OUT_B = ("completed", "collided", "violated", "leader_collided", "leader_violated", "aggressive")
-#: :func:`fused_loop` takes batches from this many scenarios on.
-FUSED_MIN_ROWS = 64
-
-
-@numba.njit(inline="always")
-def _clip(a, lo, hi):  # np.clip
-    return _min(_max(a, lo), hi)
-
-
-@numba.njit(inline="always")
-def _fleet(x, v, a, dt):  # kinematics.Fleet.constant for one vehicle: (acc, t_stop, x_end, v_end)
-    ts = _min(v / -a, dt) if a < 0.0 else dt
-    if ts <= 0.0:
-        a, ts = 0.0, dt
-    xs = x + v * ts + 0.5 * a * ts * ts
-    vs = 0.0 if ts < dt else _max(v + a * ts, 0.0)
-    return a, ts, xs, vs
-
-
-@numba.njit(error_model="numpy", nogil=True)
-def _plan_sample(tq, plan, follows, a_a, a_d):
-    """``EvasionPlan.state`` at ``tq`` of a plan held as :data:`PLAN` values (no own-lane leader): ``(px, py, vx,
-    vy)``."""
-    p, py0, v, vy0, p1, v1, a1, u, V, t2, T, t_1, acc_1, acc_2, t_end = plan
-    tt = _min(tq, T)
-    l1_stop = _stop_time(v1, a1)
-    px = _ego_position(tt, p, v, u, V, t2, follows, p1, v1, a1, a_a, a_d, l1_stop)
-    # longitudinal.ego_speed
-    ta = _min(tt, u)
-    tb = _max(_min(tt, t2) - u, 0.0)
-    own = v + a_a * ta - a_d * tb
-    vx = _max(v1 - a1 * tt, 0.0) if (follows and tt > t2) else _max(own, 0.0)
-    px = px + vx * _max(tq - tt, 0.0)
-    # lateral.lateral_state
-    ta = _min(tq, t_1)
-    y = py0 + vy0 * ta + 0.5 * acc_1 * ta * ta
-    vy = vy0 + acc_1 * ta
-    tb = _max(_min(tq, t_end) - t_1, 0.0)
-    y = y + vy * tb + 0.5 * acc_2 * tb * tb
-    vy = vy + acc_2 * tb
-    return px, y, vx, vy
-
-
-@numba.njit(error_model="numpy", nogil=True)
-def _plan_motion(plan, follows, age, dt, a_a, a_d, kt, kx, kv, ky, kvy, kax, kay):
-    """``decide.plan_motion`` and ``Motion.from_samples`` of one held plan on ``[age, age + dt]``: the 8 knots into
-    ``kt``, the samples into ``kx, kv, ky, kvy``, the segment accelerations into ``kax, kay``."""
-    l1_v, l1_decel = plan[5], plan[6]
-    l1_stop = l1_v / l1_decel if l1_decel > 0.0 else _INF
-    kt[0] = 0.0
-    kt[1] = _clip(plan[7] - age, 0.0, dt)  # t_x1
-    kt[2] = _clip(plan[9] - age, 0.0, dt)  # t_brake_end
-    kt[3] = _clip(l1_stop - age, 0.0, dt)
-    kt[4] = _clip(plan[10] - age, 0.0, dt)  # t_y_f
-    kt[5] = _clip(plan[11] - age, 0.0, dt)  # t_y_switch
-    kt[6] = _clip(plan[14] - age, 0.0, dt)  # t_y_end
-    kt[7] = dt
-    kt.sort()
-    for j in range(8):
-        kx[j], ky[j], kv[j], kvy[j] = _plan_sample(age + kt[j], plan, follows, a_a, a_d)
-    for j in range(7):
-        span = kt[j + 1] - kt[j]
-        kax[j] = (kv[j + 1] - kv[j]) / span if span > 0.0 else 0.0
-        kay[j] = (kvy[j + 1] - kvy[j]) / span if span > 0.0 else 0.0
-
-
-@numba.njit(inline="always")
-def _motion_max(t, x, v):  # kinematics.extrema(m)[1]
-    hi = x[0]
-    for j in range(1, t.shape[0]):
-        hi = _max(hi, x[j])
-    top = -_INF
-    for j in range(t.shape[0] - 1):
-        span = t[j + 1] - t[j]
-        ra = (v[j + 1] - v[j]) / span if span > 0.0 else 0.0
-        tau = -v[j] / ra if ra != 0.0 else -1.0
-        if tau > 0.0 and tau < span and ra < 0.0:
-            top = _max(top, x[j] + v[j] * tau + 0.5 * ra * tau * tau)
-    return _max(hi, top)
 
 
 @numba.njit(cache=True, nogil=True, error_model="numpy")
@@ -415,102 +325,3 @@ def loop_kernel(
         breach_flags[b, 0], breach_flags[b, 1], breach_flags[b, 2], breach_flags[b, 3] = br0, br1, br2, br3
         breach_flags[b, 4] = False
         bad_step[b] = bad
-
-
-def fused_loop(batch, prm: Params, cfg, nominal, traffic, trace: bool, record_observations: bool):
-    """This module where :func:`run` covers the run, else ``None`` (see the module docstring)."""
-    from ..safety.evasion import fast_kernel
-
-    if fast_kernel() is None or os.environ.get("SAFELANE_NO_FUSED", "") == "1":
-        return None
-    if trace or record_observations or traffic is not None or len(batch) < FUSED_MIN_ROWS:
-        return None
-    if type(nominal) is not ExpertPlanner:
-        return None
-    # The settings the loop implements; the others it reads from cfg (horizon, brake start, the assessment's window
-    # and threshold, F's gap opening) or that only matter with one of these changed.
-    covered = dict(
-        assessment="observed", completion="commit_guard", sensor_noise_std=0.0, supervised=True, v2x_loss=0.0,
-        v2x_latency_periods=0, leader_rule="worst_case", follower_ignores_ego=False, monitor=True, own_lane=False,
-        sensing_error=False, actuation_delay_s=0.0,
-    )  # fmt: skip
-    if any(getattr(cfg, name) != value for name, value in covered.items()):
-        return None
-    if batch.l0_x is not None or batch.last_profile_t is not None or (batch.p_v > 0.0).any():
-        return None
-    if any(VARIANTS[name].rule != "paper" for name in np.asarray(VARIANT_NAMES)[np.unique(batch.variant)]):
-        return None
-    import sys
-
-    return sys.modules[__name__]
-
-
-def run(sim, n_steps: int):
-    """The final :class:`~.step.SimState`'s fields that :func:`~.results.results_table` reads, from
-    :func:`loop_kernel` on :class:`~.step.ClosedLoop` ``sim``'s arrays."""
-    from ..shield.policies import variant_flags
-
-    b, prm, cfg, nominal = sim.b, sim.prm, sim.cfg, sim.nominal
-    start = sim.initial_state()
-    traffic = sim.traffic_step  # the paper's, bound to the batch (fused_loop covers no other)
-    n = len(b)
-    conflict = prm.y_safe + LATERAL_TOL_M
-    overlap = prm.lane_width - prm.vehicle_width
-    values = dict(
-        dt=prm.dt, a_x_a=prm.a_x_a, a_x_d=prm.a_x_d, a_y_m=prm.a_y_m, y_safe=prm.y_safe, p_m=prm.p_m,
-        lane_width=prm.lane_width, y_boundary=prm.y_boundary, vehicle_length=prm.vehicle_length, conflict=conflict,
-        overlap=overlap, lat_tol=LATERAL_TOL_M, tol=FEASIBILITY_TOL_M, eps=ROOT_EPS_MPS2, monitor_tol=TOL_M,
-        brake_start_s=cfg.brake_start_s, assess_threshold=cfg.assess_threshold, open_decel=cfg.follower_open_decel,
-        open_gap_m=cfg.follower_open_gap_m, k_p=nominal.k_p, k_v=nominal.k_v, gap_fraction=nominal.gap_fraction,
-        brake_comfort=nominal.brake_comfort, omega2=nominal.omega**2, two_omega=2.0 * nominal.omega,
-    )  # fmt: skip
-    prm_vec = np.array([float(values[name]) for name in PRM])
-    plan = start.shield.plan
-    plan_init = np.ascontiguousarray(np.stack([np.asarray(getattr(plan, name), np.float64) for name in PLAN], 1))
-    uses = np.ascontiguousarray(np.stack(variant_flags(b.variant, n), 1))
-    c = np.ascontiguousarray
-    out_f, out_b = np.empty((n, len(OUT_F))), np.empty((n, len(OUT_B)), np.bool_)
-    counts, n_invalid = np.empty((n, 3), np.int64), np.empty(n, np.int64)
-    flags, bad = np.empty((n, len(BREACH_KINDS)), np.bool_), np.empty(n, np.int64)
-    is_last, acts = traffic.roles
-    loop_kernel(
-        n_steps, prm_vec, cfg.assess_window, c(b.x), c(b.v),
-        c(np.stack([b.ego_x, b.ego_y, b.ego_vx, b.ego_vy], 1)), c(b.valid), c(b.n_connected.astype(np.int64)),
-        c(b.connected[:, 0]), c(b.follower_aggressive), uses, c(sim.chain_promise), c(sim.chain_margin),
-        c(traffic.margin), c(is_last), c(acts), c(traffic.v_desired), c(b.promise_decel), c(b.promise_accel),
-        c(b.decel_last.astype(np.float64)), c(traffic.gap0), c(sim.lane_pairs[0]), c(sim.lane_pairs[1]), plan_init,
-        c(np.asarray(plan.follows_leader, np.bool_)), out_f, out_b, counts, n_invalid, flags, bad,
-    )  # fmt: skip
-    if (bad >= 0).any():
-        step = int(bad[bad >= 0].min())
-        rows = np.flatnonzero(bad == step)
-        ids = b.scenario_id[rows][:5].tolist()
-        raise FloatingPointError(
-            f"non-finite simulator state at t = {(step + 1) * prm.dt:.1f} s in scenario(s) {ids} ({rows.size} in "
-            "all): a bug in a behaviour model or hook, not an outcome"
-        )
-    f = dict(zip(OUT_F, out_f.T, strict=True))
-    o = dict(zip(OUT_B, out_b.T, strict=True))
-    belief = SimpleNamespace(aggressive=o["aggressive"], first_collaborative_s=f["first_collaborative_s"])
-    return SimpleNamespace(
-        completed=o["completed"], collided=o["collided"], violated=o["violated"],
-        leader_collided=o["leader_collided"], leader_violated=o["leader_violated"], t_complete=f["t_complete"],
-        min_gap_f=f["min_gap_f"], min_gap_l1=f["min_gap_l1"], min_lane_ratio=f["min_lane_ratio"], counts=counts,
-        belief=belief, n_invalid=n_invalid, breach=Breach(flags=flags, first_s=f["breach_first_s"]),
-        initial_safe=start.initial_safe, l0=None,
-    )  # fmt: skip
-
-
-def concat(parts):
-    """One result of :func:`run` from the results of consecutive chunks of scenarios."""
-
-    def cat(name):
-        return np.concatenate([getattr(p, name) for p in parts])
-
-    names = ("completed", "collided", "violated", "leader_collided", "leader_violated", "t_complete", "min_gap_f",
-             "min_gap_l1", "min_lane_ratio", "counts", "n_invalid", "initial_safe")  # fmt: skip
-    belief = SimpleNamespace(**{name: np.concatenate([getattr(p.belief, name) for p in parts])
-                                for name in ("aggressive", "first_collaborative_s")})  # fmt: skip
-    breach = Breach(flags=np.concatenate([p.breach.flags for p in parts]),
-                    first_s=np.concatenate([p.breach.first_s for p in parts]))  # fmt: skip
-    return SimpleNamespace(**{name: cat(name) for name in names}, belief=belief, breach=breach, l0=None)

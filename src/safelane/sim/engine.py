@@ -15,7 +15,7 @@ from threadpoolctl import threadpool_limits
 from ..parallel import Backend, as_backend, map_chunks
 from ..params import Params
 from ..planners.base import ExpertPlanner, NominalPlanner
-from ..safety.evasion import fast_kernel
+from . import _fused as fused
 from ._alloc import tune_allocator
 from .config import SimConfig
 from .inputs import cell_rng, check_cell_args, check_settings, resolve
@@ -110,8 +110,8 @@ def simulate_batch(
             return _simulate_parallel(batch, seed, prm, cfg, nominal, backend, chunks, traffic)
     sim = ClosedLoop(batch, seed, prm, cfg, nominal, traffic)
     n_steps = round(cfg.horizon_s / prm.dt)
-    if (fused := fused_loop(batch, prm, cfg, nominal, traffic, trace, record_observations)) is not None:
-        return SimResult(table=results_table(batch, _run_fused(fused, sim, n_steps, progress)))
+    if fused.covers(batch, cfg, nominal, traffic, trace, record_observations):  # the whole run compiled
+        return SimResult(table=results_table(batch, fused.run(sim, n_steps, progress)))
     state = sim.initial_state()
     rows, observations = [], []
     steps = range(n_steps)
@@ -132,33 +132,6 @@ def simulate_batch(
     table = results_table(batch, state)
     trace_df = pd.concat(rows, ignore_index=True) if trace and rows else None
     return SimResult(table=table, trace=trace_df, observations=observations)
-
-
-def fused_loop(batch, prm, cfg, nominal, traffic, trace: bool, record_observations: bool):
-    """The compiled closed loop's module (:mod:`._fast_loop`) where it covers this run, else ``None`` (numba
-    missing, ``SAFELANE_NO_NUMBA=1`` or ``SAFELANE_NO_FUSED=1``, or settings it does not cover)."""
-    if fast_kernel() is None:
-        return None
-    from ._fast_loop import fused_loop as covers
-
-    return covers(batch, prm, cfg, nominal, traffic, trace, record_observations)
-
-
-#: Scenarios per call of the compiled loop while a progress bar is shown.
-PROGRESS_CHUNK = 4096
-
-
-def _run_fused(fused, sim: ClosedLoop, n_steps: int, progress: bool):
-    """The final state's fields of the compiled loop; with ``progress``, in chunks of scenarios behind a bar."""
-    if not progress or len(sim.b) <= PROGRESS_CHUNK:
-        return fused.run(sim, n_steps)
-    from rich.progress import track
-
-    parts = np.array_split(np.arange(len(sim.b)), -(-len(sim.b) // PROGRESS_CHUNK))
-    chunk = lambda rows: ClosedLoop(sim.b.take(rows), sim.seed, sim.prm, sim.cfg, sim.nominal)  # noqa: E731
-    done = [fused.run(chunk(rows), n_steps) for rows in track(parts, description=f"simulating {len(sim.b)} scenarios",
-                                                              transient=True)]  # fmt: skip
-    return fused.concat(done)
 
 
 def _simulate_chunk(args) -> pd.DataFrame:

@@ -1,0 +1,139 @@
+"""The compiled closed loop's Python side: where it runs (:func:`covers`), and :func:`run`, which hands a
+:class:`~.step.ClosedLoop`'s arrays to :func:`._fast_loop.loop_kernel` and returns what the results table reads.
+
+The loop covers batches of :data:`FUSED_MIN_ROWS` scenarios or more with the expert planner (``ExpertPlanner``
+itself, any gains), the paper's traffic without hooks, unexpected promise violations or L(N+1) profiles, the
+paper's four variants and the default settings (the observed assessment, the commit guard, the monitor on, the
+worst-case leader rule, supervised, none of the real-world settings), without a trace or recorded observations.
+Everything else — and everything with ``SAFELANE_NO_FUSED=1`` or without numba — runs period by period
+(:mod:`.step`), whose parts are compiled where they have kernels. Importing this module does not import numba.
+"""
+
+from __future__ import annotations
+
+import os
+from types import SimpleNamespace
+
+import numpy as np
+
+from ..planners.base import ExpertPlanner
+from ..planners.variants import VARIANT_NAMES, VARIANTS
+from ..safety._backend import FEASIBILITY_TOL_M
+from ..safety.evasion import fast_kernel
+from ..safety.lateral import LATERAL_TOL_M
+from ..safety.responsible import ROOT_EPS_MPS2
+from ..shield.monitor import BREACH_KINDS, TOL_M, Breach
+
+#: :func:`covers` takes batches from this many scenarios on.
+FUSED_MIN_ROWS = 64
+#: Scenarios per call of the compiled loop while a progress bar is shown.
+PROGRESS_CHUNK = 4096
+
+
+def covers(batch, cfg, nominal, traffic, trace: bool, record_observations: bool) -> bool:
+    """Whether the compiled loop runs this simulation (see the module docstring)."""
+    if fast_kernel() is None or os.environ.get("SAFELANE_NO_FUSED", "") == "1":
+        return False
+    if trace or record_observations or traffic is not None or len(batch) < FUSED_MIN_ROWS:
+        return False
+    if type(nominal) is not ExpertPlanner:
+        return False
+    # The settings the loop implements; the others it reads from cfg (horizon, brake start, the assessment's window
+    # and threshold, F's gap opening) or that only matter with one of these changed.
+    covered = dict(
+        assessment="observed", completion="commit_guard", sensor_noise_std=0.0, supervised=True, v2x_loss=0.0,
+        v2x_latency_periods=0, leader_rule="worst_case", follower_ignores_ego=False, monitor=True, own_lane=False,
+        sensing_error=False, actuation_delay_s=0.0,
+    )  # fmt: skip
+    if any(getattr(cfg, name) != value for name, value in covered.items()):
+        return False
+    if batch.l0_x is not None or batch.last_profile_t is not None or (batch.p_v > 0.0).any():
+        return False
+    return all(VARIANTS[name].rule == "paper" for name in np.asarray(VARIANT_NAMES)[np.unique(batch.variant)])
+
+
+def run(sim, n_steps: int, progress: bool = False):
+    """:func:`run_chunk` on the whole batch; with ``progress``, in chunks of :data:`PROGRESS_CHUNK` scenarios behind a
+    bar (the same table: the scenarios are independent)."""
+    if not progress or len(sim.b) <= PROGRESS_CHUNK:
+        return run_chunk(sim, n_steps)
+    from rich.progress import track
+
+    from .step import ClosedLoop
+
+    parts = np.array_split(np.arange(len(sim.b)), -(-len(sim.b) // PROGRESS_CHUNK))
+    chunk = lambda rows: ClosedLoop(sim.b.take(rows), sim.seed, sim.prm, sim.cfg, sim.nominal)  # noqa: E731
+    bar = track(parts, description=f"simulating {len(sim.b)} scenarios", transient=True)
+    return concat([run_chunk(chunk(rows), n_steps) for rows in bar])
+
+
+def run_chunk(sim, n_steps: int):
+    """The final :class:`~.step.SimState`'s fields that :func:`~.results.results_table` reads, from
+    :func:`._fast_loop.loop_kernel` on :class:`~.step.ClosedLoop` ``sim``'s arrays."""
+    from ..shield.policies import variant_flags
+    from ._fast_loop import OUT_B, OUT_F, PLAN, PRM, loop_kernel
+
+    b, prm, cfg, nominal = sim.b, sim.prm, sim.cfg, sim.nominal
+    start = sim.initial_state()
+    traffic = sim.traffic_step  # the paper's, bound to the batch (fused_loop covers no other)
+    n = len(b)
+    conflict = prm.y_safe + LATERAL_TOL_M
+    overlap = prm.lane_width - prm.vehicle_width
+    values = dict(
+        dt=prm.dt, a_x_a=prm.a_x_a, a_x_d=prm.a_x_d, a_y_m=prm.a_y_m, y_safe=prm.y_safe, p_m=prm.p_m,
+        lane_width=prm.lane_width, y_boundary=prm.y_boundary, vehicle_length=prm.vehicle_length, conflict=conflict,
+        overlap=overlap, lat_tol=LATERAL_TOL_M, tol=FEASIBILITY_TOL_M, eps=ROOT_EPS_MPS2, monitor_tol=TOL_M,
+        brake_start_s=cfg.brake_start_s, assess_threshold=cfg.assess_threshold, open_decel=cfg.follower_open_decel,
+        open_gap_m=cfg.follower_open_gap_m, k_p=nominal.k_p, k_v=nominal.k_v, gap_fraction=nominal.gap_fraction,
+        brake_comfort=nominal.brake_comfort, omega2=nominal.omega**2, two_omega=2.0 * nominal.omega,
+    )  # fmt: skip
+    prm_vec = np.array([float(values[name]) for name in PRM])
+    plan = start.shield.plan
+    plan_init = np.ascontiguousarray(np.stack([np.asarray(getattr(plan, name), np.float64) for name in PLAN], 1))
+    uses = np.ascontiguousarray(np.stack(variant_flags(b.variant, n), 1))
+    c = np.ascontiguousarray
+    out_f, out_b = np.empty((n, len(OUT_F))), np.empty((n, len(OUT_B)), np.bool_)
+    counts, n_invalid = np.empty((n, 3), np.int64), np.empty(n, np.int64)
+    flags, bad = np.empty((n, len(BREACH_KINDS)), np.bool_), np.empty(n, np.int64)
+    is_last, acts = traffic.roles
+    loop_kernel(
+        n_steps, prm_vec, cfg.assess_window, c(b.x), c(b.v),
+        c(np.stack([b.ego_x, b.ego_y, b.ego_vx, b.ego_vy], 1)), c(b.valid), c(b.n_connected.astype(np.int64)),
+        c(b.connected[:, 0]), c(b.follower_aggressive), uses, c(sim.chain_promise), c(sim.chain_margin),
+        c(traffic.margin), c(is_last), c(acts), c(traffic.v_desired), c(b.promise_decel), c(b.promise_accel),
+        c(b.decel_last.astype(np.float64)), c(traffic.gap0), c(sim.lane_pairs[0]), c(sim.lane_pairs[1]), plan_init,
+        c(np.asarray(plan.follows_leader, np.bool_)), out_f, out_b, counts, n_invalid, flags, bad,
+    )  # fmt: skip
+    if (bad >= 0).any():
+        step = int(bad[bad >= 0].min())
+        rows = np.flatnonzero(bad == step)
+        ids = b.scenario_id[rows][:5].tolist()
+        raise FloatingPointError(
+            f"non-finite simulator state at t = {(step + 1) * prm.dt:.1f} s in scenario(s) {ids} ({rows.size} in "
+            "all): a bug in a behaviour model or hook, not an outcome"
+        )
+    f = dict(zip(OUT_F, out_f.T, strict=True))
+    o = dict(zip(OUT_B, out_b.T, strict=True))
+    belief = SimpleNamespace(aggressive=o["aggressive"], first_collaborative_s=f["first_collaborative_s"])
+    return SimpleNamespace(
+        completed=o["completed"], collided=o["collided"], violated=o["violated"],
+        leader_collided=o["leader_collided"], leader_violated=o["leader_violated"], t_complete=f["t_complete"],
+        min_gap_f=f["min_gap_f"], min_gap_l1=f["min_gap_l1"], min_lane_ratio=f["min_lane_ratio"], counts=counts,
+        belief=belief, n_invalid=n_invalid, breach=Breach(flags=flags, first_s=f["breach_first_s"]),
+        initial_safe=start.initial_safe, l0=None,
+    )  # fmt: skip
+
+
+def concat(parts):
+    """One result of :func:`run` from the results of consecutive chunks of scenarios."""
+
+    def cat(name):
+        return np.concatenate([getattr(p, name) for p in parts])
+
+    names = ("completed", "collided", "violated", "leader_collided", "leader_violated", "t_complete", "min_gap_f",
+             "min_gap_l1", "min_lane_ratio", "counts", "n_invalid", "initial_safe")  # fmt: skip
+    belief = SimpleNamespace(**{name: np.concatenate([getattr(p.belief, name) for p in parts])
+                                for name in ("aggressive", "first_collaborative_s")})  # fmt: skip
+    breach = Breach(flags=np.concatenate([p.breach.flags for p in parts]),
+                    first_s=np.concatenate([p.breach.first_s for p in parts]))  # fmt: skip
+    return SimpleNamespace(**{name: cat(name) for name in names}, belief=belief, breach=breach, l0=None)
