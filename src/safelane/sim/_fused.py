@@ -53,10 +53,11 @@ def covers(batch, cfg, nominal, traffic, trace: bool, record_observations: bool)
 
 
 def run(sim, n_steps: int, progress: bool = False):
-    """:func:`run_chunk` on the whole batch; with ``progress``, in chunks of :data:`PROGRESS_CHUNK` scenarios behind a
+    """The final state's fields that :func:`~.results.results_table` reads, from :func:`run_chunk` on the whole
+    batch; with ``progress``, in chunks of :data:`PROGRESS_CHUNK` scenarios behind a
     bar (the same table: the scenarios are independent)."""
     if not progress or len(sim.b) <= PROGRESS_CHUNK:
-        return run_chunk(sim, n_steps)
+        return _state(run_chunk(sim, n_steps))
     from rich.progress import track
 
     from .step import ClosedLoop
@@ -64,18 +65,19 @@ def run(sim, n_steps: int, progress: bool = False):
     parts = np.array_split(np.arange(len(sim.b)), -(-len(sim.b) // PROGRESS_CHUNK))
     chunk = lambda rows: ClosedLoop(sim.b.take(rows), sim.seed, sim.prm, sim.cfg, sim.nominal)  # noqa: E731
     bar = track(parts, description=f"simulating {len(sim.b)} scenarios", transient=True)
-    return concat([run_chunk(chunk(rows), n_steps) for rows in bar])
+    done = [run_chunk(chunk(rows), n_steps) for rows in bar]
+    return _state({name: np.concatenate([fields[name] for fields in done]) for name in done[0]})
 
 
-def run_chunk(sim, n_steps: int):
-    """The final :class:`~.step.SimState`'s fields that :func:`~.results.results_table` reads, from
-    :func:`._fast_loop.loop_kernel` on :class:`~.step.ClosedLoop` ``sim``'s arrays."""
+def run_chunk(sim, n_steps: int) -> dict:
+    """The final state's arrays by name, from :func:`._fast_loop.loop_kernel` on :class:`~.step.ClosedLoop`
+    ``sim``'s arrays."""
     from ..shield.policies import variant_flags
     from ._fast_loop import OUT_B, OUT_F, PLAN, PRM, loop_kernel
 
     b, prm, cfg, nominal = sim.b, sim.prm, sim.cfg, sim.nominal
     start = sim.initial_state()
-    traffic = sim.traffic_step  # the paper's, bound to the batch (fused_loop covers no other)
+    traffic = sim.traffic_step  # the paper's, bound to the batch (covers() admits no other)
     n = len(b)
     conflict = prm.y_safe + LATERAL_TOL_M
     overlap = prm.lane_width - prm.vehicle_width
@@ -112,28 +114,15 @@ def run_chunk(sim, n_steps: int):
             f"non-finite simulator state at t = {(step + 1) * prm.dt:.1f} s in scenario(s) {ids} ({rows.size} in "
             "all): a bug in a behaviour model or hook, not an outcome"
         )
-    f = dict(zip(OUT_F, out_f.T, strict=True))
-    o = dict(zip(OUT_B, out_b.T, strict=True))
-    belief = SimpleNamespace(aggressive=o["aggressive"], first_collaborative_s=f["first_collaborative_s"])
-    return SimpleNamespace(
-        completed=o["completed"], collided=o["collided"], violated=o["violated"],
-        leader_collided=o["leader_collided"], leader_violated=o["leader_violated"], t_complete=f["t_complete"],
-        min_gap_f=f["min_gap_f"], min_gap_l1=f["min_gap_l1"], min_lane_ratio=f["min_lane_ratio"], counts=counts,
-        belief=belief, n_invalid=n_invalid, breach=Breach(flags=flags, first_s=f["breach_first_s"]),
-        initial_safe=start.initial_safe, l0=None,
-    )  # fmt: skip
+    return dict(zip(OUT_F, out_f.T, strict=True), **dict(zip(OUT_B, out_b.T, strict=True)), counts=counts,
+                n_invalid=n_invalid, breach_flags=flags, initial_safe=start.initial_safe)
 
 
-def concat(parts):
-    """One result of :func:`run` from the results of consecutive chunks of scenarios."""
-
-    def cat(name):
-        return np.concatenate([getattr(p, name) for p in parts])
-
+def _state(f: dict):
+    """The fields :func:`~.results.results_table` reads (a :class:`~.step.SimState`'s), from :func:`run_chunk`'s
+    arrays."""
+    belief = SimpleNamespace(aggressive=f["aggressive"], first_collaborative_s=f["first_collaborative_s"])
+    breach = Breach(flags=f["breach_flags"], first_s=f["breach_first_s"])
     names = ("completed", "collided", "violated", "leader_collided", "leader_violated", "t_complete", "min_gap_f",
              "min_gap_l1", "min_lane_ratio", "counts", "n_invalid", "initial_safe")  # fmt: skip
-    belief = SimpleNamespace(**{name: np.concatenate([getattr(p.belief, name) for p in parts])
-                                for name in ("aggressive", "first_collaborative_s")})  # fmt: skip
-    breach = Breach(flags=np.concatenate([p.breach.flags for p in parts]),
-                    first_s=np.concatenate([p.breach.first_s for p in parts]))  # fmt: skip
-    return SimpleNamespace(**{name: cat(name) for name in names}, belief=belief, breach=breach, l0=None)
+    return SimpleNamespace(**{name: f[name] for name in names}, belief=belief, breach=breach, l0=None)
