@@ -1,4 +1,4 @@
-"""Independent chunks of work on local processes or on a Ray cluster: one abstraction for every sweep (issue 13).
+"""Independent chunks of work on local processes or on a Ray cluster: one abstraction for every sweep (docs/scale.md).
 
 ``map_chunks(fn, jobs, backend, workers, ray_address)`` returns ``[fn(job) for job in jobs]`` — in job order,
 whatever ran them and in whatever order they finished. A sweep whose jobs are pure functions of their arguments

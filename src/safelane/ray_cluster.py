@@ -1,4 +1,4 @@
-"""The Ray connection of this process (issue 13): connect to a cluster or start a local instance once, ship this
+"""The Ray connection of this process (docs/scale.md): connect to a cluster or start a local instance once, ship this
 package to the workers, disconnect at the end of a session — shutting the instance down only if this process
 started it. :mod:`safelane.parallel` dispatches jobs over it; the rules (which cluster, authentication, shipping
 the code) are in its module docstring and ``docs/scale.md``.

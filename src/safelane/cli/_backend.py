@@ -1,4 +1,4 @@
-"""``--backend``, ``--workers`` and ``--ray-address``: where a command's sweeps run (issue 13, docs/scale.md).
+"""``--backend``, ``--workers`` and ``--ray-address``: where a command's sweeps run (docs/scale.md).
 
 Every command that simulates many scenarios takes the three options; :func:`resolve_backend` checks them before any
 work and returns what the experiment functions take as ``workers``: a number of local processes, or a

@@ -26,7 +26,7 @@ def falsify(
     replay: Path = typer.Option(None, "--replay", help="Re-simulate one dumped scenario (a JSON from --out)."),
     progress: bool = typer.Option(True, "--progress/--no-progress", help="Show a progress bar."),
 ) -> None:
-    """Adversarial falsification of the safety guarantee (issue 9).
+    """Adversarial falsification of the safety guarantee (docs/falsification.md).
 
     Searches initial states at the edges, L(N+1) acceleration profiles, leaders' tasks inside their promises,
     F inside its type's range and adversarial nominal planners, with random search, a cross-entropy optimiser

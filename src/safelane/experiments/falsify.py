@@ -80,11 +80,11 @@ class Setting:
     decel_last_max: float | None = None  # > a_x_d: L(N+1) may brake beyond the assumptions (studies, tests)
     use_hooks: bool = True  # traffic hooks, where the simulator has them
     use_profiles: bool = True  # L(N+1) profiles, where the simulator has them (else sudden braking at decel_last)
-    world: str = "paper"  # "realistic": L0, sensing errors, actuation delay (issue 17; falsify_space.WORLDS)
+    world: str = "paper"  # "realistic": L0, sensing errors, actuation delay (docs/real_roads.md; falsify_space.WORLDS)
 
     @classmethod
     def realistic(cls, **kwargs) -> Setting:
-        """The realistic world (issue 17): an own-lane leader L0 from the spec, measurement errors inside their
+        """The realistic world (docs/real_roads.md): an own-lane leader L0 from the spec, measurement errors in their
         bounds (half of them at the bounds' ends), the delay from the spec; the extended shield."""
         sim = SimConfig(assessment="truth", own_lane=True, sensing_error=True, sensing_edge_share=0.5)
         return cls(sim=sim, world="realistic", **kwargs)

@@ -54,8 +54,8 @@ def _edge(u, lo, hi, *, exact=None, p_exact=0.1, p_tiny=0.2, tiny_lo=1e-12):
     return np.where(u < p_exact, exact, np.where(u < p_exact + p_tiny, tiny, plain))
 
 
-#: The worlds the falsifier searches: the paper's, and the realistic one (issue 17: an own-lane leader L0 with a
-#: braking profile, measurement errors inside their bounds, actuation delay 0–0.3 s), whose extra coordinates
+#: The worlds the falsifier searches: the paper's, and the realistic one (docs/real_roads.md: an own-lane leader L0
+#: with a braking profile, measurement errors inside their bounds, actuation delay 0–0.3 s), whose extra coordinates
 #: come after the paper's (the paper's decode is unchanged).
 WORLDS = ("paper", "realistic")
 MAX_DELAY_PERIODS = 3
@@ -154,7 +154,7 @@ def knife_specs(rng: np.random.Generator, count: int, prm: Params, brake_start_s
       ``dt``, which differ in the last bit) or a hair off it (±1e-12, ±1e-9 s) or mid-period; brake, ease off,
       brake harder; planner and traffic square waves with periods that are multiples of ``dt``, phase 0;
     * **lateral edges**: the ego at ``y_s`` or the lane boundary (± one ulp, ± 1e-12), lateral speed 0 or tiny;
-    * **the paper's setting with a hugging planner** (where issue 9's violation was found): traffic at 30 m/s, one
+    * **the paper's setting with a hugging planner** (where the guarantee's first hole showed): traffic at 30 m/s, one
       spacing ``δp ~ U[17, 22]`` m, promises 0.5, L(N+1) braking at one constant deceleration, CV_all, hug L1.
     """
     spec = decode(rng.uniform(size=(count, dimension(prm, world))), prm, brake_start_s, world)
@@ -206,7 +206,7 @@ def knife_specs(rng: np.random.Generator, count: int, prm: Params, brake_start_s
     osc_period = (rng.integers(1, 30, size=count) - 1) * prm.dt / 2.9  # planner_for: period dt + 2.9·q
     spec["planner"][:, 5] = np.where(aligned_rows, osc_period, spec["planner"][:, 5])
     spec["planner"][:, 6] = np.where(aligned_rows, 0.0, spec["planner"][:, 6])
-    # The paper's own setting with a hugging planner (where issue 9's violation was found): traffic at 30 m/s,
+    # The paper's own setting with a hugging planner (where the guarantee's first hole showed): traffic at 30 m/s,
     # one spacing δp ~ U[17, 22] m, promises 0.5, L(N+1) braking at one constant deceleration, CV_all, hug L1.
     paper = pick(0.2)
     rows = np.flatnonzero(paper)

@@ -1,4 +1,4 @@
-"""The two modes side by side (issue 12): the paper-faithful mode (the reproduction's preset) and the safe mode.
+"""The two modes side by side (docs/reproduction.md): the paper-faithful mode (the reproduction's) and the safe mode.
 
 * **paper-faithful** — the ``paper`` preset: the paper's completion rule (``paper_evasion``: the crossing step is
   decided by the Eq. 9 evasion check alone), connected leaders that react to the braking ahead as it happens

@@ -167,7 +167,7 @@ EXPERIMENTS: dict[str, Experiment] = {
         Experiment(
             "table1_safe_mode",
             "The published Table 1 cells in safe mode (commit guard, worst-case leaders, monitor on) beside the "
-            "paper-faithful preset's (issue 12; safelane.experiments.modes).",
+            "paper-faithful preset's (docs/reproduction.md; safelane.experiments.modes).",
             ModesConfig,
             modes_cells,
             {"samples": 40},
@@ -178,7 +178,7 @@ EXPERIMENTS: dict[str, Experiment] = {
         Experiment(
             "table1_rules",
             "Table 1 with the rule-based planner the network is distilled from (the preset's expert), beside the "
-            "reported table1, which runs the network (issue 12; safelane.experiments.rules_table).",
+            "reported table1, which runs the network (docs/reproduction.md; safelane.experiments.rules_table).",
             Table1Config,
             _n_grid,
             {"samples": 40},

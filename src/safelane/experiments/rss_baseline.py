@@ -1,5 +1,5 @@
 """The experiment ``rss_baseline``: the industry's safety model (RSS, as ad-rss implements it) against this paper's
-shield on the same lane changes, with and without V2X (issue 16; docs/rss.md).
+shield on the same lane changes, with and without V2X (docs/rss.md).
 
 The Table 1 grid (N ∈ {1, 3, 10} × a_x_N+1_d ∈ {2..6}) × follower behaviour × planner variant (the paper's four and
 the four RSS variants), every variant on the same sampled scenarios of a cell (common random numbers: the behaviours

@@ -1,4 +1,4 @@
-"""The experiment ``table1_rules``: Table 1 with the rule-based planner, beside the reported NN one (issue 12).
+"""The experiment ``table1_rules``: Table 1 under the rule-based planner, beside the NN one (docs/reproduction.md).
 
 The paper's planners are neural networks; so are the reproduction's: the ``paper`` preset names the network
 distilled from its calibrated rule-based planner (``network: mlp_paper``, :mod:`safelane.planners.distilled`),

@@ -1,4 +1,4 @@
-"""Structure-aware calibration: fit the paper's *findings*, not only its numbers (issue 12).
+"""Structure-aware calibration: fit the paper's *findings*, not only its numbers (docs/reproduction.md).
 
 The plain calibration (:mod:`.calibration`) minimises the mean absolute success-rate difference over the 40
 published cells of Table 1. That loss is blind to the structure the paper argues from: a fit can match the cells
@@ -16,7 +16,7 @@ chain all of it). This module's loss adds that structure:
 
 ``loss = mae + W_ADJ · adj_err + W_CLAIM · claim_penalty``. The search is the plain calibration's (Latin
 hypercube, a shrinking (1+1) evolution strategy, finalists re-scored with more samples), over its space plus the
-knobs issue 12 adds: the nominal planner's comfort braking limit ``brake_comfort`` and position gain ``k_p``, and
+knobs this fit adds: the nominal planner's comfort braking limit ``brake_comfort`` and position gain ``k_p``, and
 the ``slow`` assessment's mean delay ``assess_delay_s`` and miss rate ``assess_miss`` (their plausible ranges in
 :data:`STRUCTURE_SPACE`'s comments). The completion rule is the paper's (``paper_evasion``), the leaders reactive
 and the monitor off: the paper-faithful mode.
@@ -50,7 +50,7 @@ W_ADJ, W_CLAIM = 1.0, 1.0
 #: Optional weight of the largest cell error beyond 0.10 (the issue's per-cell target); 0 in the shipped fit.
 W_MAX = 0.0
 
-#: The search space: the plain calibration's, plus issue 12's knobs.
+#: The search space: the plain calibration's, plus this fit's knobs.
 STRUCTURE_SPACE: dict[str, tuple[float, float]] = {
     "a_x_a": (1.0, 3.5),  # a passenger car's full-throttle acceleration at highway speed: 1–3.5 m/s²
     "a_x_d": (6.0, 9.0),

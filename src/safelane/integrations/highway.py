@@ -50,7 +50,7 @@ HIGHWAY_CONFIG = {"simulation_frequency": 10, "policy_frequency": 10, "action": 
 NO_CUT_IN_CONFIG = {"other_vehicles_type": "safelane.integrations.highway_vehicles.NoCutInIDMVehicle"}
 BEHAVIOUR = {PROCEED: "proceed", HESITATE: "hesitate", ABORT: "abort", COMPLETED: "completed"}
 FAR_M = 1000.0  # where a missing F or L1 is put (behind / ahead of the ego)
-#: The Situation takes the ego's own-lane leaders (issue 17) where its ``from_arrays`` has ``own_leaders``.
+#: The Situation takes the ego's own-lane leaders (docs/real_roads.md) where its ``from_arrays`` has ``own_leaders``.
 OWN_LANE_SUPPORTED = "own_leaders" in inspect.signature(Situation.from_arrays).parameters
 
 __all__ = [
@@ -109,7 +109,7 @@ class SafeLaneShield(gym.Wrapper, gym.utils.RecordConstructorArgs):
         v2x_loss, v2x_seed: each message is lost independently with probability ``v2x_loss`` (default 0: an ideal
             link), drawn from ``numpy.random.default_rng`` seeded by ``v2x_seed`` and the reset's seed; the latest
             received message then stands in, extrapolated, until it is older than ``safelane.v2x.MAX_AGE_S``.
-        own_leaders: how many own-lane leaders to read (used once the Situation takes them, issue 17).
+        own_leaders: how many own-lane leaders to read (used once the Situation takes them; docs/real_roads.md).
 
     Actions: ``Box([-a_x_d, -a_y_m], [a_x_a, a_y_m])``; ``a_y > 0`` points to the target lane. ``info`` adds
     ``shield`` (``proceed``/``hesitate``/``abort``/``completed``, ``off`` without the shield), ``intervened``,
@@ -143,7 +143,7 @@ class SafeLaneShield(gym.Wrapper, gym.utils.RecordConstructorArgs):
         self.shield_on = bool(shield)
         self.variant = variant or ("CV_all" if connected else "No_agg_assess")
         self.shield = Shield(prm, variant=self.variant, config=config)
-        # Issue 17: error bounds the shield takes the worst case over (a SensingBounds; None: highway-env's exact
+        # Real roads: error bounds the shield takes the worst case over (a SensingBounds; None: highway-env's exact
         # states), and the actuation delay of the config, which the ego's actuator then applies.
         self.sensing = sensing
         self.delay_periods = round(self.shield.config.actuation_delay_s / prm.dt)

@@ -53,7 +53,7 @@ def longitudinal(vehicle) -> tuple[float, float]:
 
 def own_lane_leaders(road, ego, lane_index, k: int = 1) -> tuple[np.ndarray, np.ndarray, list]:
     """The ego's own-lane leaders ``L0, …`` (nearest first, ``k`` of them): ``(x (k,), v (k,), vehicles)``, with
-    ``np.inf`` positions (and speed 0) where there is none. The one place the own lane is read (issue 17)."""
+    ``np.inf`` positions (and speed 0) where there is none. The one place the own lane is read (docs/real_roads.md)."""
     x, v, found = np.full(k, np.inf), np.zeros(k), []
     current = ego
     for i in range(k):

@@ -18,7 +18,7 @@ desired gap between platoon vehicles), ``own_leader`` (``None``, ``"cruise"`` or
 hi) m), ``traffic_lane_changes`` (MOBIL on for F and the platoon; off by default: highway-env's MOBIL may move F
 or L1 out of the lane mid-manoeuvre), ``duration`` (s).
 
-Connected traffic (issue 11): ``connected`` (default ``False``: highway-env's traffic is not connected) makes
+Connected traffic: ``connected`` (default ``False``: highway-env's traffic is not connected) makes
 ``L1..LN`` :class:`~.highway_vehicles.PromiseIDMVehicle` — IDM held to the promise ``promise`` [m/s²] (default 0.5)
 by the ``worst_case`` leader rule — with ``safelane_connected = True`` and ``safelane_promise``; F too is marked
 connected (its IDM unchanged, and it declares no intent: the shield still treats it as aggressive) unless

@@ -1,4 +1,4 @@
-"""The neural planner distilled from the calibrated nominal planner of the ``paper`` preset (issue 12).
+"""The neural planner distilled from the calibrated nominal planner of the ``paper`` preset (docs/reproduction.md).
 
 The paper's planners are neural networks trained to imitate a nominal planner; ours is the calibrated rule-based
 planner of the ``paper`` preset (:class:`~safelane.planners.base.ExpertPlanner` with the preset's knobs: lateral

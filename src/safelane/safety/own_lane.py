@@ -1,4 +1,4 @@
-"""The evasion check with traffic in the ego's own lane: ``L0`` ahead of the ego in its original lane (issue 17).
+"""The evasion check with traffic in the ego's own lane: ``L0`` ahead of the ego in its original lane (real_roads.md).
 
 The paper's evasion returns the ego to an *empty* original lane: it accelerates at ``a_x_a`` to stay ahead of ``F``,
 brakes behind ``L1``, and after ``t_y_f`` cruises. With ``L0`` (the nearest vehicle ahead of the ego in its original

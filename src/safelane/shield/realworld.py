@@ -1,4 +1,4 @@
-"""What the shield does beyond the paper's world (issue 17): sensing error, the own lane's chain, actuation delay.
+"""What the shield does beyond the paper's world (real_roads.md): sensing error, the own lane's chain, actuation delay.
 
 * **Sensing error** (:func:`worst_corners`): every measured state lies within its bound of the truth. The analysis is
   monotone in each vehicle's state, with a known direction: a leader (``L1``, ``L0``) lower and slower is worse for

@@ -57,7 +57,7 @@ class SimConfig(BaseModel):
         description="After a breach of the assumptions (safelane.shield.monitor) use the most conservative ones "
         "(L1 at a_x_d, F aggressive). False only records breaches.",
     )
-    # --- Beyond the paper's world (issue 17, docs/real_roads.md): all off by default (the paper's world) ---
+    # --- Beyond the paper's world (docs/real_roads.md): all off by default (the paper's world) ---
     own_lane: bool = Field(False, description="Put a leader L0 ahead of the ego in its own lane (non-connected).")
     l0_gap_min_m: float = Field(15.0, gt=0.0, description="L0's initial gap to the ego: smallest [m].")
     l0_gap_max_m: float = Field(60.0, gt=0.0, description="L0's initial gap to the ego: largest [m].")

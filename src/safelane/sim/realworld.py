@@ -1,4 +1,4 @@
-"""The simulator beyond the paper's world (issue 17): a leader ``L0`` in the ego's own lane, sensing error, delay.
+"""The simulator beyond the paper's world (real_roads.md): a leader ``L0`` in the ego's own lane, sensing error, delay.
 
 * **L0** (:func:`with_own_lane`, :func:`l0_motion`, :func:`own_lane_checks`): one non-connected vehicle ahead of the
   ego in its original lane, driving a piecewise-constant acceleration profile (by default: cruise, then brake at

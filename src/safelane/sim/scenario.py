@@ -66,7 +66,7 @@ class ScenarioBatch:
     #: :func:`safelane.sim.traffic.with_last_profile`.
     last_profile_t: np.ndarray | None = None
     last_profile_a: np.ndarray | None = None
-    #: The own lane's leader L0 (issue 17): ``(B,)`` initial position and speed (``+inf`` position: none) and its
+    #: The own lane's leader L0 (real_roads.md): ``(B,)`` initial position and speed (``+inf`` position: none) and its
     #: ``(B, P)`` acceleration profile (as ``last_profile_*``); ``None``: the paper's empty original lane.
     l0_x: np.ndarray | None = None
     l0_v: np.ndarray | None = None

@@ -71,7 +71,7 @@ class TrainConfig(BaseModel):
     teacher_preset: str | None = Field(
         None,
         description="Distil this preset's calibrated nominal planner (and use its params) instead of the "
-        "optimal-control teacher (issue 12: the NN planner of the paper-faithful Table 1).",
+        "optimal-control teacher (the NN planner of the paper-faithful Table 1, docs/reproduction.md).",
     )
     model: ModelConfig = Field(default_factory=ModelConfig)
     optim: OptimConfig = Field(default_factory=OptimConfig)
