@@ -7,6 +7,10 @@ drawn with their 95 % Wilson intervals as error bars. Planners keep one colour, 
 matplotlib is imported inside the functions and figures are drawn on an explicit Agg canvas (no pyplot, no global
 backend switch), so plotting never changes the caller's matplotlib state. SVGs are written with a fixed hash salt
 and no date, so the same results give the same files.
+
+Legibility: a figure is drawn at most :data:`MAX_WIDTH_IN` inches wide and no text is set below
+:data:`MIN_FONT_PT`, so at the report's page width (``document.CONTENT_WIDTH_PX``) every label is at least
+:func:`smallest_text_px` ≥ 12 CSS pixels tall (tests/test_report_figures.py checks each figure).
 """
 
 from __future__ import annotations
@@ -26,6 +30,12 @@ PLANNER_STYLES: dict[str, dict] = {
     "CV_none": {"color": "#2ca02c", "marker": "^", "linestyle": "-."},
     "No_agg_assess": {"color": "#d62728", "marker": "v", "linestyle": ":"},
 }
+#: Resolution of the PNGs; the report shows them at their pixel size, scaled down to the page width if wider.
+DPI = 150
+#: Widest figure [in]: 1500 px at DPI, shown at 1100 px, so 8 pt text is 12 px on the page.
+MAX_WIDTH_IN = 10.0
+#: Smallest font of any text in a figure [pt].
+MIN_FONT_PT = 8.0
 _DECEL_LABEL = "sudden deceleration of $L_{N+1}$, $a_{x,N+1,d}$ [m/s²]"
 _SECONDARY_STYLES = ("-", "--", ":", "-.")
 
@@ -34,7 +44,7 @@ def _figure(ncols: int = 1, width: float = 5.0, height: float = 3.6):
     from matplotlib.backends.backend_agg import FigureCanvasAgg
     from matplotlib.figure import Figure
 
-    fig = Figure(figsize=(width * ncols, height), layout="constrained")
+    fig = Figure(figsize=(min(width * ncols, MAX_WIDTH_IN), height), layout="constrained")
     FigureCanvasAgg(fig)
     axes = fig.subplots(1, ncols, squeeze=False)[0]
     return fig, list(axes)
@@ -47,9 +57,23 @@ def _save(fig, out_dir: Path, stem: str) -> list[Path]:
     out_dir.mkdir(parents=True, exist_ok=True)
     png, svg = out_dir / f"{stem}.png", out_dir / f"{stem}.svg"
     with matplotlib.rc_context({"svg.hashsalt": "safelane"}):
-        fig.savefig(png, dpi=150, metadata={"Software": None})
+        fig.savefig(png, dpi=DPI, metadata={"Software": None})
         fig.savefig(svg, metadata={"Date": None})
     return [png, svg]
+
+
+def smallest_text_px(fig, content_width_px: float | None = None) -> tuple[float, str]:
+    """``(size, text)`` of the smallest visible text of ``fig`` in CSS pixels as the report shows the PNG: at its
+    pixel size (``DPI``), scaled down to ``content_width_px`` when wider."""
+    from matplotlib.text import Text
+
+    from .document import CONTENT_WIDTH_PX
+
+    natural = fig.get_figwidth() * DPI
+    scale = min(1.0, (content_width_px or CONTENT_WIDTH_PX) / natural)
+    sizes = [(float(t.get_fontsize()) * DPI / 72 * scale, t.get_text()) for t in fig.findobj(Text)
+             if t.get_visible() and t.get_text().strip()]  # fmt: skip
+    return min(sizes) if sizes else (float("inf"), "")
 
 
 def _planner_order(planners) -> list[str]:
@@ -95,7 +119,7 @@ def fig4(summary: pd.DataFrame, out_dir: Path, *, n_leaders: int = 5, stem: str 
 def table1(summary: pd.DataFrame, out_dir: Path, *, stem: str = "table1") -> list[Path]:
     """Table 1 as a figure: one panel per N; ours with intervals, the paper's published values as crosses."""
     ns = sorted(summary["n_leaders"].unique())
-    fig, axes = _figure(len(ns), width=4.2)
+    fig, axes = _figure(len(ns), width=3.4, height=3.6)
     published = {n for n, _ in TABLE1}
     for ax, n in zip(axes, ns, strict=True):
         frame = summary[summary["n_leaders"] == n]
@@ -105,12 +129,15 @@ def table1(summary: pd.DataFrame, out_dir: Path, *, stem: str = "table1") -> lis
                 k = PLANNERS.index(planner)
                 points = sorted((d, values[k]) for (m, d), values in TABLE1.items() if m == n)
                 ax.plot(*zip(*points, strict=True), "x", color=PLANNER_STYLES[planner]["color"], markersize=8)
-            ax.set_title(f"N = {n}: ours (lines) vs paper (×)")
+            ax.set_title(f"N = {n}: ours (lines), paper (×)", fontsize=10)
         else:
-            ax.set_title(f"N = {n}: our prediction (paper withheld)")
+            ax.set_title(f"N = {n}: our prediction", fontsize=10)
         _rate_axis(ax)
         ax.set_xlabel("$a_{x,N+1,d}$ [m/s²]")
-    axes[0].legend(fontsize=7)
+    for ax in axes[1:]:
+        ax.set_ylabel("")
+    handles, labels = axes[0].get_legend_handles_labels()
+    fig.legend(handles, labels, loc="outside upper center", ncols=len(labels), fontsize=9, frameon=False)
     return _save(fig, out_dir, stem)
 
 
