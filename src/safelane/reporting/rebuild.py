@@ -14,6 +14,7 @@ from __future__ import annotations
 import argparse
 import json
 import shutil
+from collections.abc import Sequence
 from pathlib import Path
 
 import pandas as pd
@@ -29,8 +30,9 @@ from .report import RunRecord, write_report
 PUBLISHED = ("_summary.csv", "_trace.csv", "claims.csv", "table1_side_by_side.csv")
 
 
-def record_from_folder(folder: str | Path) -> RunRecord:
-    """A :class:`RunRecord` from a run folder (``run.json`` and ``data/``); figures are redrawn into ``figures/``."""
+def record_from_folder(folder: str | Path, *, figures: bool | Sequence[str] = True) -> RunRecord:
+    """A :class:`RunRecord` from a run folder (``run.json`` and ``data/``); figures are redrawn into ``figures/``
+    (``figures``: all, none, or the experiments named)."""
     folder = Path(folder)
     info = json.loads((folder / "run.json").read_text(encoding="utf-8"))
     preset = load_preset(info["preset"]["name"])
@@ -51,11 +53,12 @@ def record_from_folder(folder: str | Path) -> RunRecord:
     side, mae = (None, None)
     if "table1" in summaries:
         side, mae = table1_side_by_side(summaries["table1"])
-    figures = {}
+    drawn = {}
     for name, res in results.items():
         data = res.summary if res.summary is not None else res.trace
-        if name in FIGURES and data is not None and len(data):
-            figures[name] = [p.resolve() for p in FIGURES[name](data, folder / "figures", preset.params.y_boundary)]
+        wanted = figures is True or (not isinstance(figures, bool) and name in figures)
+        if wanted and name in FIGURES and data is not None and len(data):
+            drawn[name] = [p.resolve() for p in FIGURES[name](data, folder / "figures", preset.params.y_boundary)]
     data_files = []
     for name, res in results.items():
         kinds = ("scenarios", "summary") if res.summary is not None else ("trace",)
@@ -65,7 +68,7 @@ def record_from_folder(folder: str | Path) -> RunRecord:
     return RunRecord(
         run_id=info["run_id"], run_dir=folder.resolve(), seed=info["seed"], quick=info["quick"],
         command=info["command"], preset=preset, results=results, claims=claims, side_by_side=side, mae=mae,
-        figures=figures, data_files=data_files, versions=info["versions"], parquet=info.get("parquet", False),
+        figures=drawn, data_files=data_files, versions=info["versions"], parquet=info.get("parquet", False),
         timings=timings, started_utc=info["started_utc"],
     )  # fmt: skip
 
