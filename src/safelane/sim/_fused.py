@@ -30,26 +30,80 @@ FUSED_MIN_ROWS = 64
 PROGRESS_CHUNK = 4096
 
 
-def covers(batch, cfg, nominal, traffic, trace: bool, record_observations: bool) -> bool:
-    """Whether the compiled loop runs this simulation (see the module docstring)."""
-    if fast_kernel() is None or os.environ.get("SAFELANE_NO_FUSED", "") == "1":
-        return False
-    if trace or record_observations or traffic is not None or len(batch) < FUSED_MIN_ROWS:
-        return False
+#: How the compiled loop treats each :class:`~.config.SimConfig` field. Every field is named in exactly one of the
+#: three tables, and :func:`reasons` refuses a config whose class has a field named in none (a new setting is never
+#: run compiled as if it were at its default: ``tests/test_fused_dispatch.py`` builds its cases from the field list).
+#: The loop reads these fields' values (any value runs compiled):
+READ = frozenset({"horizon_s", "brake_start_s", "assess_window", "assess_threshold", "follower_open_decel",
+                  "follower_open_gap_m"})  # fmt: skip
+#: The loop implements these fields at this value only; any other value runs period by period:
+FIXED = {
+    "assessment": "observed", "completion": "commit_guard", "sensor_noise_std": 0.0, "supervised": True,
+    "v2x_loss": 0.0, "v2x_latency_periods": 0, "leader_rule": "worst_case", "follower_ignores_ego": False,
+    "monitor": True, "own_lane": False, "sensing_error": False, "actuation_delay_s": 0.0,
+}  # fmt: skip
+#: These fields act only through another setting; while the fields named (or the nominal planner: ``"nominal"``)
+#: are at the loop's values they change nothing, so any value runs compiled:
+ONLY_WITH = {
+    "assess_delay_s": ("assessment",), "assess_miss": ("assessment",),
+    "v2x_max_age_s": ("v2x_loss", "v2x_latency_periods"),  # no message is ever late without the V2X emulation
+    "l1_plan_steps": ("nominal",),  # L1's shared plan feeds the neural planners' features; the expert ignores it
+    "l0_gap_min_m": ("own_lane",), "l0_gap_max_m": ("own_lane",), "l0_speed_spread_mps": ("own_lane",),
+    "l0_decel_mps2": ("own_lane",), "l0_brake_window_s": ("own_lane",), "shield_own_lane": ("own_lane",),
+    "sense_connected_pos_m": ("sensing_error",), "sense_connected_speed_mps": ("sensing_error",),
+    "sense_sensed_pos_m": ("sensing_error",), "sense_sensed_speed_mps": ("sensing_error",),
+    "sensing_edge_share": ("sensing_error",), "shield_sensing": ("sensing_error",),
+    "shield_delay": ("actuation_delay_s",),
+}  # fmt: skip
+
+
+def unclassified(config_cls) -> list[str]:
+    """The fields of ``config_cls`` that the tables above do not name (or name twice)."""
+    named = [*READ, *FIXED, *ONLY_WITH]
+    fields = set(config_cls.model_fields)
+    return sorted({f for f in fields if named.count(f) != 1} | (set(named) - fields))
+
+
+def reasons(batch, cfg, nominal, traffic, trace: bool, record_observations: bool) -> list[str]:
+    """Why the compiled loop does not run this simulation (empty: it runs it); see the module docstring."""
+    missing = unclassified(type(cfg))
+    if missing:
+        raise RuntimeError(
+            f"sim/_fused.py does not classify the SimConfig field(s) {missing} (READ, FIXED or ONLY_WITH): say how the "
+            "compiled loop treats each one before it can run"
+        )
+    out = []
+    if fast_kernel() is None:
+        out.append("numba is not installed (extra 'fast')")
+    if os.environ.get("SAFELANE_NO_FUSED", "") == "1":
+        out.append("SAFELANE_NO_FUSED=1")
+    if trace:
+        out.append("a trace is recorded")
+    if record_observations:
+        out.append("observations are recorded")
+    if traffic is not None:
+        out.append("a traffic model other than the paper's default")
+    if len(batch) < FUSED_MIN_ROWS:
+        out.append(f"fewer than {FUSED_MIN_ROWS} scenarios")
     if type(nominal) is not ExpertPlanner:
-        return False
-    # The settings the loop implements; the others it reads from cfg (horizon, brake start, the assessment's window
-    # and threshold, F's gap opening) or that only matter with one of these changed.
-    covered = dict(
-        assessment="observed", completion="commit_guard", sensor_noise_std=0.0, supervised=True, v2x_loss=0.0,
-        v2x_latency_periods=0, leader_rule="worst_case", follower_ignores_ego=False, monitor=True, own_lane=False,
-        sensing_error=False, actuation_delay_s=0.0,
-    )  # fmt: skip
-    if any(getattr(cfg, name) != value for name, value in covered.items()):
-        return False
-    if batch.l0_x is not None or batch.last_profile_t is not None or (batch.p_v > 0.0).any():
-        return False
-    return all(VARIANTS[name].rule == "paper" for name in np.asarray(VARIANT_NAMES)[np.unique(batch.variant)])
+        out.append(f"the nominal planner {type(nominal).__name__} (the loop runs ExpertPlanner only)")
+    out.extend(f"config.{name}={getattr(cfg, name)!r} (compiled: {value!r})" for name, value in FIXED.items()
+               if getattr(cfg, name) != value)  # fmt: skip
+    if batch.l0_x is not None:
+        out.append("own-lane leaders in the batch")
+    if batch.last_profile_t is not None:
+        out.append("L(N+1) braking profiles")
+    if (batch.p_v > 0.0).any():
+        out.append("promise violations (p_v > 0)")
+    ruled = [name for name in np.asarray(VARIANT_NAMES)[np.unique(batch.variant)] if VARIANTS[name].rule != "paper"]
+    if ruled:
+        out.append(f"variants decided by another rule: {ruled}")
+    return out
+
+
+def covers(batch, cfg, nominal, traffic, trace: bool, record_observations: bool) -> bool:
+    """Whether the compiled loop runs this simulation (:func:`reasons` is empty)."""
+    return not reasons(batch, cfg, nominal, traffic, trace, record_observations)
 
 
 def run(sim, n_steps: int, progress: bool = False):

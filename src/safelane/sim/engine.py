@@ -8,6 +8,8 @@ cells is just a bigger batch) — in one process, or split into chunks on worker
 
 from __future__ import annotations
 
+import os
+
 import numpy as np
 import pandas as pd
 from threadpoolctl import threadpool_limits
@@ -110,8 +112,12 @@ def simulate_batch(
             return _simulate_parallel(batch, seed, prm, cfg, nominal, backend, chunks, traffic)
     sim = ClosedLoop(batch, seed, prm, cfg, nominal, traffic)
     n_steps = round(cfg.horizon_s / prm.dt)
-    if fused.covers(batch, cfg, nominal, traffic, trace, record_observations):  # the whole run compiled
-        return SimResult(table=results_table(batch, fused.run(sim, n_steps, progress)))
+    why = fused.reasons(batch, cfg, nominal, traffic, trace, record_observations)
+    if not why:  # the whole run compiled
+        return SimResult(table=results_table(batch, fused.run(sim, n_steps, progress)), engine="compiled loop")
+    if os.environ.get("SAFELANE_REQUIRE_COMPILED", "") == "1":
+        raise InputError(f"SAFELANE_REQUIRE_COMPILED=1 but this run is not compiled: {'; '.join(why)}",
+                         "SAFELANE_REQUIRE_COMPILED")  # fmt: skip
     state = sim.initial_state()
     rows, observations = [], []
     steps = range(n_steps)
@@ -131,7 +137,8 @@ def simulate_batch(
     state = sim.finish(state)
     table = results_table(batch, state)
     trace_df = pd.concat(rows, ignore_index=True) if trace and rows else None
-    return SimResult(table=table, trace=trace_df, observations=observations)
+    return SimResult(table=table, trace=trace_df, observations=observations, engine="period by period",
+                     engine_reasons=tuple(why))  # fmt: skip
 
 
 def _simulate_chunk(args) -> pd.DataFrame:

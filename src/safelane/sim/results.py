@@ -20,6 +20,10 @@ class SimResult:
     table: pd.DataFrame
     trace: pd.DataFrame | None = None
     observations: list[Observation] = field(default_factory=list)
+    #: Which engine ran it: ``"compiled loop"`` (sim/_fused.py), ``"period by period"`` (with ``engine_reasons``,
+    #: why the compiled loop did not take it), or ``None`` (split over workers).
+    engine: str | None = None
+    engine_reasons: tuple = ()
 
     def summary(self) -> pd.DataFrame:
         from .metrics import summarize
