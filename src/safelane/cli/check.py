@@ -14,7 +14,11 @@ from . import app
 @app.command()
 def check(
     ego_px: float = typer.Option(0.0, help="Ego longitudinal position [m]."),
-    ego_py: float = typer.Option(1.2, help="Ego lateral centre position [m] (original lane centre = 0)."),
+    ego_py: float = typer.Option(
+        1.2,
+        help="Ego lateral centre position [m]: original lane centre 0, target lane centre lane_width (3.5 "
+        "by default); within [-lane_width/2, 1.5*lane_width].",
+    ),
     ego_vx: float = typer.Option(30.0, help="Ego speed [m/s]."),
     ego_vy: float = typer.Option(0.5, help="Ego lateral speed [m/s], positive toward the target lane."),
     l1_p: float = typer.Option(20.0, help="L1 position [m]."),
@@ -59,6 +63,7 @@ def check(
         )
     if chain_p and l1_decel is not None:
         raise typer.BadParameter("give either --l1-decel or a chain (--chain-p), not both", param_hint="--l1-decel")
+    _check_geometry(params, ego_py, l1_p, f_p, chain_p)
     try:
         if chain_p:
             n = len(chain_p)
@@ -83,6 +88,33 @@ def check(
         "params": params.model_dump(),
     }
     typer.echo(json.dumps(out, indent=2))
+
+
+def _check_geometry(params, ego_py: float, l1_p: float, f_p: float, chain_p: list[float]) -> None:
+    """Refuse a state outside the analysis' world, naming the option: the ego's centre outside the original and the
+    target lane, F ahead of L1, or a leader behind the one before it (one lane: no vehicle passes through another).
+    L1 behind the ego or F ahead of it are answered (no evasion: the gap is below ``p_m`` from the start)."""
+    lo, hi = -0.5 * params.lane_width, 1.5 * params.lane_width
+    if not lo <= ego_py <= hi:
+        raise typer.BadParameter(
+            f"{ego_py:g} m is outside the two lanes: the ego's lateral centre position must lie in [{lo:g}, {hi:g}] m "
+            f"(original lane centre 0, target lane centre lane_width={params.lane_width:g}, outer edges at "
+            "-lane_width/2 and 1.5*lane_width)",
+            param_hint="--ego-py",
+        )
+    if f_p > l1_p:
+        raise typer.BadParameter(
+            f"the follower at {f_p:g} m is ahead of L1 at {l1_p:g} m; F and L1 share the target lane, F behind L1",
+            param_hint="--f-p",
+        )
+    positions = [l1_p, *chain_p]
+    for i in range(1, len(positions)):
+        if positions[i] < positions[i - 1]:
+            raise typer.BadParameter(
+                f"L{i + 1} at {positions[i]:g} m is behind L{i} at {positions[i - 1]:g} m; give L2..L(N+1) nearest "
+                "first, each at or ahead of the one before it",
+                param_hint="--chain-p",
+            )
 
 
 _STATE_OPTIONS = ("ego_px", "ego_py", "ego_vx", "ego_vy", "l1_p", "l1_v", "l1_decel", "f_p", "f_v")

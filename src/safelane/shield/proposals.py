@@ -20,18 +20,19 @@ _RANGE_TOL = 1e-9
 def check_proposal(planner, proposal, batch: int, prm: Params):
     """``(a_x, a_y, invalid)`` from a planner's raw answer; invalid rows hold ``0`` (see the module docstring)."""
     name = planner if isinstance(planner, str) else getattr(planner, "__name__", type(planner).__name__)
+    who = name if name.startswith("the ") else f"nominal planner {name}"  # not "nominal planner the nominal planner"
     if not isinstance(proposal, tuple | list) or len(proposal) != 2:
-        raise TypeError(f"nominal planner {name} must return a pair (a_x, a_y); got {type(proposal).__name__}")
+        raise TypeError(f"{who} must return a pair (a_x, a_y); got {type(proposal).__name__}")
     out = []
     for axis, value in zip(("a_x", "a_y"), proposal, strict=True):
         arr = np.asarray(value)
         if arr.dtype.kind not in "fiu":
             raise TypeError(
-                f"nominal planner {name} returned {axis} of dtype {arr.dtype} ({type(value).__name__}); numbers "
+                f"{who} returned {axis} of dtype {arr.dtype} ({type(value).__name__}); numbers "
                 "are required"
             )
         if arr.shape != (batch,):
-            raise ValueError(f"nominal planner {name} returned {axis} of shape {arr.shape}; expected ({batch},)")
+            raise ValueError(f"{who} returned {axis} of shape {arr.shape}; expected ({batch},)")
         out.append(arr.astype(float))
     a_x, a_y = out
     with np.errstate(invalid="ignore"):

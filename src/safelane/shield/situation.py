@@ -22,11 +22,33 @@ Beyond the paper's world (all optional; absent, the shield is exactly the paper'
 from __future__ import annotations
 
 import dataclasses
+import warnings
 from dataclasses import dataclass
 
 import numpy as np
 
+from ..errors import InputError
 from ..params import Params
+
+
+class GeometryWarning(UserWarning):
+    """A :class:`Situation` whose lanes are out of order (see :meth:`Situation.from_arrays`)."""
+
+
+_GEOMETRY = ("warn", "raise", "ignore")
+
+
+def _report_order(situation: Situation, geometry: str) -> None:
+    if geometry not in _GEOMETRY:
+        raise InputError(f"geometry must be one of {', '.join(_GEOMETRY)}; got {geometry!r}", "geometry")
+    problems = [] if geometry == "ignore" else situation.order_problems()
+    if not problems:
+        return
+    field, text = problems[0]
+    if geometry == "raise":
+        raise InputError(f"Situation.{field}: {text}", field)
+    warnings.warn(f"Situation.{field}: {text}. The shield answers it conservatively (no lane change while it lasts); "
+                  "see Situation.from_arrays", GeometryWarning, stacklevel=3)  # fmt: skip
 
 
 @dataclass(frozen=True)
@@ -134,6 +156,7 @@ class Situation:
         own_n_connected=0,
         own_promise=0.5,
         sensing: SensingBounds | None = None,
+        geometry: str = "warn",
     ) -> Situation:
         """A validated batch from plain arrays (any batch size; scalars give ``B = 1``).
 
@@ -148,6 +171,21 @@ class Situation:
                 ``None`` (the original lane is empty).
             own_n_connected, own_promise: as ``n_connected`` and ``promise_decel`` for the own lane.
             sensing: error bounds filled per vehicle by connectivity, or ``None`` (exact states).
+
+        Geometry (``geometry``): the lanes' order — the target lane's ``F ≤ L1 ≤ L2 ≤ … ≤ L(N+1)``, the own lane's
+        ``L0`` first — is checked (:meth:`order_problems`); a break (leaders given farthest first, F and L1
+        swapped) gives a :class:`GeometryWarning` naming the field, the row and the positions (``"warn"``, the
+        default), an :class:`~safelane.errors.InputError` (``"raise"``), or nothing (``"ignore"``). It is not refused
+        by default because real loops produce it — a hand-written world or a simulator without collisions between
+        the others lets a vehicle pass through another, states extrapolated from stale V2X messages at their worst
+        case can cross — and because the shield's answer to it is conservative: a leader behind the one it follows
+        makes that link unsafe, so ``L1``'s worst case is ``a_x_d``; F ahead of L1 means one of them is on the
+        wrong side of the ego. Where L1 and F stand relative to the *ego* (the other lane) is never an error:
+        ``L1`` beside or behind the ego (the ego overtaking in its own lane) and ``F`` ahead of it are real
+        situations, and the fallback is conservative: the evasion check needs ``L1`` at least ``p_m`` ahead of the
+        ego and ``F`` at least ``p_m`` behind it from the first instant on, so no step that leaves the own lane is
+        accepted (the shield hesitates or aborts) until they are where a lane change needs them
+        (``tests/test_validation_situation.py``).
         """
         prm = params or Params()
         frame = frame or LaneFrame()
@@ -180,6 +218,7 @@ class Situation:
         if sensing is not None:
             situation = sensing.apply(situation)
         situation.validate(prm)
+        _report_order(situation, geometry)
         return situation
 
     @classmethod
@@ -252,6 +291,33 @@ class Situation:
             raise ValueError(f"Situation.n_connected must lie in [0, M-1={m - 1}]")
         self._validate_own(params, b)
         self._validate_errors(b, m)
+
+    def order_problems(self) -> list[tuple[str, str]]:
+        """``(field, description)`` of each break of the lanes' order — the target lane's ``F ≤ L1 ≤ L2 ≤ … ≤
+        L(N+1)``, the own lane's ``L0 ≤ …`` (one lane: no vehicle is behind the one it follows; equal positions, an
+        overlap, are not a break) — the first row of each kind; ``[]`` when there is none. Slots beyond ``L(N+1)``
+        are not read by the analysis and not checked. See :meth:`from_arrays` for what the shield makes of it."""
+        out = []
+        x = self.chain_x
+        behind = (x[:, 1:] < x[:, :-1]) & (np.arange(1, x.shape[1])[None, :] <= self.n_connected[:, None])
+        if behind.any():
+            r, j = (int(i[0]) for i in np.nonzero(behind))
+            out.append(("chain_x", f"L{j + 2} at {x[r, j + 1]:g} m is behind L{j + 1} at {x[r, j]:g} m (row {r}); "
+                        "the leaders go nearest first, each at or ahead of the one before it"))  # fmt: skip
+        ahead = self.f_x > x[:, 0]
+        if ahead.any():
+            r = int(np.argmax(ahead))
+            out.append(("f_x", f"F at {self.f_x[r]:g} m is ahead of L1 at {x[r, 0]:g} m (row {r}); F is the target "
+                        "lane's follower, at or behind L1"))  # fmt: skip
+        if self.own_x is not None and self.own_x.shape[1] > 1:
+            ox = self.own_x
+            with np.errstate(invalid="ignore"):
+                behind = np.isfinite(ox[:, 1:]) & (ox[:, 1:] < ox[:, :-1])
+            if behind.any():
+                r, j = (int(i[0]) for i in np.nonzero(behind))
+                out.append(("own_x", f"own-lane leader {j + 1} at {ox[r, j + 1]:g} m is behind leader {j} at "
+                            f"{ox[r, j]:g} m (row {r}); L0 first, each at or ahead of the one before it"))  # fmt: skip
+        return out
 
     def _validate_own(self, params: Params, b: int) -> None:
         own = (self.own_x, self.own_v, self.own_promise, self.own_n_connected)
