@@ -45,14 +45,16 @@ class RewardConfig(BaseModel):
     − time − cost·cost_t − intervention·[the shield intervened]``, where ``Δp_y`` is the ego's lateral progress over
     the period (the lane change completes when its centre crosses the lane boundary at ``w_l/2``, so the progress
     terms of a completed lane change add up to about ``progress``) and ``(a_x, a_y)`` is the *executed* acceleration
-    (``info["executed_action"]``). The default weights are those of ``docs/envs.md``'s example.
+    (``info["executed_action"]``). The default weights are those of ``docs/envs.md``'s example. Every weight is
+    ``>= 0``: the signs are in the formula (a bonus is added, a penalty subtracted).
     """
 
     model_config = ConfigDict(frozen=True, extra="forbid", allow_inf_nan=False)
 
-    progress: float = Field(1.0, description="Weight of the lateral progress toward the lane boundary.")
-    success: float = Field(1.0, description="Bonus when the lane change completes without a collision.")
-    collision: float = Field(1.0, description="Penalty on a collision of the ego (the episode ends).")
+    progress: float = Field(1.0, ge=0.0, description="Weight of the lateral progress toward the lane boundary.")
+    success: float = Field(1.0, ge=0.0, description="Bonus when the lane change completes without a collision.")
+    collision: float = Field(1.0, ge=0.0, description="Penalty on a collision of the ego (the episode ends; "
+                             "subtracted, so a negative weight would reward crashing).")  # fmt: skip
     comfort: float = Field(0.01, ge=0.0, description="Penalty per (m/s²)²·s of executed acceleration.")
     time: float = Field(0.0, ge=0.0, description="Penalty per period (hurry).")
     cost: float = Field(0.0, ge=0.0, description="Penalty per unit of cost (0: leave it to a constrained method).")
@@ -273,6 +275,24 @@ class StepOutcome:
     success: np.ndarray
 
 
+def check_action(action, shape: tuple[int, ...], accepted: tuple[int, ...] | None = None) -> np.ndarray:
+    """``action`` as a float array of ``shape``; an :class:`~safelane.errors.InputError` naming the action, its
+    shape and the expected one otherwise (``accepted``: the shape the caller takes, named in the message)."""
+    from ..errors import InputError
+
+    want = accepted or shape
+    try:
+        arr = np.asarray(action, dtype=float)
+    except (TypeError, ValueError) as exc:
+        raise InputError(f"action must be numbers (a_x, a_y) in m/s² of shape {want}; got {action!r}",
+                         "action") from exc  # fmt: skip
+    if arr.size != int(np.prod(shape)) or arr.shape not in (shape, want):
+        text = np.array2string(np.asarray(arr), threshold=8, precision=3)
+        raise InputError(f"action must have shape {want}: (a_x, a_y) in m/s²; got shape {arr.shape}: {text}",
+                         "action")  # fmt: skip
+    return arr.reshape(shape)
+
+
 class LaneChangeTask:
     """``B`` lane-change episodes in one closed loop; the agent's actions are the nominal proposals."""
 
@@ -344,7 +364,7 @@ class LaneChangeTask:
     def step(self, action: np.ndarray) -> StepOutcome:
         """One control period with the agent's ``(B, 2)`` proposals (clipped to the action box)."""
         lo, hi = self.action_bounds()
-        proposal = np.clip(np.asarray(action, dtype=float).reshape(self.n, 2), lo, hi)  # NaN stays: an invalid one
+        proposal = np.clip(check_action(action, (self.n, 2)), lo, hi)  # NaN stays: an invalid one
         self.planner.set(proposal)
         before = self.state
         self.state, _, behaviour = self.loop.step(before)

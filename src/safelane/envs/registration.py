@@ -14,6 +14,8 @@ def register_envs() -> None:
         return
     gym.register(
         id=ENV_ID,
-        entry_point="safelane.envs.env:LaneChangeEnv",
+        # A factory, not the class: it wraps the env in a TimeLimit at its own horizon (horizon_s), so that
+        # env.spec.max_episode_steps is the episode length whatever the keyword arguments.
+        entry_point="safelane.envs.env:make_env",
         vector_entry_point="safelane.envs.vector:LaneChangeVectorEnv",
     )

@@ -19,8 +19,8 @@ from typing import Any, ClassVar
 import numpy as np
 
 from ._gym import require_gymnasium
-from .core import BEHAVIOUR_NAMES
-from .env import make_task, spaces_of
+from .core import BEHAVIOUR_NAMES, check_action
+from .env import RESET_INFO, make_task, spaces_of
 
 gym = require_gymnasium()
 from gymnasium.vector import AutoresetMode, VectorEnv  # noqa: E402
@@ -68,12 +68,15 @@ class LaneChangeVectorEnv(VectorEnv):
             if len(seeds) != self.num_envs:
                 raise ValueError(f"reset(seed=list) needs {self.num_envs} seeds; got {len(seeds)}")
         self._rngs = [np.random.default_rng(s) for s in seeds]
-        return self.task.start(self._rngs), {}
+        info = {}
+        for key, value in RESET_INFO.items():  # the single env's reset info, one array per key with its mask
+            info[key], info["_" + key] = np.full(self.num_envs, value), self._all
+        return self.task.start(self._rngs), info
 
     def step(self, actions):
         if self._rngs is None:
             raise RuntimeError("call reset() before step()")
-        out = self.task.step(np.asarray(actions, dtype=float))
+        out = self.task.step(check_action(actions, (self.num_envs, 2)))
         done = out.terminated | out.truncated
         info = {
             "behaviour": _BEHAVIOUR_LABELS[out.behaviour],

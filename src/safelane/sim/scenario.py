@@ -17,6 +17,12 @@ from ..params import Params
 from ..planners.variants import VARIANT_NAMES, get_variant
 from .inputs import check_scenario_ranges
 
+#: Bounds of :class:`ScenarioConfig` that hold whatever the ``Params``: promises beyond 15 m/s² (1.5 g, more than any
+#: road vehicle's tyres give), gaps (centre to centre) shorter than the shortest car, speeds above 100 m/s.
+MAX_ACCEL_MPS2 = 15.0
+MIN_GAP_M = 2.5
+MAX_SPEED_MPS = 100.0
+
 
 class ScenarioConfig(BaseModel):
     """Scenario distribution. Defaults are the paper's sampler (§4.1)."""
@@ -24,10 +30,16 @@ class ScenarioConfig(BaseModel):
     model_config = ConfigDict(frozen=True, extra="forbid", allow_inf_nan=False)
 
     ego_speed: tuple[float, float] = Field((29.0, 31.0), description="Ego speed range U[lo, hi] [m/s] (paper).")
-    traffic_speed: float = Field(30.0, ge=0.0, description="Speed of F and the leaders [m/s] (paper).")
+    traffic_speed: float = Field(
+        30.0, ge=0.0, le=MAX_SPEED_MPS, description="Speed of F and the leaders [m/s] (paper)."
+    )
     gap: tuple[float, float] = Field((17.0, 22.0), description="Inter-vehicle distance δp ~ U[lo, hi] [m] (paper).")
-    promise_decel: float = Field(0.5, ge=0.0, description="Promised max deceleration a_m_d [m/s²] (paper).")
-    promise_accel: float = Field(0.5, ge=0.0, description="Promised max acceleration a_m_a [m/s²] (our assumption).")
+    promise_decel: float = Field(
+        0.5, ge=0.0, le=MAX_ACCEL_MPS2, description="Promised max deceleration a_m_d [m/s²] (paper)."
+    )
+    promise_accel: float = Field(
+        0.5, ge=0.0, le=MAX_ACCEL_MPS2, description="Promised max acceleration a_m_a [m/s²] (our assumption)."
+    )
     follower_connected_share: float = Field(
         1.0, ge=0.0, le=1.0, description="Share of connected (hence collaborative) followers (paper: F connected)."
     )
@@ -38,6 +50,21 @@ class ScenarioConfig(BaseModel):
 
     # Reversed or impossible ranges fail here, naming the field (not as a NumPy error later): see sim/inputs.py.
     _check_ranges = model_validator(mode="after")(check_scenario_ranges)
+
+    @model_validator(mode="after")
+    def _check_physical(self) -> ScenarioConfig:
+        # Without Params at hand, the bounds no car passes; a run checks against its own Params too
+        # (sim/inputs.py: promises beyond a_x_d / a_x_a refused, gaps below vehicle_length warned about).
+        lo, hi = self.gap
+        if lo < MIN_GAP_M:
+            raise ValueError(
+                f"gap=({lo}, {hi}): the lower bound must be >= {MIN_GAP_M} m — gaps are centre-to-centre distances, "
+                f"and below {MIN_GAP_M} m (shorter than any car) every scenario starts with the vehicles overlapping"
+            )
+        lo, hi = self.ego_speed
+        if hi > MAX_SPEED_MPS:
+            raise ValueError(f"ego_speed=({lo}, {hi}): the upper bound must be <= {MAX_SPEED_MPS} m/s")
+        return self
 
 
 @dataclass(frozen=True)

@@ -11,8 +11,9 @@ the assumptions itself. The lighter way, for behaviours *inside* the assumptions
 * :class:`TrafficHooks` — callables the closed loop asks every period for what a vehicle *wants* to do. The
   simulator then enforces the assumptions the guarantee rests on: a connected leader's wish is clipped into its
   promise ``[−a_m_d, a_m_a]`` and then to what keeps it safe against the vehicle ahead's worst case (it may
-  brake beyond its promise only as far as the chain analysis allows); F's wish is clipped into its type's
-  range and filtered by responsible following. A hook therefore cannot leave the assumptions by accident.
+  brake beyond its promise only as far as the chain analysis allows); F's wish is clipped into the mechanical
+  limits ``[−a_x_d, a_x_a]`` and filtered by responsible following (of L1, and of the ego as
+  :class:`TrafficHooks` says). A hook therefore cannot leave the assumptions by accident.
 * :func:`with_last_profile` — the braking profile of ``L(N+1)`` (the non-connected head of the chain): piecewise
   constant accelerations inside ``[−a_x_d, a_x_a]`` that may switch at any instant, also inside a control
   period (at most one switch per period).
@@ -79,9 +80,13 @@ class TrafficHooks:
     Attributes:
         leader_task: each connected leader's *own driving task* (built-in: hold the initial speed). Clipped into the
             promise, then made safe against the vehicle ahead's worst case (see the module docstring).
-        follower_wish: F's wanted acceleration (built-in: collaborative opens a gap, aggressive closes on L1).
-            Clipped into ``[−a_x_d, a_x_a]`` and, for a collaborative F, to ``<= 0`` while the ego is changing lanes
-            in front of it (a collaborative F never pushes); then filtered by responsible following.
+        follower_wish: F's wanted acceleration (built-in: collaborative opens a gap, then matches the ego's speed;
+            aggressive closes on L1). Clipped into ``[−a_x_d, a_x_a]``, then filtered by responsible following: of
+            L1 always, and of the ego whenever the ego is ahead of F and F is collaborative (an aggressive F once
+            the lane change has completed). A collaborative F's wish is *not* clipped to ``<= 0``: it may accelerate
+            behind a lane-changing ego, as far as keeping ``p_m`` to the ego against the ego braking at ``a_x_d``
+            allows — "collaborative" means it yields responsibly, which is what the shield assumes of it and its
+            assumption monitor watches (``tests/test_validation_traffic.py`` pins this).
     """
 
     leader_task: LeaderTask | None = None
