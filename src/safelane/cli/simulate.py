@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import re
+import warnings
 from pathlib import Path
 
 import typer
@@ -28,8 +29,9 @@ def simulate(
     ),
     nominal: str = typer.Option(
         None, "--nominal", help="Nominal planner: expert (with --preset: the preset's rule-based planner and "
-        "gains), mlp, mlp_paper or teacher (default: the preset's — paper: mlp_paper, the network distilled from its "
-        "rule-based planner — else expert)."
+        "gains), mlp, mlp_paper, teacher, or a model file PATH.npz (as 'safelane train' writes it) or PATH.onnx "
+        "(default: the preset's — paper: mlp_paper, the network distilled from its rule-based planner — else "
+        "expert). Another network than the preset's warns: the preset's numbers come from its own."
     ),
     assessment: str = typer.Option(
         None, "--assessment", help="'observed' (the real one; default), 'slow' (delayed, sometimes missed verdicts; "
@@ -54,15 +56,19 @@ def simulate(
     A cell (planner, N, decel, p_v) and seed give the same numbers here, in Python (safelane.simulate) and in
     the report of 'safelane reproduce' under the same preset.
 
+    The printed summary names the preset and the nominal planner (the same cell differs between them).
+
     Example: safelane simulate --planner CV_all --leaders 5 --decel 5 --samples 1000 --seed 0
-    Example: safelane simulate --preset paper --nominal mlp --leaders 1 --decel 4
+    Example: safelane simulate --preset paper --leaders 1 --decel 4   (the preset's network, mlp_paper)
+    Example: safelane simulate --nominal results/train/RUN/model.npz   (a network from 'safelane train')
 
     Example: safelane simulate --samples 1000000 --backend ray   (the same numbers, on a Ray cluster)
     """
     from ..config import load_params
+    from ..planners.registry import is_model_path
     from ..sim import SimConfig
     from ..sim import simulate as run
-    from ..sim.inputs import check_cell_args, preset_nominal
+    from ..sim.inputs import check_cell_args, network_mismatch, nominal_label, preset_nominal
     from ..sim.preset import load_preset
     from ._runs import check_out_dir, preset_record, run_folder
 
@@ -84,9 +90,14 @@ def simulate(
         raise typer.BadParameter(f"{assessment!r} is not one of 'observed', 'slow', 'truth'", param_hint="--assessment")
     config = base.model_copy(update={"assessment": assessment or base.assessment})
     try:
-        planner_obj = preset_nominal(chosen, nominal)
+        with warnings.catch_warnings():  # said once below, as one line
+            warnings.simplefilter("ignore", UserWarning)
+            planner_obj = preset_nominal(chosen, nominal)
     except ValueError as exc:
         raise bad(exc, "--nominal") from exc
+    mismatch = network_mismatch(chosen, nominal)
+    if mismatch:
+        typer.echo(f"Warning: {mismatch.replace('nominal / --nominal', '--nominal')}", err=True)
     options = {"planner": "--planner", "n_leaders": "--leaders", "decel": "--decel", "samples": "--samples",
                "seed": "--seed", "p_v": "--p-v"}
     try:
@@ -97,13 +108,15 @@ def simulate(
     out = check_out_dir(out)
 
     label = f"{planner}_N{leaders}_decel{decel:g}_pv{p_v:g}_seed{seed}"
-    label += "".join(f"-{re.sub(r'[^A-Za-z0-9_.]+', '_', part)}" for part in (chosen and chosen.name, nominal) if part)
+    nominal_tag = Path(nominal).stem if nominal and is_model_path(nominal) else nominal  # a model file: its name
+    label += "".join(f"-{re.sub(r'[^A-Za-z0-9_.]+', '_', part)}" for part in (chosen and chosen.name, nominal_tag)
+                     if part)  # fmt: skip
     info = {
         "kind": "simulate",
         "preset": preset_record(chosen),
         "params_file": None if params_file is None else str(params_file),
         "planner": planner,
-        "nominal": _nominal_label(chosen, nominal),
+        "nominal": nominal_label(chosen, nominal),
         "n_leaders": leaders,
         "decel": decel,
         "p_v": p_v,
@@ -117,6 +130,7 @@ def simulate(
     with session(where), run_folder(out, label, info) as (run_dir, info):
         result = run(planner, leaders, decel, samples, seed, p_v=p_v, params=params, config=config, trace=trace,
                      progress=progress, nominal=planner_obj, workers=where)  # fmt: skip
+        result.preset, result.nominal = chosen and chosen.name, info["nominal"]  # summary.csv names them
         table, summary = result.table, result.summary()
         written = [run_dir / "scenarios.csv", run_dir / "summary.csv"]
         table.to_csv(written[0], index=False)
@@ -136,19 +150,20 @@ def simulate(
         info["files"] = [p.name for p in written] + ["run.json"]
         info["success_rate"] = float(table["success"].mean())
         info["collision_rate"] = float(table["collision"].mean())
-    _print_summary(table, planner, leaders, decel, samples, seed, p_v, config.assessment)
+    _print_summary(table, planner, leaders, decel, samples, seed, p_v, config.assessment,
+                   chosen.name if chosen else None, info["nominal"])  # fmt: skip
     for path in written:
         typer.echo(f"wrote {path}")
     typer.echo(f"run folder: {run_dir}")
 
 
-def _print_summary(table, planner, leaders, decel, samples, seed, p_v, assessment) -> None:
+def _print_summary(table, planner, leaders, decel, samples, seed, p_v, assessment, preset, nominal) -> None:
     from rich.console import Console
 
     from ._runs import outcome_table
 
     title = (f"{planner}, N = {leaders}, a_x_N+1_d = {decel:g} m/s², p_v = {p_v:g}, {samples} scenarios, seed {seed}"
-             f", assessment {assessment}")  # fmt: skip
+             f", assessment {assessment}, preset {preset or 'none (defaults)'}, nominal planner {nominal}")  # fmt: skip
     rows = (
         ("success", "success"),
         ("collision", "collision"),
@@ -158,12 +173,3 @@ def _print_summary(table, planner, leaders, decel, samples, seed, p_v, assessmen
         ("assessment correct", "assessment_correct"),
     )
     Console().print(outcome_table(title, table, rows))
-
-
-def _nominal_label(chosen, nominal: str | None) -> str:
-    """What ``run.json`` calls the nominal planner of the run."""
-    if chosen and nominal == "expert":
-        return "expert (preset gains)"
-    if chosen and nominal is None:
-        return chosen.network or "expert (preset gains)"
-    return nominal or "expert"

@@ -49,7 +49,8 @@ def simulate(
     """Simulate one experiment cell of the paper's sampler.
 
     ``preset`` (a name such as ``"paper"``, a YAML path or a ``Preset``) supplies ``params``, ``config`` and the
-    nominal planner where those are not given; ``nominal`` takes a registered name (``"mlp"``). The cell's
+    nominal planner where those are not given; ``nominal`` takes a registered name (``"mlp"``) or the path of a
+    model file (``"model.npz"`` as ``safelane train`` writes it, or ``.onnx``). The cell's
     scenarios come from :func:`~safelane.sim.inputs.cell_rng`, as in ``safelane reproduce``: the same cell and
     seed give the same numbers as the report. Bad arguments raise ``InputError`` naming the argument. ``traffic``
     and ``workers``: as for :func:`simulate_batch`.
@@ -57,10 +58,10 @@ def simulate(
     Example: ``simulate("CV_all", n_leaders=5, decel=5.0, samples=1000, seed=0).summary()``.
     """
     check_cell_args(planner, n_leaders, decel, samples, seed, p_v)
-    params, config, scenario, nominal = resolve(preset, params, config, scenario, nominal)
+    params, config, scenario, nominal, labels = resolve(preset, params, config, scenario, nominal)
     rng = cell_rng(seed, n_leaders, decel, p_v)
     batch = paper_scenarios(planner, n_leaders, decel, samples, rng, scenario, p_v=p_v)
-    return simulate_batch(
+    result = simulate_batch(
         batch,
         seed=seed,
         params=params,
@@ -74,6 +75,8 @@ def simulate(
         workers=workers,
     )
 
+    result.preset, result.nominal = labels["preset"], labels["nominal"]  # named in result.summary()
+    return result
 
 def simulate_batch(
     batch: ScenarioBatch,

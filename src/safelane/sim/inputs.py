@@ -12,6 +12,7 @@ reproduce`` give the same scenarios — hence the same numbers — for the same 
 from __future__ import annotations
 
 import numbers
+import os
 import warnings
 from collections.abc import Mapping
 from pathlib import Path
@@ -77,20 +78,23 @@ def as_model(cls, value, name: str):
 
 
 def as_nominal(value):
-    """``None``, a registered name (``"expert"``, ``"mlp"``, ``"mlp_paper"``, ``"teacher"``) or a planner callable
-    (with a preset, :func:`preset_nominal` reads ``"expert"`` as the preset's rule-based planner)."""
+    """``None``, a registered name (``"expert"``, ``"mlp"``, ``"mlp_paper"``, ``"teacher"``), the path of a model
+    file (``.npz`` as ``safelane train`` writes it, ``.onnx`` as ``safelane export-onnx`` does;
+    :func:`~safelane.planners.registry.load_nominal`) or a planner callable (with a preset, :func:`preset_nominal`
+    reads ``"expert"`` as the preset's rule-based planner)."""
     if value is None:
         return None
-    if isinstance(value, str):
-        from ..planners.registry import get_nominal
+    if isinstance(value, str | os.PathLike):
+        from ..planners.registry import load_nominal
 
         try:
-            return get_nominal(value)
+            return load_nominal(value)
         except ValueError as exc:
             raise InputError(str(exc), "nominal") from exc
     if not callable(value):
         raise InputError(
-            f"nominal must be a registered name or a planner called as planner(obs, params); got {_got(value)}",
+            "nominal must be a registered name, the path of a .npz/.onnx model or a planner called as "
+            f"planner(obs, params); got {_got(value)}",
             "nominal",
         )
     return value
@@ -99,15 +103,49 @@ def as_nominal(value):
 def preset_nominal(chosen, nominal):
     """The nominal planner of a run under the preset ``chosen`` (or ``None``): ``"expert"`` is the preset's
     rule-based planner with its gains (what its network imitates), ``None`` the preset's own (its network, if it
-    names one), anything else as :func:`as_nominal` reads it."""
+    names one), anything else as :func:`as_nominal` reads it. Another registered network than the one the preset
+    names warns (:func:`network_mismatch`): its numbers are not the preset's."""
     if chosen is not None and isinstance(nominal, str) and nominal == "expert":
         return chosen.expert()
+    mismatch = network_mismatch(chosen, nominal)
+    if mismatch:
+        warnings.warn(mismatch, UserWarning, stacklevel=4)  # the caller of simulate()
     nominal = as_nominal(nominal)
     return chosen.nominal() if nominal is None and chosen is not None else nominal
 
 
+def network_mismatch(chosen, nominal) -> str | None:
+    """The warning for a registered network other than the one the preset ``chosen`` names (``paper`` with
+    ``nominal="mlp"``: ``mlp`` learnt the default world, the preset's numbers come from ``mlp_paper``), else
+    ``None``. ``"expert"`` (the preset's rule-based planner), a model file and a planner object are deliberate
+    choices and do not warn."""
+    from ..planners.registry import NOMINAL_PLANNERS
+
+    network = getattr(chosen, "network", None)
+    if network is None or not isinstance(nominal, str) or nominal in ("expert", network):
+        return None
+    if nominal not in NOMINAL_PLANNERS:
+        return None
+    return (f"nominal planner {nominal!r} is not the network of preset {chosen.name!r} ({network!r}), which its "
+            f"published numbers use; leave nominal / --nominal out for {network!r}")  # fmt: skip
+
+
+def nominal_label(chosen, nominal) -> str:
+    """What a run's records (``run.json``, :meth:`SimResult.summary`, the printed summary) call its nominal planner,
+    given the preset ``chosen`` (or ``None``) and the ``nominal`` argument as the user gave it."""
+    if chosen is not None and (nominal == "expert" or (nominal is None and chosen.network is None)):
+        return "expert (preset gains)"
+    if nominal is None:
+        return chosen.network if chosen is not None else "expert"
+    if isinstance(nominal, str | os.PathLike):
+        return str(nominal)
+    return getattr(nominal, "__name__", type(nominal).__name__)
+
+
 def resolve(preset, params, config, scenario, nominal):
-    """The run's ``(params, config, scenario, nominal)``: explicit arguments first, then the preset's parts."""
+    """The run's ``(params, config, scenario, nominal, labels)``: explicit arguments first, then the preset's parts;
+    ``labels``: the preset's name (or ``None``) and :func:`nominal_label`, as :class:`~.results.SimResult` records
+    them."""
     from .scenario import ScenarioConfig
 
     chosen = None
@@ -120,13 +158,14 @@ def resolve(preset, params, config, scenario, nominal):
     params = as_model(Params, params, "params")
     config = as_model(SimConfig, config, "config")
     scenario = as_model(ScenarioConfig, scenario, "scenario")
+    labels = {"preset": None if chosen is None else chosen.name, "nominal": nominal_label(chosen, nominal)}
     nominal = preset_nominal(chosen, nominal)
     if chosen is not None:
         params = chosen.params if params is None else params
         config = chosen.sim if config is None else config
     params = Params() if params is None else params
     check_settings(params, config or SimConfig(), scenario)
-    return params, config, scenario, nominal
+    return params, config, scenario, nominal, labels
 
 
 def check_settings(params: Params, config: SimConfig, scenario=None) -> None:

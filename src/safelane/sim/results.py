@@ -15,20 +15,32 @@ from .scenario import ScenarioBatch
 
 @dataclass
 class SimResult:
-    """Per-scenario table, optional per-step trace and recorded observations."""
+    """Per-scenario table, optional per-step trace and recorded observations.
+
+    ``preset`` and ``nominal`` name the run's preset (``None``: none) and nominal planner (``"mlp_paper"``,
+    ``"expert (preset gains)"``, a model file's path, ...); :func:`~safelane.sim.simulate` sets them."""
 
     table: pd.DataFrame
     trace: pd.DataFrame | None = None
     observations: list[Observation] = field(default_factory=list)
+    preset: str | None = None
+    nominal: str | None = None
     #: Which engine ran it: ``"compiled loop"`` (sim/_fused.py), ``"period by period"`` (with ``engine_reasons``,
     #: why the compiled loop did not take it), or ``None`` (split over workers).
     engine: str | None = None
     engine_reasons: tuple = ()
 
     def summary(self) -> pd.DataFrame:
+        """One row per cell: rates with 95 % Wilson intervals (:func:`~.metrics.summarize`), after the columns
+        ``preset`` and ``nominal`` where the run recorded them (a result of :func:`~safelane.sim.simulate` does):
+        the same cell gives different numbers under another nominal planner."""
         from .metrics import summarize
 
-        return summarize(self.table)
+        out = summarize(self.table)
+        if self.nominal is not None:
+            out.insert(0, "nominal", self.nominal)
+            out.insert(0, "preset", self.preset)
+        return out
 
 
 def results_table(b: ScenarioBatch, s) -> pd.DataFrame:
