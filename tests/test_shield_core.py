@@ -603,7 +603,7 @@ def test_a_bad_proposal_names_the_planner_and_a_given_chain_analysis_is_used():
     rng = np.random.default_rng(40)
     s = _situations(rng, 4)
     state = init(s, PRM, ShieldConfig())
-    with pytest.raises(TypeError, match="^the nominal planner must return a pair"):
+    with pytest.raises(TypeError, match=r"^the nominal planner must return a pair"):
         step(state, s, np.zeros((2, 4)), PRM)
     with pytest.raises(ValueError, match=r"nominal planner expert returned a_x of shape \(3,\)"):
         step(state, s, (np.zeros(3), np.zeros(4)), PRM, planner_name="expert")
