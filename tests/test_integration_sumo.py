@@ -24,7 +24,7 @@ from safelane.integrations.sumo_world import (
 
 @pytest.fixture(scope="module")
 def runner():
-    with sumo.SumoRunner() as r:
+    with sumo.SumoRunner(policy=sumo.reckless) as r:  # the stress test: always merge at full authority
         yield r
 
 
@@ -104,7 +104,8 @@ def test_reckless_without_shield_collides(runner):
 
 def test_v2x_loss_and_sumo_traffic_run(runner):
     sc = sumo.sumo_scenarios(3, 6.0, 2, seed=5)
-    lossy = sumo.SumoRunner(traffic="sumo", v2x_loss=0.5, v2x_latency_periods=1, world=runner.world)  # one SUMO
+    lossy = sumo.SumoRunner(traffic="sumo", v2x_loss=0.5, v2x_latency_periods=1, world=runner.world,
+                            policy=sumo.reckless)  # one SUMO
     res = lossy.run(sc[0])
     assert res.v2x_sent > 0 and 0 < res.v2x_lost < res.v2x_sent
     assert res.steps > 0
@@ -117,9 +118,11 @@ def test_delay_and_sensing_bounds_in_sumo(runner):
     from safelane.shield import SensingBounds, ShieldConfig
 
     scenarios = sumo.sumo_scenarios(3, 6.0, 8, seed=3, own_share=0.5)
-    extended = sumo.SumoRunner(config=ShieldConfig(actuation_delay_s=0.2), sensing=SensingBounds(), world=runner.world)
+    extended = sumo.SumoRunner(config=ShieldConfig(actuation_delay_s=0.2), sensing=SensingBounds(), world=runner.world,
+                               policy=sumo.reckless)
     table = extended.run_many(scenarios)
     assert table.collided.sum() == 0 and table.success.mean() > 0.3
-    paper = sumo.SumoRunner(config=ShieldConfig(own_lane=False, sensing=False), world=runner.world)
+    paper = sumo.SumoRunner(config=ShieldConfig(own_lane=False, sensing=False), world=runner.world,
+                            policy=sumo.reckless)
     paper.delay_periods = 2  # the host delays by 0.2 s; this shield assumes instant actuation
     assert paper.run_many(scenarios).collided.sum() > 0

@@ -1,7 +1,8 @@
 """``safelane sumo``: one experiment cell in SUMO (libsumo) → summary on screen, CSVs in a run folder.
 
 The cell's scenarios are ``safelane simulate``'s (the same seed gives the same initial states), run with the same
-planner variant, nominal planner (expert) and shield settings; SUMO integrates the vehicles and its own collision
+planner variant, nominal planner (``--nominal``; default the expert, as ``SumoRunner()``:
+``integrations.sumo.DEFAULT_NOMINAL``) and shield settings; SUMO integrates the vehicles and its own collision
 list is the referee (docs/integrations.md, SUMO).
 """
 
@@ -30,6 +31,10 @@ def sumo(
     ),
     seed: int = typer.Option(0, "--seed", help="Seed; the same cell and seed give 'safelane simulate's scenarios."),
     shield: bool = typer.Option(True, "--shield/--no-shield", help="--no-shield runs the nominal planner alone."),
+    nominal: str = typer.Option(
+        None, "--nominal", help="Nominal planner: expert (default, as SumoRunner() in Python), mlp, mlp_paper, "
+        "teacher, or a model file PATH.npz (as 'safelane train' writes it) or PATH.onnx."
+    ),
     gui: bool = typer.Option(False, "--gui", help="Run in sumo-gui through TraCI (needs eclipse-sumo; one process)."),
     fcd: Path = typer.Option(
         None, "--fcd", help="SUMO's floating-car data: this file for one episode, else FILE-<scenario id>.xml each."
@@ -49,9 +54,11 @@ def sumo(
     Example: safelane sumo --leaders 5 --decel 5 --episodes 100
 
     Example: safelane sumo --leaders 3 --decel 6 --episodes 200 --traffic sumo --workers 2
+
+    Example: safelane sumo --nominal results/train/RUN/model.npz   (a network from 'safelane train')
     """
-    from ..integrations.sumo import TRAFFIC_MODES
-    from ..sim.inputs import check_cell_args
+    from ..integrations.sumo import DEFAULT_NOMINAL, TRAFFIC_MODES
+    from ..sim.inputs import as_nominal, check_cell_args
     from ._runs import check_out_dir
 
     if traffic not in TRAFFIC_MODES:
@@ -65,6 +72,11 @@ def sumo(
         where = getattr(exc, "where", None) or ""
         message = str(exc).replace("samples must", "episodes must") if where == "samples" else str(exc)
         raise typer.BadParameter(message, param_hint=options.get(where, "--planner")) from exc
+    try:
+        as_nominal(nominal or DEFAULT_NOMINAL)  # fail before any work; each SUMO process loads it again
+    except ValueError as exc:
+        raise typer.BadParameter(str(exc), param_hint="--nominal") from exc
+    nominal = nominal or DEFAULT_NOMINAL
     if gui and workers > 1:
         raise typer.BadParameter(f"--gui runs in one process; got --workers {workers}", param_hint="--workers")
     if fcd is not None:
@@ -74,7 +86,7 @@ def sumo(
         check_out_dir(fcd.parent if str(fcd.parent) else Path("."), "--fcd")
     _require_sumo(gui)
     out = check_out_dir(out)
-    _run(leaders, decel, episodes, traffic, planner, seed, shield, gui, fcd, out, workers, progress)
+    _run(leaders, decel, episodes, traffic, planner, seed, shield, gui, fcd, out, workers, progress, nominal)
 
 
 def _require_sumo(gui: bool) -> None:
@@ -103,7 +115,8 @@ def _gui_binary() -> str | None:
     return shutil.which("sumo-gui")
 
 
-def _run(leaders, decel, episodes, traffic, planner, seed, shielded, gui, fcd, out, workers, progress) -> None:
+def _run(leaders, decel, episodes, traffic, planner, seed, shielded, gui, fcd, out, workers, progress,
+         nominal) -> None:  # fmt: skip
     import time
     from importlib.metadata import version
 
@@ -121,7 +134,7 @@ def _run(leaders, decel, episodes, traffic, planner, seed, shielded, gui, fcd, o
     info = {
         "kind": "sumo",
         "planner": planner,
-        "nominal": "expert",
+        "nominal": nominal,
         "n_leaders": leaders,
         "decel": decel,
         "episodes": episodes,
@@ -142,7 +155,7 @@ def _run(leaders, decel, episodes, traffic, planner, seed, shielded, gui, fcd, o
         _, scenarios = cell_scenarios(planner, leaders, decel, episodes, seed)
         t0 = time.perf_counter()
         results = run_episodes(scenarios, planner=planner, traffic=traffic, seed=seed, shielded=shielded,
-                               workers=workers, gui=gui, fcd=fcd, progress=progress)  # fmt: skip
+                               workers=workers, gui=gui, fcd=fcd, progress=progress, nominal=nominal)  # fmt: skip
         wall = time.perf_counter() - t0
         table = pd.DataFrame([r.results_row(planner) for r in results])
         collisions = pd.DataFrame(
@@ -160,7 +173,8 @@ def _run(leaders, decel, episodes, traffic, planner, seed, shielded, gui, fcd, o
         info["sumo_collisions"] = len(collisions)
         info["wall_s"] = round(wall, 2)
         info["episodes_per_s"] = round(episodes / wall, 3)
-    _print_summary(table, len(collisions), planner, leaders, decel, episodes, seed, traffic, shielded, wall, workers)
+    _print_summary(table, len(collisions), planner, leaders, decel, episodes, seed, traffic, shielded, wall, workers,
+                   nominal)  # fmt: skip
     for path in written:
         typer.echo(f"wrote {path}")
     if fcd is not None:
@@ -196,14 +210,15 @@ def _summary(table):
     return pd.DataFrame([row])
 
 
-def _print_summary(table, n_list, planner, leaders, decel, episodes, seed, traffic, shielded, wall, workers) -> None:
+def _print_summary(table, n_list, planner, leaders, decel, episodes, seed, traffic, shielded, wall, workers,
+                   nominal) -> None:  # fmt: skip
     from rich.console import Console
 
     from ._runs import outcome_table
 
     n = len(table)
     title = (f"SUMO, {planner}{'' if shielded else ' without the shield'}, N = {leaders}, a_x_N+1_d = {decel:g} m/s²,"
-             f" traffic {traffic}, {episodes} episodes, seed {seed}")  # fmt: skip
+             f" traffic {traffic}, {episodes} episodes, seed {seed}, nominal {nominal}")  # fmt: skip
     t = outcome_table(title, table, RATES, unit="episode")
     t.add_row("entries in SUMO's collision list", str(n_list), "", "")
     t.add_row("promise-violating periods", str(int(table["promise_violations"].sum())), "", "")

@@ -15,8 +15,9 @@ the scenario's vehicles at their exact initial states, then every period:
 2. builds the :class:`~safelane.shield.Situation` from :mod:`safelane.v2x` messages of the connected vehicles
    (emulated with loss and latency, :class:`~.sumo_traffic.V2XLink`) and sensed states of the others — the chain
    stops at the first non-connected or stale leader ``L(N+1)``;
-3. asks the nominal policy (default: :func:`reckless`, always merging at full authority; or a built-in
-   simulator's planner wrapped in :class:`NominalPolicy`, e.g. ``NominalPolicy(ExpertPlanner())``) and the
+3. asks the nominal policy (default: :func:`default_policy`, the built-in simulator's nominal planner — the
+   expert, :data:`DEFAULT_NOMINAL`, as ``safelane sumo`` runs it; ``nominal=`` takes another name or a model file;
+   ``policy=reckless`` always merges at full authority, the campaign's stress test) and the
    :class:`~safelane.shield.Shield` (or, unshielded, ``ShieldConfig(enabled=False)``: the proposal passes, and the
    ego follows L1 responsibly once across — the built-in simulator's ``supervised=False``);
 4. moves the ego as an exact point mass (constant accelerations over the period, the held plan's exact motion when
@@ -43,11 +44,13 @@ from .sumo_traffic import TRAFFIC_MODES, TargetLaneTraffic, V2XLink, profile_acc
 from .sumo_world import SumoWorld, VehicleSpec, libsumo_available, net_file, overlaps
 
 __all__ = [
+    "DEFAULT_NOMINAL",
     "TRAFFIC_MODES",
     "EpisodeResult",
     "NominalPolicy",
     "SumoRunner",
     "SumoScenario",
+    "default_policy",
     "libsumo_available",
     "net_file",
     "own_lane_leaders",
@@ -107,21 +110,46 @@ class NominalPolicy:
         )  # fmt: skip
 
 
+#: The nominal planner of a SUMO run unless told otherwise — :class:`SumoRunner` and ``safelane sumo``
+#: (:func:`~.sumo_cells.run_episodes`) alike, through :func:`default_policy`: the built-in simulator's default.
+DEFAULT_NOMINAL = "expert"
+
+
+def default_policy(variant: str = "CV_all", nominal=None) -> NominalPolicy:
+    """The nominal policy of :class:`SumoRunner` and ``safelane sumo`` (the one place both take it from):
+    ``nominal`` — a planner object, a registered name or the path of a ``.npz``/``.onnx`` model
+    (:func:`~safelane.planners.registry.load_nominal`); default :data:`DEFAULT_NOMINAL` — observed as the built-in
+    simulator observes it (``SimConfig().l1_plan_steps``) under the planner variant ``variant``."""
+    from ..sim import SimConfig
+    from ..sim.inputs import as_nominal
+
+    planner = as_nominal(DEFAULT_NOMINAL if nominal is None else nominal)
+    return NominalPolicy(planner, variant, SimConfig().l1_plan_steps)
+
+
 class SumoRunner:
     """Runs episodes in one SUMO simulation (one per process: libsumo is a singleton; use processes for parallel
     episodes). ``traci=True`` runs SUMO as a separate process through TraCI (needs a SUMO binary), ``gui=True``
     in sumo-gui; ``fcd``: SUMO's floating-car-data output file (the last episode's). ``world``: share an open
-    :class:`~.sumo_world.SumoWorld` between runners of other settings (it stays open when this runner closes)."""
+    :class:`~.sumo_world.SumoWorld` between runners of other settings (it stays open when this runner closes).
+
+    The nominal policy: ``policy`` (``policy(situation, params) -> (a_x, a_y)``, e.g. :func:`reckless`, or a
+    :class:`NominalPolicy`) if given, else :func:`default_policy` of ``variant`` and ``nominal`` (a name such as
+    ``"mlp"``, a model file, or a planner; default the expert) — the planner ``safelane sumo`` runs, so the same
+    cell and seed give the same numbers here and there."""
 
     def __init__(self, params: Params | None = None, *, variant: str = "CV_all", config: ShieldConfig | None = None,
                  traffic: str = "paper", v2x_loss: float = 0.0, v2x_latency_periods: int = 0,
-                 v2x_max_age_s: float = v2x.MAX_AGE_S, horizon_s: float = 10.0, policy=reckless,
+                 v2x_max_age_s: float = v2x.MAX_AGE_S, horizon_s: float = 10.0, policy=None, nominal=None,
                  stop_on_collision: bool = True, traci: bool = False, gui: bool = False, fcd: str | None = None,
                  seed: int = 0, world: SumoWorld | None = None, sensing=None):  # fmt: skip
         if traffic not in TRAFFIC_MODES:
             raise ValueError(f"traffic must be one of {TRAFFIC_MODES}; got {traffic!r}")
+        if policy is not None and nominal is not None:
+            raise ValueError("give either policy or nominal, not both")
         self.params = params or Params()
         self.variant, self.config = variant, config or ShieldConfig()
+        policy = default_policy(variant, nominal) if policy is None else policy
         self.traffic, self.policy, self.horizon_s = traffic, policy, float(horizon_s)
         self.v2x = dict(loss=float(v2x_loss), latency_periods=int(v2x_latency_periods), max_age_s=float(v2x_max_age_s))
         self.stop_on_collision, self.seed = stop_on_collision, int(seed)
@@ -143,7 +171,8 @@ class SumoRunner:
         self.close()
 
     def settings(self) -> dict:
-        """The settings as SUMO reports them (after the first episode has started SUMO)."""
+        """The settings as SUMO reports them, read back when the first episode started SUMO: available from the
+        first :meth:`run` on, also after the runner is closed (``RuntimeError`` saying so before)."""
         return self.world.settings()
 
     def run_many(self, scenarios, *, shielded: bool = True):

@@ -16,7 +16,7 @@ import multiprocessing as mp
 from pathlib import Path
 
 from ..params import Params
-from .sumo import EpisodeResult, NominalPolicy, SumoRunner, SumoScenario, scenarios_from_batch
+from .sumo import EpisodeResult, SumoRunner, SumoScenario, scenarios_from_batch
 
 __all__ = ["cell_scenarios", "fcd_path", "run_episodes", "shield_config"]
 
@@ -63,13 +63,13 @@ _SETTINGS: dict = {}
 
 
 def _runner_kwargs(planner: str, traffic: str, seed: int, params: Params | None, gui: bool, nominal=None) -> dict:
-    from ..planners.base import ExpertPlanner
+    """The :class:`SumoRunner` of a cell; its policy is :func:`~.sumo.default_policy` of ``planner`` and
+    ``nominal`` (a name or model path travels to worker processes as such, each loads it)."""
     from ..sim import SimConfig
 
     cfg = SimConfig()
     return dict(params=params, variant=planner, config=shield_config(cfg), traffic=traffic, seed=seed,
-                horizon_s=cfg.horizon_s, v2x_max_age_s=cfg.v2x_max_age_s, gui=gui,
-                policy=NominalPolicy(nominal or ExpertPlanner(), planner, cfg.l1_plan_steps))  # fmt: skip
+                horizon_s=cfg.horizon_s, v2x_max_age_s=cfg.v2x_max_age_s, gui=gui, nominal=nominal)  # fmt: skip
 
 
 def _init_worker(kwargs: dict) -> None:
@@ -98,8 +98,9 @@ def run_episodes(
     nominal=None,
     progress: bool = False,
 ) -> list[EpisodeResult]:
-    """Run ``scenarios`` in SUMO with the built-in simulator's nominal planner (``nominal``, default
-    ``ExpertPlanner()``), shield settings and horizon; results in the order of ``scenarios``.
+    """Run ``scenarios`` in SUMO with the built-in simulator's nominal planner (``nominal``: a planner, a registered
+    name or a ``.npz``/``.onnx`` model path; default :data:`~.sumo.DEFAULT_NOMINAL`, as ``SumoRunner()``), shield
+    settings and horizon; results in the order of ``scenarios``.
 
     ``workers > 1`` spreads the episodes over that many spawned processes, each with its own SUMO (libsumo allows
     one simulation per process); ``workers == 1`` runs them in this process (which must not hold an open SUMO).

@@ -172,6 +172,7 @@ class SumoWorld:
         self.routes = self._tmp / "episode.rou.xml"
         self.started = False
         self.lane_y = (0.0, 0.0)
+        self._settings: dict | None = None  # read back from SUMO when it first starts (settings())
         _ACTIVE = self
         atexit.register(self.close)
 
@@ -188,6 +189,7 @@ class SumoWorld:
             self.started = True
             shapes = [self.api.lane.getShape(lane) for lane in LANES]
             self.lane_y = tuple(float(s[0][1]) for s in shapes)
+            self._settings = self._read_settings()
         else:
             self.api.load(args)
         self.api.simulationStep()
@@ -235,7 +237,16 @@ class SumoWorld:
         return float(self.api.simulation.getTime())
 
     def settings(self) -> dict:
-        """What SUMO itself reports for the settings the integration relies on (read back, not echoed)."""
+        """What SUMO itself reports for the settings the integration relies on (read back, not echoed): read when
+        the first :meth:`load` starts SUMO (every episode reloads it with the same options), so available from then
+        on, after :meth:`close` too; before, a ``RuntimeError`` that says so."""
+        if self._settings is None:
+            raise RuntimeError("SUMO settings are read back from SUMO when it starts, i.e. after the first episode "
+                               "has been loaded: call settings() after runner.run(...) / run_many(...) (inside or "
+                               "after the with block), or after SumoWorld.load(...)")  # fmt: skip
+        return {k: list(v) if isinstance(v, list) else v for k, v in self._settings.items()}
+
+    def _read_settings(self) -> dict:
         opt = self.api.simulation.getOption
         return {
             "step_length_s": float(self.api.simulation.getDeltaT()),
