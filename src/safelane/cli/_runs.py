@@ -3,7 +3,9 @@
 A run folder is ``OUT/<UTC start>-<label>`` (``-2``, ``-3``… when a run in the same second took the name).
 Its ``run.json`` records the command, the preset, the planners, the samples, the assessment, the seed, the
 software versions and ``status``: ``running`` while it runs, then ``complete`` — or ``interrupted``
-(Ctrl-C) / ``failed`` when it stops early; a folder left empty by an early stop is removed.
+(Ctrl-C) / ``failed`` when it stops early; a folder left empty by an early stop is removed. Either way one line on
+stderr says what was kept. Every writing command keeps this contract (tests/test_cli_contract.py); ``reproduce``
+writes its own ``run.json`` (:mod:`safelane.experiments.reproduce`) with the same keys.
 """
 
 from __future__ import annotations
@@ -51,9 +53,14 @@ def new_run_dir(base: Path, label: str, now: dt.datetime | None = None) -> Path:
     raise InputError(f"could not create a run folder under {base}", "--out")
 
 
+#: The arguments the ``safelane`` command was invoked with (set by ``SafelaneGroup``; ``sys.argv`` otherwise).
+invoked_args: list[str] | None = None
+
+
 def command_line() -> str:
     """The command as typed (``safelane ...``)."""
-    return "safelane " + shlex.join(sys.argv[1:]) if sys.argv[1:] else "safelane"
+    args = sys.argv[1:] if invoked_args is None else invoked_args
+    return "safelane " + shlex.join(args) if args else "safelane"
 
 
 def write_run_json(run_dir: Path, info: dict) -> Path:
@@ -98,12 +105,21 @@ def run_folder(out: Path, label: str, info: dict) -> Iterator[tuple[Path, dict]]
     finally:
         info["status"] = status
         info["finished_utc"] = f"{dt.datetime.now(dt.timezone.utc):%Y-%m-%d %H:%M:%S}"
-        if status != "complete" and {p.name for p in run_dir.iterdir()} <= {"run.json"}:
+        kept = sorted(p.name for p in run_dir.iterdir() if p.name != "run.json")
+        if status != "complete" and not kept:
             with contextlib.suppress(OSError):
                 (run_dir / "run.json").unlink()
                 os.rmdir(run_dir)
+            say(f"{status}: nothing was written yet; removed the run folder {run_dir}")
         else:
             write_run_json(run_dir, info)
+            if status != "complete":
+                say(f"{status}: kept {', '.join(kept)} in {run_dir} (run.json: status {status!r})")
+
+
+def say(message: str) -> None:
+    """One line on stderr (stdout stays for a command's result)."""
+    print(message, file=sys.stderr, flush=True)
 
 
 def outcome_table(title: str, table, rows, unit: str = "scenario"):

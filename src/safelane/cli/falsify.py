@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 from pathlib import Path
 
 import typer
@@ -22,8 +23,13 @@ def falsify(
     ray_address: str = ray_address_option(),
     world: str = typer.Option("paper", "--world", help="paper (the paper's assumptions) or realistic (plus an "
                               "own-lane leader L0, sensing errors and actuation delay; docs/real_roads.md)."),
-    out: Path = typer.Option(Path("results/falsify"), "--out", "-o", help="Folder for report.json and dumps."),
-    replay: Path = typer.Option(None, "--replay", help="Re-simulate one dumped scenario (a JSON from --out)."),
+    out: Path = typer.Option(
+        Path("results/falsify"), "--out", "-o", help="Parent folder; the run goes to OUT/<run-id>/ (created)."
+    ),
+    replay: Path = typer.Option(
+        None, "--replay", help="Re-simulate one dumped scenario: a JSON from a run folder, or the folder (its "
+        "worst.json)."
+    ),
     progress: bool = typer.Option(True, "--progress/--no-progress", help="Show a progress bar."),
 ) -> None:
     """Adversarial falsification of the safety guarantee (docs/falsification.md).
@@ -31,19 +37,20 @@ def falsify(
     Searches initial states at the edges, L(N+1) acceleration profiles, leaders' tasks inside their promises,
     F inside its type's range and adversarial nominal planners, with random search, a cross-entropy optimiser
     and knife-edge families. Runs until both --minutes and --scenarios are reached, then prints the report and
-    writes OUT/report.json, OUT/worst.json (the scenario with the smallest gap over p_m) and OUT/failure_<i>.json
-    for each collision or violation found (replay with --replay).
+    writes the run folder OUT/<run-id>/ (run-id = UTC start time, world, method and seed): report.json,
+    worst.json (the scenario with the smallest gap over p_m), failure_<i>.json for each collision or violation
+    found (replay with --replay) and run.json. Ctrl-C keeps the report of what was simulated so far.
 
     Example: safelane falsify --minutes 10 --scenarios 1000000 --seed 0 --out results/falsify
 
-    Example: safelane falsify --replay results/falsify/worst.json
+    Example: safelane falsify --replay results/falsify/<run-id>/worst.json
 
     Example: safelane falsify --backend ray --workers 64 --minutes 30 --scenarios 100000000   (docs/scale.md)
     """
     from ..experiments import falsify as fz
 
     if replay is not None:
-        outcome = fz.replay(replay)
+        outcome = fz.replay(_read_dump(replay))
         if outcome.empty:
             typer.echo("not simulated: the scenario does not start inside the assumptions (the shield's initial "
                        "check finds no safe evasion)")  # fmt: skip
@@ -51,30 +58,90 @@ def falsify(
         row = outcome.drop(columns="row").iloc[0]
         typer.echo("\n".join(f"{k}: {fz.json_scalar(v)!r}" for k, v in row.items()))
         return
+    if not math.isfinite(minutes):
+        raise typer.BadParameter(f"must be a finite number of minutes >= 0; got {minutes}", param_hint="--minutes")
     if world not in fz.space.WORLDS:
         raise typer.BadParameter(f"must be one of {', '.join(fz.space.WORLDS)}; got {world!r}", param_hint="--world")
     if method not in (*fz.METHODS, "all"):
         raise typer.BadParameter(
             f"must be one of {', '.join((*fz.METHODS, 'all'))}; got {method!r}", param_hint="--method"
         )
+    from rich.console import Console
     from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
 
-    from ._runs import check_out_dir
+    from ._backend import record
+    from ._runs import check_out_dir, run_folder, say
 
     where = resolve_backend(backend, workers, ray_address)
     out = check_out_dir(out)  # before minutes of search, not after
+    info = {"kind": "falsify", "world": world, "method": method, "scenarios": scenarios, "minutes": minutes,
+            "seed": seed, "batch_size": batch_size, **record(where)}
     columns = (TextColumn("{task.description}"), BarColumn(), TextColumn("{task.fields[status]}"), TimeElapsedColumn())
-    with session(where), Progress(*columns, disable=not progress, transient=True) as bar:
-        task = bar.add_task("falsifying", total=max(scenarios, 1), status="")
+    latest: list[fz.Report] = []
+    with session(where), run_folder(out, f"falsify-{world}-{method}-seed{seed}", info) as (run_dir, info):
+        bar = Progress(*columns, console=Console(stderr=True), disable=not progress, transient=True)
+        try:
+            with bar:
+                task = bar.add_task("falsifying", total=max(scenarios, 1), status="")
 
-        def on_batch(report: fz.Report) -> None:
-            failures = sum(report.counts[name] for name in fz.OUTCOMES)
-            status = f"{report.simulated:,} simulated, min gap/p_m {report.min_ratio:.12f}, failures {failures}"
-            bar.update(task, completed=min(report.simulated, scenarios), status=status)
+                def on_batch(report: fz.Report) -> None:
+                    latest[:] = [report]
+                    failures = sum(report.counts[name] for name in fz.OUTCOMES)
+                    status = f"{report.simulated:,} simulated, min gap/p_m {report.min_ratio:.12f}, failures {failures}"
+                    bar.update(task, completed=min(report.simulated, scenarios), status=status)
 
-        setting = fz.Setting.realistic(seed=seed) if world == "realistic" else None
-        report = fz.falsify(scenarios, minutes, seed, method, batch_size=batch_size, on_batch=on_batch, workers=where,
-                            setting=setting)  # fmt: skip
+                setting = fz.Setting.realistic(seed=seed) if world == "realistic" else None
+                report = fz.falsify(scenarios, minutes, seed, method, batch_size=batch_size, on_batch=on_batch,
+                                    workers=where, setting=setting)  # fmt: skip
+        except KeyboardInterrupt:
+            if latest:  # the report of the batches simulated so far: worth keeping after minutes of search
+                _write(latest[0], run_dir, info)
+                say(f"interrupted after {latest[0].simulated:,} simulated scenarios: their report is kept")
+            raise
+        written = _write(report, run_dir, info)
     typer.echo(report.text())
-    written = report.write(out)
     typer.echo(f"wrote {written[0]}" + (f" and {len(written) - 1} scenario dumps" if len(written) > 1 else ""))
+    typer.echo(f"run folder: {run_dir}")
+
+
+def _write(report, run_dir: Path, info: dict) -> list[Path]:
+    """The report and dumps into the run folder; the counts into ``run.json``."""
+    written = report.write(run_dir)
+    summary = report.summary()
+    info["scenarios_simulated"] = summary["scenarios_simulated"]
+    info["failures"] = {k: summary[k] for k in ("collisions", "p_m_violations_ego", "leader_collisions",
+                                                 "p_m_violations_leaders")}  # fmt: skip
+    info["files"] = [p.name for p in written] + ["run.json"]
+    return written
+
+
+_DUMP = "give a scenario dump of a falsify run folder (worst.json or failure_<i>.json)"
+
+
+def _read_dump(path: Path) -> dict:
+    """A scenario dump for ``--replay`` (a folder: its ``worst.json``); :class:`typer.BadParameter` naming the file
+    and what is wrong otherwise."""
+    import json
+
+    def bad(why: str) -> typer.BadParameter:
+        return typer.BadParameter(f"{str(path)!r}: {why}", param_hint="--replay")
+
+    if path.is_dir():
+        if not (path / "worst.json").is_file():
+            raise bad(f"a folder without worst.json; {_DUMP}")
+        path = path / "worst.json"
+    try:
+        text = path.read_text(encoding="utf-8")
+    except FileNotFoundError as exc:
+        raise bad(f"file not found; {_DUMP}") from exc
+    except (OSError, UnicodeDecodeError) as exc:
+        raise bad(f"cannot be read ({getattr(exc, 'strerror', None) or type(exc).__name__})") from exc
+    try:
+        record = json.loads(text)
+    except json.JSONDecodeError as exc:
+        raise bad(f"line {exc.lineno}, column {exc.colno}: invalid JSON: {exc.msg}") from exc
+    keys = ("spec", "params", "sim", "seed", "decel_last_max", "use_hooks")
+    missing = [k for k in keys if k not in record] if isinstance(record, dict) else list(keys)
+    if missing:
+        raise bad(f"not a falsify scenario dump (missing {', '.join(map(repr, missing))}); {_DUMP}")
+    return record

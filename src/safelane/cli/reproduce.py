@@ -2,8 +2,6 @@
 
 from __future__ import annotations
 
-import shlex
-import sys
 from pathlib import Path
 
 import typer
@@ -43,9 +41,9 @@ def reproduce(
     from ..experiments.registry import get_experiment
     from ..experiments.reproduce import reproduce as run
     from ..sim.preset import load_preset
-    from ._runs import check_out_dir
+    from ._runs import check_out_dir, command_line, say
 
-    command = "safelane " + shlex.join(sys.argv[1:]) if sys.argv[1:] else None
+    command = command_line()
     try:
         load_preset(preset)  # fail before any work
     except ValueError as exc:
@@ -57,15 +55,22 @@ def reproduce(
             raise typer.BadParameter(str(exc), param_hint="--only") from exc
     where = resolve_backend(backend, workers, ray_address)
     out = check_out_dir(out)
-    with session(where):
-        run_dir = run(
-            out,
-            seed=seed,
-            quick=quick,
-            workers=where,
-            preset=preset,
-            progress=progress,
-            experiments=only or None,
-            command=command,
-        )
+    before = set(out.iterdir())
+    try:
+        with session(where):
+            run_dir = run(
+                out,
+                seed=seed,
+                quick=quick,
+                workers=where,
+                preset=preset,
+                progress=progress,
+                experiments=only or None,
+                command=command,
+            )
+    except KeyboardInterrupt:
+        left = sorted(set(out.iterdir()) - before)
+        say("interrupted: " + (f"kept the partial run folder {left[0]} (no run.json: not complete)" if left else
+                               "the experiments had not finished; nothing was kept (the run folder is removed)"))
+        raise
     typer.echo(str(run_dir / "report.html"))

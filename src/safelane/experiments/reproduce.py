@@ -116,8 +116,8 @@ def reproduce(
         timings=timings,
         started_utc=f"{started:%Y-%m-%d %H:%M:%S}",
     )
-    _write_run_json(record)
     write_report(record)
+    _write_run_json(record)  # last: status "complete" once every file is written
     if progress:
         _console().print(f"report: {run_dir / 'report.html'} (total {sum(timings.values()):.1f} s)")
     return run_dir
@@ -225,7 +225,11 @@ def _equivalent_command(seed, quick, workers, preset: str, out_dir, configs) -> 
 def _write_run_json(r) -> None:
     info = {
         "run_id": r.run_id,
+        "kind": "reproduce",
+        # The contract of every command's run folder (safelane.cli._runs); written after every other file.
+        "status": "complete",
         "started_utc": r.started_utc,
+        "finished_utc": f"{dt.datetime.now(dt.timezone.utc):%Y-%m-%d %H:%M:%S}",
         "seed": r.seed,
         "quick": r.quick,
         "command": r.command,
