@@ -8,40 +8,114 @@ traceback unless ``safelane --debug ...`` (or ``SAFELANE_DEBUG=1``). Ctrl-C exit
 
 from __future__ import annotations
 
+import contextlib
 import os
+import re
+import traceback
+import warnings
 
 import typer
 from typer.core import TyperGroup
 
 #: Exceptions that mean "the user gave something invalid": exit status 2, like Click's usage errors.
 _USAGE_ERRORS = (ValueError, FileNotFoundError, IsADirectoryError, NotADirectoryError, PermissionError)
+#: Click's base of its own errors (Typer may vendor Click, so taken from ``typer.BadParameter``).
+_CLICK_ERROR = next(c for c in typer.BadParameter.__mro__ if c.__name__ == "ClickException")
+#: NumPy scalar reprs (``np.float64(50.0)``) in a message: shown as the plain value (``50.0``).
+_NUMPY_REPR = re.compile(r"\bnp\.(?:float|int|uint|bool_|bool|str_|complex)\d*\(([^()]*)\)")
 
 
 class SafelaneGroup(TyperGroup):
     """Turns exceptions from a subcommand into one-line messages (see the module docstring)."""
 
-    def invoke(self, ctx: typer.Context):
-        try:
-            return super().invoke(ctx)
-        except typer.BadParameter as exc:
-            # Commands turn input errors into BadParameter (naming the option); --debug shows where they arose.
-            if _debug(ctx) and exc.__cause__ is not None:
-                raise exc.__cause__ from exc
-            raise
-        except (typer.TyperException, typer.Exit, typer.Abort, KeyboardInterrupt):
-            raise
-        except Exception as exc:
-            if _debug(ctx):
-                raise
-            from ..errors import one_line
+    def make_context(self, info_name, args, parent=None, **extra):
+        if parent is None:  # the command line as given (sys.argv, or a test runner's list) for run.json
+            from . import _runs
 
-            message = one_line(str(exc)) or type(exc).__name__
-            if isinstance(exc, _USAGE_ERRORS):
-                # No usage block: the one line says what was wrong and what is allowed.
-                raise typer.BadParameter(message) from None
-            typer.echo(f"Error: {type(exc).__name__}: {message} (run 'safelane --debug ...' for the traceback)",
-                       err=True)
-            raise typer.Exit(code=1) from None
+            _runs.invoked_args = list(args)
+        return super().make_context(info_name, args, parent=parent, **extra)
+
+    def invoke(self, ctx: typer.Context):
+        debug = _debug(ctx)
+        with _one_line_warnings(debug):
+            try:
+                return super().invoke(ctx)
+            except typer.BadParameter as exc:
+                # Commands turn input errors into BadParameter (naming the option); --debug shows where they arose.
+                exc.message = plain_message(exc.message)
+                if exc.param_hint is None and exc.param is None:
+                    exc.param_hint = _option_of(ctx, exc.__cause__)
+                if debug:
+                    _print_traceback(exc)
+                raise
+            except (_CLICK_ERROR, typer.Exit, typer.Abort):
+                raise
+            except KeyboardInterrupt:
+                # Whatever wrote a run folder has said what it kept; this line says why the command stopped.
+                typer.echo("Interrupted (Ctrl-C); exit status 130.", err=True)
+                raise typer.Exit(code=130) from None
+            except Exception as exc:
+                message = plain_message(str(exc)) or type(exc).__name__
+                if debug:
+                    _print_traceback(exc)
+                if isinstance(exc, _USAGE_ERRORS):
+                    # No usage block: the one line says what was wrong and what is allowed.
+                    raise typer.BadParameter(message, param_hint=_option_of(ctx, exc)) from None
+                hint = "" if debug else " (run 'safelane --debug ...' for the traceback)"
+                typer.echo(f"Error: {type(exc).__name__}: {message}{hint}", err=True)
+                raise typer.Exit(code=1) from None
+
+
+def plain_message(text: str) -> str:
+    """One line, NumPy scalars shown as plain numbers (``np.float64(50.0)`` → ``50.0``)."""
+    from ..errors import one_line
+
+    return _NUMPY_REPR.sub(r"\1", one_line(text))
+
+
+def _option_of(ctx: typer.Context, exc: BaseException | None) -> str | None:
+    """The option an exception's ``where`` (an :class:`~safelane.errors.InputError` field) names, if the command has
+    one of that name (``samples`` → ``--samples``); ``where`` itself when it already is an option."""
+    where = getattr(exc, "where", None)
+    if not where:
+        return None
+    where = str(where)
+    if where.startswith("-"):
+        return where
+    command, name = ctx.command, ctx.invoked_subcommand
+    if name and hasattr(command, "get_command"):
+        command = command.get_command(ctx, name) or command
+    for param in command.params:
+        if param.name == where.replace("-", "_") and param.param_type_name == "option":
+            return max(param.opts, key=len)
+    return None
+
+
+def _print_traceback(exc: BaseException) -> None:
+    """The full traceback (causes included) on stderr: what ``--debug`` and ``SAFELANE_DEBUG=1`` add."""
+    if isinstance(exc, _CLICK_ERROR) and exc.__cause__ is not None:
+        exc = exc.__cause__
+    typer.echo("".join(traceback.format_exception(type(exc), exc, exc.__traceback__)).rstrip(), err=True)
+
+
+@contextlib.contextmanager
+def _one_line_warnings(debug: bool):
+    """A warning during a command as one line ``Warning: ...`` on stderr, each text once (Python's default shows
+    the file and the source line that triggered it); unchanged under ``--debug``."""
+    if debug:
+        yield
+        return
+    seen: set[str] = set()
+
+    def show(message, category, filename, lineno, file=None, line=None):
+        text = plain_message(str(message))
+        if text not in seen:
+            seen.add(text)
+            typer.echo(f"Warning: {text}", err=True)
+
+    with warnings.catch_warnings():
+        warnings.showwarning = show
+        yield
 
 
 def _debug(ctx: typer.Context) -> bool:

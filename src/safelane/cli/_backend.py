@@ -63,6 +63,7 @@ def session(workers):
     if not isinstance(workers, Backend):
         yield
         return
+    announce_ray(workers.ray_address)
     try:
         opened = connect_ray(workers.ray_address, workers.workers)
     except ConnectionError as exc:
@@ -79,3 +80,21 @@ def record(workers) -> dict:
     from ..parallel import as_backend
 
     return as_backend(workers).record()
+
+
+def announce_ray(address: str | None) -> None:
+    """Say on stderr what connecting is about to do: a fresh local Ray runtime takes tens of seconds to start."""
+    import os
+    import sys
+
+    from ..ray_cluster import _local_cluster, import_ray
+
+    ray = import_ray()
+    if ray.is_initialized():
+        return
+    target = address or os.environ.get("RAY_ADDRESS") or _local_cluster(ray)
+    if target:
+        message = f"connecting to the Ray cluster at {target}..."
+    else:
+        message = "starting a local Ray runtime (~40 s; a running cluster: --ray-address or 'ray start --head')..."
+    print(message, file=sys.stderr, flush=True)

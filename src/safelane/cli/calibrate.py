@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import dataclasses
+import re
 import time
 from pathlib import Path
 
@@ -28,7 +30,10 @@ def calibrate(
     install: bool = typer.Option(
         False, "--install", help="Also install the result as a user preset (see --name), outside the package."
     ),
-    name: str = typer.Option("calibrated", "--name", help="Name of the installed user preset (--preset NAME)."),
+    name: str = typer.Option(
+        "calibrated", "--name", help="Name of the result (preset.yaml) and of the user preset --install writes "
+        "(then --preset NAME): letters, digits, '-' or '_'."
+    ),
     preset_dir: Path = typer.Option(
         None, "--preset-dir", help="Folder of user presets; default $SAFELANE_PRESET_DIR or ~/.config/safelane/presets."
     ),
@@ -36,14 +41,16 @@ def calibrate(
     """Calibrate the quantities the paper leaves open to its published N = 1 and N = 10 rows of Table 1.
 
     Searches accelerations, p_m, the horizon and planner gains over plausible ranges (N = 3 is never used).
-    The defaults are the settings that built the shipped 'paper' preset. Rather different parameter sets fit
-    about equally well: read the result as one good choice, not a measurement.
+    The defaults are the settings that built the shipped 'paper_numbers' preset (its meta.command); the shipped
+    'paper' preset comes from 'python -m safelane.experiments.structure' (its meta.history). Rather different
+    parameter sets fit about equally well: read the result as one good choice, not a measurement.
 
     Loss: mean absolute success-rate difference over the 40 published cells; every candidate is shown, with
     the total and an estimate of the time left.
 
-    Writes OUT/<run-id>/ with preset.yaml, candidates.csv, fit_per_cell.csv and run.json. --install also
-    writes the preset as a user preset NAME (never into the package): use it with --preset NAME.
+    Writes OUT/<run-id>/ with preset.yaml (named NAME), candidates.csv, fit_per_cell.csv and run.json. --install
+    also writes the preset as a user preset NAME (never into the package): use it with --preset NAME. Ctrl-C
+    keeps the candidates scored so far (candidates.csv, run.json status 'interrupted').
 
     Example: safelane calibrate --install --name mine   (then: safelane simulate --preset mine)
 
@@ -55,8 +62,9 @@ def calibrate(
     from ..experiments.calibration import SEARCH_SPACE
     from ..experiments.calibration import calibrate as run
     from ..sim.preset import PRESET_DIR, install_preset, user_preset_dir
-    from ._runs import check_out_dir, run_folder
+    from ._runs import check_out_dir, run_folder, say
 
+    _check_name(name)  # before the calibration runs, not after
     if install and (PRESET_DIR / f"{name}.yaml").exists():
         raise typer.BadParameter(f"{name!r} is a shipped preset and cannot be replaced; choose another name",
                                  param_hint="--name")
@@ -71,12 +79,14 @@ def calibrate(
     console.print(f"calibration: {total} candidates ({candidates} search, {refine} refine, {finalists} final); "
                   "loss: mean |ours - paper| over 40 cells; * = best so far", soft_wrap=True)
     best = [float("inf")]
+    scored: list[dict] = []  # every candidate scored so far: kept on Ctrl-C
     start = time.perf_counter()
 
     def on_candidate(i: int, point: dict, loss: float) -> None:
         mark = " *" if loss < best[0] else "  "
         best[0] = min(best[0], loss)
         stage = "search" if i < candidates else "refine" if i < candidates + refine else "final"
+        scored.append({**{k: point[k] for k in SEARCH_SPACE}, "loss": loss, "stage": 2 if stage == "final" else 1})
         values = "  ".join(f"{k}={point[k]:.3g}" for k in SEARCH_SPACE)
         elapsed = time.perf_counter() - start
         eta = elapsed / (i + 1) * (total - i - 1)
@@ -85,10 +95,19 @@ def calibrate(
 
     args = {"candidates": candidates, "samples": samples, "refine": refine, "finalists": finalists,
             "final_samples": final_samples, "seed": seed, "workers": where}
-    info = {"kind": "calibrate", **args, **record(where)}
+    info = {"kind": "calibrate", "name": name, **args, **record(where)}
     with session(where), run_folder(out, f"calibrate-seed{seed}", info) as (run_dir, info):
-        preset, frame = run(**args, on_candidate=on_candidate)
+        try:
+            fitted, frame = run(**args, on_candidate=on_candidate)
+        except KeyboardInterrupt:
+            if scored:  # minutes of simulation each: keep them (the run folder is then kept, status interrupted)
+                pd.DataFrame(scored).to_csv(run_dir / "candidates.csv", index=False)
+                info["candidates_scored"] = len(scored)
+                say(f"interrupted: kept the {len(scored)} candidates scored so far in {run_dir / 'candidates.csv'}")
+            raise
         console.print()
+        # The result carries the user's name, not the shipped preset's the search starts from.
+        preset = dataclasses.replace(fitted, name=name)
         text = preset.to_yaml()
         (run_dir / "preset.yaml").write_text(text, encoding="utf-8")
         frame.to_csv(run_dir / "candidates.csv", index=False)
@@ -100,3 +119,10 @@ def calibrate(
     console.print(f"chosen preset: loss {preset.meta.get('loss_mean_abs_diff')} (re-scored); wrote {run_dir}/")
     if install:
         console.print(f"installed user preset {name!r}: {path} (use --preset {name})")
+
+
+def _check_name(name: str) -> None:
+    """``--name`` becomes a file name and a preset name: letters, digits, '-' or '_' only."""
+    if not re.fullmatch(r"[A-Za-z0-9_-]+", name or ""):
+        raise typer.BadParameter(f"{name!r} is not a preset name; allowed: letters, digits, '-' or '_' (it becomes "
+                                 "NAME.yaml in the user preset folder)", param_hint="--name")  # fmt: skip

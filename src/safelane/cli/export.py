@@ -18,6 +18,9 @@ def export_onnx(
 
     Example: safelane export-onnx results/mlp/<run-id>/model.npz --out model.onnx
     """
+    import zipfile
+
+    from ..errors import one_line
     from ..planners.nn import MLPPlanner, load_default_planner
     from ._runs import check_out_dir
 
@@ -29,6 +32,10 @@ def export_onnx(
         planner = load_default_planner() if model is None else MLPPlanner.load(model)
     except (ValueError, FileNotFoundError) as exc:
         raise typer.BadParameter(str(exc), param_hint="MODEL") from exc
+    except (EOFError, OSError, KeyError, zipfile.BadZipFile) as exc:  # empty, truncated or not a zip archive
+        why = "the file is empty" if model.is_file() and model.stat().st_size == 0 else one_line(str(exc))
+        raise typer.BadParameter(f"{str(model)!r} is not a readable .npz model file written by 'safelane train' "
+                                 f"({why or type(exc).__name__})", param_hint="MODEL") from exc
     check_out_dir(out.parent if str(out.parent) else Path("."), "--out")
     try:
         written = planner.to_onnx(out)

@@ -101,11 +101,13 @@ class TrainResult:
 
 
 def _progress(enabled: bool):
+    """Progress bars on stderr: stdout stays for the result (``safelane train`` prints its JSON summary there)."""
+    from rich.console import Console
     from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
 
     cols = (TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(), TimeElapsedColumn(),
             TextColumn("{task.fields[info]}"))
-    return Progress(*cols, disable=not enabled, transient=False)
+    return Progress(*cols, console=Console(stderr=True), disable=not enabled, transient=False)
 
 
 def _stage_printer(progress: bool, t_start: float):
