@@ -82,6 +82,7 @@ def test_cli_nominal_model_file_and_name(tmp_path):
         assert result.exit_code == 0, result.output
         assert f"nominal {nominal}" in " ".join(result.output.split())
         (run,) = out.iterdir()
+        assert run.name.endswith("-mlp" if nominal == "mlp" else "-model")  # the name, or the file's name
         assert json.loads((run / "run.json").read_text())["nominal"] == nominal
         tables[nominal] = pd.read_csv(run / "scenarios.csv").drop(columns=["wall_s"], errors="ignore")
     pd.testing.assert_frame_equal(tables["mlp"], tables[str(model)])

@@ -122,13 +122,17 @@ def _run(leaders, decel, episodes, traffic, planner, seed, shielded, gui, fcd, o
 
     import pandas as pd
 
+    from ..integrations.sumo import DEFAULT_NOMINAL
     from ..integrations.sumo_cells import cell_scenarios, fcd_path, run_episodes
     from ..integrations.sumo_world import net_file, sumo_args
     from ..params import Params
+    from ..planners.registry import is_model_path
     from ..sim import SimConfig
     from ._runs import run_folder
 
     label = f"{planner}_N{leaders}_decel{decel:g}_{traffic}_seed{seed}" + ("" if shielded else "_noshield")
+    if nominal != DEFAULT_NOMINAL:  # as simulate's: the name, or a model file's name
+        label += "-" + (Path(nominal).stem if is_model_path(nominal) else nominal)
     label = re.sub(r"[^A-Za-z0-9_.-]+", "_", label)
     params = Params()
     info = {
