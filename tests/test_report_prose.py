@@ -186,3 +186,24 @@ def test_claims_sentence_counts_the_verdicts(tmp_path):
     claims[1] = Claim("b", "B.", True, "e")
     md = build_document(_record(tmp_path, None, None, claims)).to_markdown()
     assert "2 of 2 checked claims hold; 1 could not be checked" in md
+
+
+def test_figure_captions_state_the_grid_of_the_results(tmp_path):
+    """A caption's numbers (N, braking values, planners, samples) are read from the results, not a description."""
+    from safelane.experiments.registry import EXPERIMENTS
+    from safelane.experiments.runner import ExperimentResult
+
+    def caption(n_leaders: int, decels: tuple[float, ...]) -> str:
+        frame = summary(0.5, samples=40, n_leaders=(n_leaders,))
+        frame = frame[frame["decel"].isin(decels)]
+        table = pd.DataFrame(index=range(int(frame["samples"].sum())))  # sized only
+        res = ExperimentResult("fig4_n5", EXPERIMENTS["fig4_n5"].default_config(), table, frame, None, 0.0)
+        record = _record(tmp_path, None, None, [])
+        record.results = {"fig4_n5": res}
+        record.timings = {"fig4_n5": 0.0}
+        return build_document(record).to_markdown()
+
+    md = caption(7, (2.0, 6.0))
+    assert "Grid: N = 7; a_x,N+1,d ∈ {2, 6} m/s²; 4 planners" in md and "40 scenarios per cell, 8 cells" in md
+    assert "N = 5" not in md  # the registry's description says N = 5; these results do not
+    assert "Grid: N = 3; a_x,N+1,d ∈ {2, 3, 4} m/s²" in caption(3, (2.0, 3.0, 4.0))

@@ -74,6 +74,10 @@ TITLES: dict[str, tuple[str, str]] = {
 AXIS_LABELS = {"decel": "braking a [m/s²]", "n_leaders": "N", "p_v": "p_v", "penetration": "penetration",
                "planner": "planner", "follower": "F"}  # fmt: skip
 
+#: Column -> (its symbol, its unit) in sentences.
+_PROSE = {"decel": ("a_x,N+1,d", " m/s²"), "n_leaders": ("N", ""), "p_v": ("p_v", ""),
+          "penetration": ("penetration", ""), "follower": ("F", "")}  # fmt: skip
+
 
 def title(name: str) -> str:
     """The human title of an experiment's section and figure (the id itself for one without a title)."""
@@ -245,14 +249,15 @@ def grid_sentence(name: str, res: ExperimentResult) -> str:
         cfg = res.config.model_dump()
         trace = res.trace if res.trace is not None else pd.DataFrame({"planner": []})
         planners = list(dict.fromkeys(trace["planner"]))
-        where = ", ".join(f"{AXIS_LABELS.get(k, k)} = {cfg[k]:g}" for k in ("n_leaders", "decel") if k in cfg)
+        where = ", ".join(f"{_PROSE[k][0]} = {cfg[k]:g}{_PROSE[k][1]}" for k in ("n_leaders", "decel") if k in cfg)
         return f"{where}; {prose.plural(len(planners), 'planner')}: {', '.join(planners)}."
     parts = []
     for key in ("follower", "n_leaders", "decel", "p_v", "penetration"):
+        name, unit = _PROSE[key]
         if key in frame and frame[key].nunique() > 1:
-            parts.append(f"{AXIS_LABELS[key]} ∈ {{{', '.join(_label(v) for v in sorted(frame[key].unique()))}}}")
+            parts.append(f"{name} ∈ {{{', '.join(_label(v) for v in sorted(frame[key].unique()))}}}{unit}")
         elif key in frame and (key != "p_v" or frame[key].iloc[0] != 0):
-            parts.append(f"{AXIS_LABELS[key]} = {_label(frame[key].iloc[0])}")
+            parts.append(f"{name} = {_label(frame[key].iloc[0])}{unit}")
     planners = [p for p in dict.fromkeys(frame["planner"])]
     samples = sorted(frame["samples"].unique())
     per_cell = f"{samples[0]}" if len(samples) == 1 else f"{samples[0]}–{samples[-1]}"
