@@ -281,3 +281,17 @@ def test_train_progress_goes_to_stderr_and_stdout_is_the_json_summary(tmp_path):
     summary = json.loads(result.stdout)  # nothing but the summary
     assert summary["epochs"] == 1 and summary["out"].startswith(str(tmp_path / "o"))
     assert "round 0 epochs" in result.stderr and "labelling states" in result.stderr
+
+
+def test_a_file_error_names_the_file_without_errno(monkeypatch, tmp_path):
+    missing = str(tmp_path / "gone.csv")
+    monkeypatch.setattr("safelane.planners.nn.load_default_planner",
+                        _boom(FileNotFoundError(2, "No such file or directory", missing)))  # fmt: skip
+    result = runner.invoke(app, ["export-onnx", "--out", str(tmp_path / "m.onnx")])
+    assert result.exit_code == 2
+    assert result.stderr.strip().splitlines()[-1] == (
+        f"Error: Invalid value for MODEL: {missing!r}: No such file or directory"
+    )
+    folder = runner.invoke(app, ["export-onnx", str(tmp_path), "--out", str(tmp_path / "m.onnx")])
+    assert folder.exit_code == 2 and "Errno" not in folder.output
+    assert f"Invalid value for MODEL: {str(tmp_path)!r} is a folder; give a model.npz file" in folder.stderr

@@ -42,6 +42,9 @@ class SafelaneGroup(TyperGroup):
                 return super().invoke(ctx)
             except typer.BadParameter as exc:
                 # Commands turn input errors into BadParameter (naming the option); --debug shows where they arose.
+                cause = exc.__cause__
+                if isinstance(cause, OSError) and cause.strerror and exc.message == str(cause):
+                    exc.message = _describe(cause)  # '[Errno 2] No such file...: PATH' -> 'PATH': No such file...
                 exc.message = plain_message(exc.message)
                 if exc.param_hint is None and exc.param is None:
                     exc.param_hint = _option_of(ctx, exc.__cause__)
@@ -55,7 +58,7 @@ class SafelaneGroup(TyperGroup):
                 typer.echo("Interrupted (Ctrl-C); exit status 130.", err=True)
                 raise typer.Exit(code=130) from None
             except Exception as exc:
-                message = plain_message(str(exc)) or type(exc).__name__
+                message = _describe(exc)
                 if debug:
                     _print_traceback(exc)
                 if isinstance(exc, _USAGE_ERRORS):
@@ -71,6 +74,14 @@ def plain_message(text: str) -> str:
     from ..errors import one_line
 
     return _NUMPY_REPR.sub(r"\1", one_line(text))
+
+
+def _describe(exc: BaseException) -> str:
+    """The one line of an exception: an ``OSError`` as ``'FILE': reason`` (not ``[Errno 2] ...``)."""
+    if isinstance(exc, OSError) and exc.strerror:
+        where = f"{exc.filename!r}" + (f" -> {exc.filename2!r}" if exc.filename2 else "") if exc.filename else ""
+        return plain_message(f"{where}: {exc.strerror}" if where else exc.strerror)
+    return plain_message(str(exc)) or type(exc).__name__
 
 
 def _option_of(ctx: typer.Context, exc: BaseException | None) -> str | None:

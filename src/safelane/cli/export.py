@@ -28,6 +28,9 @@ def export_onnx(
         raise typer.BadParameter(f"{str(out)!r} must end in .onnx", param_hint="--out")
     if out.is_dir():
         raise typer.BadParameter(f"{str(out)!r} is a folder; give the path of the .onnx file", param_hint="--out")
+    if model is not None and model.is_dir():
+        raise typer.BadParameter(f"{str(model)!r} is a folder; give a model.npz file (safelane train writes one in its "
+                                 "run folder)", param_hint="MODEL")  # fmt: skip
     try:
         planner = load_default_planner() if model is None else MLPPlanner.load(model)
     except (ValueError, FileNotFoundError) as exc:
