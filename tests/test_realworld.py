@@ -4,7 +4,7 @@
   corners and its interior): the chain bound computed with the errors is at least the exact bound of every drawn
   truth, and an evasion that exists at the analysis' worst corner exists for every drawn truth (with and without
   an own-lane leader);
-* **actuation delay**: :meth:`Pending.carry` against an independent integration of piecewise-constant commands; the
+* **actuation delay**: :meth:`InFlight.carry` against an independent integration of piecewise-constant commands; the
   shield's initial plan with a delay of 0–0.3 s, simulated by the reference (``tests/reference_own_lane.py``) as one
   trajectory — the commands in flight, then the plan — keeps every margin; a delay that is not a whole number of
   periods is refused, naming the field;
@@ -28,7 +28,8 @@ from safelane import Params
 from safelane.safety import evasion_exists
 from safelane.safety.own_lane import own_lane_core
 from safelane.shield import SensingBounds, Shield, ShieldConfig, Situation, chain_analysis
-from safelane.shield.realworld import Pending, own_lane_decel, worst_corners
+from safelane.shield.command import Command, InFlight
+from safelane.shield.realworld import own_lane_decel, worst_corners
 from safelane.sim import SimConfig, simulate
 
 SETTINGS = settings(deadline=None, suppress_health_check=[HealthCheck.too_slow, HealthCheck.data_too_large])
@@ -251,31 +252,36 @@ def test_pending_carry_integrates_the_commands_in_flight():
     rng = np.random.default_rng(3)
     prm = Params()
     b, periods = 200, 3
-    pieces = []
+    commands, pieces = [], []
     for _ in range(periods):
         cuts = np.sort(rng.uniform(0.0, prm.dt, (b, 6)), axis=1)
         cuts[rng.random((b, 6)) < 0.2] = 0.0  # some empty segments
-        cuts = np.sort(cuts, axis=1)
-        dur = np.diff(np.concatenate([np.zeros((b, 1)), cuts, np.full((b, 1), prm.dt)], axis=1), axis=1)
+        knots = np.concatenate([np.zeros((b, 1)), np.sort(cuts, axis=1), np.full((b, 1), prm.dt)], axis=1)
+        plan = rng.random(b) < 0.7  # the others keep one acceleration over the period
+        rows = np.flatnonzero(plan)
         ax = rng.uniform(-prm.a_x_d, prm.a_x_a, (b, 7))
         ay = rng.uniform(-prm.a_y_m, prm.a_y_m, (b, 7))
-        pieces.append((dur, ax, ay))
+        cmd = Command(ax[:, 0], ay[:, 0], rows, knots[rows], ax[rows], ay[rows], np.zeros(b, bool))
+        dur = np.where(plan[:, None], np.diff(knots, axis=1), np.eye(1, 7) * prm.dt)
+        commands.append(cmd)
+        pieces.append((dur, np.where(plan[:, None], ax, ax[:, :1]), np.where(plan[:, None], ay, ay[:, :1])))
     state = (rng.uniform(-10, 10, b), rng.uniform(0, 3.5, b), np.where(rng.random(b) < 0.3, rng.uniform(0, 1, b),
              rng.uniform(0, 30, b)), rng.uniform(-1, 1, b))  # fmt: skip
-    got = Pending(pieces=tuple(pieces)).carry(*state)
+    got = InFlight(commands=tuple(commands)).carry(*state, prm.dt)
     want = _integrate_commands(pieces, *state)
     for g, w in zip(got, want, strict=True):
         np.testing.assert_allclose(g, w, rtol=1e-12, atol=1e-9)
     assert (want[2] == 0.0).sum() > 5  # some rows braked to rest in flight
     # idle: cruising; push: the oldest command leaves the queue
-    idle = Pending.idle(b, 2, prm.dt)
-    x, y, vx, vy = idle.carry(*state)
+    idle = InFlight.idle(b, 2)
+    x, y, vx, vy = idle.carry(*state, prm.dt)
     np.testing.assert_allclose(x, state[0] + state[2] * 2 * prm.dt, rtol=1e-12)
     np.testing.assert_allclose(y, state[1] + state[3] * 2 * prm.dt, rtol=1e-12)
     np.testing.assert_array_equal(vx, state[2])
     np.testing.assert_array_equal(vy, state[3])
-    pushed = idle.push(pieces[0])
-    assert len(pushed.pieces) == 2 and pushed.pieces[-1] is pieces[0] and pushed.pieces[0] is idle.pieces[1]
+    acting, pushed = idle.push(commands[0])
+    assert acting is idle.commands[0]
+    assert len(pushed.commands) == 2 and pushed.commands[-1] is commands[0] and pushed.commands[0] is idle.commands[1]
 
 
 @pytest.mark.parametrize("delay", [0.0, 0.1, 0.2, 0.3])

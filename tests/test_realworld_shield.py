@@ -15,14 +15,12 @@ from safelane import Params
 from safelane.safety import plan_evasion
 from safelane.safety.own_lane import own_lane_core
 from safelane.shield import Situation
+from safelane.shield.command import Command, InFlight
 from safelane.shield.decide import own_margin
 from safelane.shield.realworld import (
-    Pending,
     carry_worst,
     chain_bounds,
     in_flight_checked,
-    issued_piece,
-    knots_piece,
     own_lane_decel,
     own_plan,
     worst_corners,
@@ -221,15 +219,16 @@ def test_carry_worst_brakes_to_rest_or_accelerates():
     np.testing.assert_allclose(got_v, [17.6, 0.0], rtol=1e-12)
 
 
-def test_knots_piece_and_issued_piece():
-    """Knots ``(t, v_x, v_y)`` become segment durations and the constant accelerations between them; a zero-length
-    segment has acceleration 0. The command issued is ``(dt, a_x, a_y)`` in the first of 7 segments (the others
-    empty), an aborting row its knots' piece."""
+def test_a_commands_piece():
+    """An aborting row's knots ``(t, v_x, v_y)`` become segment durations and the constant accelerations between
+    them; a zero-length segment has acceleration 0. Another row's piece is ``(dt, a_x, a_y)`` in the first
+    segment (the others empty; one segment where no row aborts)."""
     knots = np.array([[0.0, 0.02, 0.02, 0.05, 0.1, 0.1, 0.1, 0.1], [0.0, 0.1, 0.1, 0.1, 0.1, 0.1, 0.1, 0.1]])
     vx = np.array([[20.0, 19.8, 19.8, 19.5, 19.0, 19.0, 30.0, 19.0], [10.0, 10.25, 9.0, 9.0, 9.0, 9.0, 9.0, 9.0]])
     vy = np.array([[1.0, 0.97, 0.97, 0.94, 0.94, 0.94, 0.94, 0.94], [0.0, 0.15, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0]])
+    rows = np.arange(2)
     with np.errstate(all="raise"):  # zero-length segments are never divided by (no warning, no nan)
-        dur, ax, ay = knots_piece(knots, vx, vy)
+        dur, ax, ay = Command.issued(np.zeros(2), np.zeros(2), (rows, knots, None, vx, None, vy), rows < 0).piece(0.1)
     np.testing.assert_allclose(dur, np.diff(knots, axis=1), atol=1e-15)
     np.testing.assert_allclose(ax[0], [-10.0, 0.0, -10.0, -10.0, 0.0, 0.0, 0.0], atol=1e-9)
     np.testing.assert_allclose(ay[0], [-1.5, 0.0, -1.0, 0.0, 0.0, 0.0, 0.0], atol=1e-9)
@@ -238,21 +237,22 @@ def test_knots_piece_and_issued_piece():
     dt = 0.1
     ax_cmd, ay_cmd = np.array([1.0, -2.0, 0.5]), np.array([0.3, -0.4, 0.0])
     none = (np.array([], np.int64), None, None, None, None, None)
-    d, a, y = issued_piece(ax_cmd, ay_cmd, none, dt)
-    assert d.shape == a.shape == y.shape == (3, 7)
+    d, a, y = Command.issued(ax_cmd, ay_cmd, none, np.zeros(3, bool)).piece(dt)
+    assert d.shape == a.shape == y.shape == (3, 1)
     np.testing.assert_array_equal(d[:, 0], dt)
-    np.testing.assert_array_equal(d[:, 1:], 0.0)
     np.testing.assert_array_equal(a[:, 0], ax_cmd)
     np.testing.assert_array_equal(y[:, 0], ay_cmd)
     abort = (np.array([2]), knots[:1], None, vx[:1], None, vy[:1])
-    d, a, y = issued_piece(ax_cmd, ay_cmd, abort, dt)
+    d, a, y = Command.issued(ax_cmd, ay_cmd, abort, np.zeros(3, bool)).piece(dt)
     np.testing.assert_allclose(d[2], dur[0], atol=1e-15)
     np.testing.assert_allclose(a[2], ax[0], atol=1e-9)
     np.testing.assert_allclose(y[2], ay[0], atol=1e-9)
     np.testing.assert_array_equal(a[:2, 0], ax_cmd[:2])
+    assert d.shape == (3, 7)
+    np.testing.assert_array_equal(d[:2, 1:], 0.0)
     # Carrying the issued piece moves the ego as the commands say (cruise segments of zero length change nothing).
-    p = Pending(pieces=(issued_piece(ax_cmd, ay_cmd, none, dt),))
-    x, y, v, w = p.carry(np.zeros(3), np.zeros(3), np.array([20.0, 10.0, 0.0]), np.zeros(3))
+    p = InFlight(commands=(Command.issued(ax_cmd, ay_cmd, none, np.zeros(3, bool)),))
+    x, y, v, w = p.carry(np.zeros(3), np.zeros(3), np.array([20.0, 10.0, 0.0]), np.zeros(3), dt)
     np.testing.assert_allclose(v, [20.1, 9.8, 0.05], rtol=1e-12)
     np.testing.assert_allclose(x, [2.0 + 0.005, 1.0 - 0.01, 0.0025], rtol=1e-12)
     np.testing.assert_allclose(w, [0.03, -0.04, 0.0], rtol=1e-12)

@@ -11,9 +11,10 @@ import numpy as np
 import pytest
 
 from safelane import Params
+from safelane.shield.command import Command
 from safelane.sim import SimConfig
 from safelane.sim.kinematics import Fleet, Motion
-from safelane.sim.realworld import cruise, executed_motion, issued, l0_motion, own_lane_checks, with_own_lane
+from safelane.sim.realworld import executed_motion, l0_motion, own_lane_checks, with_own_lane
 from safelane.sim.scenario import paper_scenarios
 from test_sim_checks_reference import GRID, _plan_segments, crossings, scenarios, trajectory
 
@@ -95,7 +96,7 @@ def test_executing_an_issued_plan_from_its_own_start_reproduces_it():
     decision = SimpleNamespace(
         a_x=a_x, a_y=a_y, completing=np.arange(n) % 3 == 0, abort_motion=lambda: (rows, knots, px, vx, py, vy)
     )
-    cmd = issued(decision)
+    cmd = Command.of(decision)
     np.testing.assert_array_equal(cmd.rows, rows)
     np.testing.assert_array_equal(cmd.completing, decision.completing)
     assert (cmd.ax_seg[0, 1] == 0.0) and (cmd.ay_seg[0, 1] == 0.0)  # the zero-length segment
@@ -105,6 +106,13 @@ def test_executing_an_issued_plan_from_its_own_start_reproduces_it():
         np.testing.assert_array_equal(getattr(lon, f), getattr(ref_lon, f))
         np.testing.assert_array_equal(getattr(lat, f), getattr(ref_lat, f))
     got_rows, plan_lon, plan_lat = plan
+    # the hosts (highway-env, SUMO) take the end of the period from Command.carry: the same state, bit for bit
+    end = cmd.carry(ex, ey, evx, evy, DT)
+    want = [lon.end[0].copy(), lat.end[0].copy(), lon.end[1].copy(), lat.end[1].copy()]
+    for k, q in enumerate((plan[1].end[0], plan[2].end[0], plan[1].end[1], plan[2].end[1])):
+        want[k][rows] = q
+    for got_q, want_q in zip(end, want, strict=True):
+        np.testing.assert_array_equal(got_q, want_q)
     np.testing.assert_array_equal(got_rows, rows)
     np.testing.assert_allclose(plan_lon.x, px, rtol=0, atol=1e-9)
     np.testing.assert_allclose(plan_lon.v, vx, rtol=0, atol=1e-9)
@@ -121,7 +129,7 @@ def test_executing_an_issued_plan_from_its_own_start_reproduces_it():
 
 
 def test_cruise_and_a_decision_without_aborts():
-    c = cruise(3)
+    c = Command.idle(3)
     np.testing.assert_array_equal(c.a_x, 0.0)
     np.testing.assert_array_equal(c.a_y, 0.0)
     assert c.rows.size == 0 and c.rows.dtype == np.intp and not c.completing.any() and c.completing.shape == (3,)
@@ -133,7 +141,7 @@ def test_cruise_and_a_decision_without_aborts():
     empty = np.zeros(0, np.intp)
     decision = SimpleNamespace(a_x=np.ones(2), a_y=np.zeros(2), completing=np.ones(2, bool),
                                abort_motion=lambda: (empty, np.zeros((0, 5)), *(np.zeros((0, 5)),) * 4))  # fmt: skip
-    cmd = issued(decision)
+    cmd = Command.of(decision)
     assert cmd.ax_seg is None and cmd.ay_seg is None and cmd.completing.all()
 
 

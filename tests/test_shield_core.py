@@ -241,7 +241,7 @@ def test_the_stateful_shield_uses_its_params_config_and_variant():
     assert shield.params is prm and shield.config is cfg and shield.variant == "CV_none"
     shield.reset(s0)
     ref_state = init(s0, prm, cfg, "CV_none")
-    assert shield.state.belief.history.shape == (b, 3) and len(shield.state.pending.pieces) == 2
+    assert shield.state.belief.history.shape == (b, 3) and len(shield.state.pending.commands) == 2
     np.testing.assert_array_equal(shield.state.plan.feasible, ref_state.plan.feasible)
     proposal = (np.full(b, 2.0), np.full(b, 1.5))
     got = shield.step(s0, proposal)
@@ -302,7 +302,7 @@ def _expected(state, s, proposal, prm, cfg, variant, breach_any):
         own = (s.own_x[:, 0], s.own_v[:, 0], own_lane_decel(s, prm, np.full(b, v.uses_chain), broken))
     delay = cfg.actuation_delay_s
     if delay > 0.0:
-        ex, ey, evx, evy = state.pending.carry(ex, ey, evx, evy)
+        ex, ey, evx, evy = state.pending.carry(ex, ey, evx, evy, prm.dt)
         l1x, l1v = advance(l1x, l1v, -l1_decel, delay)
         fx, fv = advance(fx, fv, np.where(f_aggr, prm.a_x_a, -prm.a_x_d), delay)
         if own is not None:
@@ -439,13 +439,14 @@ def test_step_makes_the_documented_decision_row_by_row(name):
                            -prm.a_x_d)  # fmt: skip
         np.testing.assert_allclose(new.last.f_limit, np.where(watch, limit, np.inf), rtol=1e-12, atol=1e-12)
         if cfg.actuation_delay_s:
-            assert len(new.pending.pieces) == len(state.pending.pieces)
-            dur, ax, ay = new.pending.pieces[-1]
+            assert len(new.pending.commands) == len(state.pending.commands)
+            dur, ax, ay = new.pending.commands[-1].piece(prm.dt)
             np.testing.assert_allclose(dur.sum(1), prm.dt, rtol=0, atol=1e-12)
             front = np.argmax(dur > 0.0, axis=1)
             np.testing.assert_allclose(ax[np.arange(b), front], d.a_x, rtol=1e-12, atol=1e-12)
             np.testing.assert_allclose(ay[np.arange(b), front], d.a_y, rtol=1e-12, atol=1e-12)
-            assert len(state.pending.pieces) == 1 or new.pending.pieces[0] is state.pending.pieces[1]
+            assert len(state.pending.commands) == 1 or new.pending.commands[0] is state.pending.commands[1]
+            np.testing.assert_array_equal(new.pending.commands[-1].completing, d.completing)
         else:
             assert new.pending is None
         seen |= set(d.behaviour.tolist())
@@ -584,8 +585,8 @@ def test_init_holds_the_most_conservative_plan_from_where_the_commands_in_flight
         plan = own_plan(plan, args, (ox, ov, o_decel), PRM)
     if delay:
         plan = in_flight_checked(plan, s, own_now, delay, PRM)
-        assert len(state.pending.pieces) == round(delay / PRM.dt)
-        for dur, ax, ay in state.pending.pieces:
+        assert len(state.pending.commands) == round(delay / PRM.dt)
+        for dur, ax, ay in (command.piece(PRM.dt) for command in state.pending.commands):
             assert (dur == PRM.dt).all() and not ax.any() and not ay.any()
     else:
         assert state.pending is None

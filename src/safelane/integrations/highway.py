@@ -29,7 +29,7 @@ except ImportError as exc:  # pragma: no cover - exercised only without the extr
 
 from ..params import Params  # noqa: E402
 from ..shield import ABORT, COMPLETED, HESITATE, PROCEED, LaneFrame, Shield, ShieldConfig, Situation  # noqa: E402
-from ..sim.realworld import cruise, executed_motion, issued  # noqa: E402
+from ..shield.command import Command, InFlight  # noqa: E402
 from ..v2x import MAX_AGE_S, SensedVehicle, V2XMessage, leader_arrays  # noqa: E402
 from .highway_road import check_frequencies, check_road, classify_crash, longitudinal, own_lane_leaders  # noqa: E402
 from .highway_vehicles import (  # noqa: E402
@@ -147,7 +147,7 @@ class SafeLaneShield(gym.Wrapper, gym.utils.RecordConstructorArgs):
         # states), and the actuation delay of the config, which the ego's actuator then applies.
         self.sensing = sensing
         self.delay_periods = round(self.shield.config.actuation_delay_s / prm.dt)
-        self.in_flight = ()
+        self.in_flight = None
         self.target = target
         self.connected = bool(connected)
         self.promise = float(promise)
@@ -294,7 +294,7 @@ class SafeLaneShield(gym.Wrapper, gym.utils.RecordConstructorArgs):
         # until the ego lies wholly in the target lane: read by NoCutInIDMVehicle, and for info["cut_in"]
         u.road.safelane_manoeuvre = (self.ego, (self.original_lane, self.target_lane))
         self.shield.reset(self.situation())
-        self.in_flight = (cruise(1),) * self.delay_periods  # the commands acting at the start: cruise
+        self.in_flight = InFlight.idle(1, self.delay_periods)  # the commands acting at the start: cruise
         obs = u.observation_type.observe()
         info.update(original_lane=lane[2], target_lane=tid, crashed=bool(self.ego.crashed))
         return obs, info
@@ -312,11 +312,10 @@ class SafeLaneShield(gym.Wrapper, gym.utils.RecordConstructorArgs):
             decision = self.shield.step(situation, (a[:1], a[1:]))
             code = int(decision.behaviour[0])
             if self.delay_periods:  # the oldest command in flight acts now (exactly); this one joins the queue
-                acting, self.in_flight = self.in_flight[0], (*self.in_flight[1:], issued(decision))
+                acting, self.in_flight = self.in_flight.push(Command.of(decision))
                 ey, evy = frame.y(ego.position[1], ego.lateral_speed)
                 ego1 = tuple(np.array([float(q)]) for q in (ego.position[0], ey, ego.speed, evy))
-                lon, lat, plan = executed_motion(acting, ego1, prm.dt)
-                (nx, nv), (ny, nvy) = (plan[1].end, plan[2].end) if plan is not None else (lon.end, lat.end)
+                nx, ny, nv, nvy = acting.carry(*ego1, prm.dt)
                 ysim = frame.origin_y + frame.sign * float(ny[0])
                 ego.command = ("state", float(nx[0]), float(nv[0]), ysim, frame.sign * float(nvy[0]))
             elif code == ABORT:

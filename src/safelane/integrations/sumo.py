@@ -38,7 +38,7 @@ from .. import v2x
 from .._motion import advance
 from ..params import Params
 from ..shield import ABORT, HESITATE, PROCEED, Shield, ShieldConfig, Situation
-from ..sim.realworld import cruise, executed_motion, issued
+from ..shield.command import Command, InFlight
 from .sumo_episode import EpisodeResult, SumoScenario, scenarios_from_batch, sumo_scenarios
 from .sumo_traffic import TRAFFIC_MODES, TargetLaneTraffic, V2XLink, profile_accel
 from .sumo_world import SumoWorld, VehicleSpec, libsumo_available, net_file, overlaps
@@ -153,7 +153,7 @@ class SumoRunner:
         self.traffic, self.policy, self.horizon_s = traffic, policy, float(horizon_s)
         self.v2x = dict(loss=float(v2x_loss), latency_periods=int(v2x_latency_periods), max_age_s=float(v2x_max_age_s))
         self.stop_on_collision, self.seed = stop_on_collision, int(seed)
-        # Issue 17: error bounds the shield takes the worst case over (a SensingBounds, or None: SUMO's exact states)
+        # Real roads: error bounds the shield takes the worst case over (a SensingBounds, or None: SUMO's exact states)
         # and the actuation delay of ``config`` (the ego executes each command that much later).
         self.sensing = sensing
         self.delay_periods = round(self.config.actuation_delay_s / self.params.dt)
@@ -209,9 +209,9 @@ class SumoRunner:
 
         ex, ey, evx, evy = ROAD_X0 + sc.ego_x, 0.0, sc.ego_v, 0.0  # the ego: road x, shield-frame y (exact state)
         completed = False
-        in_flight = ()
+        in_flight = None
         if self.delay_periods:  # the commands acting when the episode starts: cruise
-            in_flight = (cruise(1),) * self.delay_periods
+            in_flight = InFlight.idle(1, self.delay_periods)
         last_acc = {vid: 0.0 for vid in slot_ids}
         steps = round(self.horizon_s / dt)
         t = 0.0
@@ -242,10 +242,9 @@ class SumoRunner:
             rows, _, px, vx, py, vy = d.abort_motion()
             completing = bool(d.completing[0])
             if self.delay_periods:  # the oldest command in flight acts now; this one joins the queue
-                acting, in_flight = in_flight[0], (*in_flight[1:], issued(d))
+                acting, in_flight = in_flight.push(Command.of(d))
                 ego1 = tuple(np.array([q], float) for q in (ex, ey, evx, evy))
-                lon, lat, plan = executed_motion(acting, ego1, dt)
-                (nx, nv), (ny, nvy) = (plan[1].end, plan[2].end) if plan is not None else (lon.end, lat.end)
+                nx, ny, nv, nvy = acting.carry(*ego1, dt)
                 ex, evx, ey, evy = float(nx[0]), float(nv[0]), float(ny[0]), float(nvy[0])
                 completing = bool(acting.completing[0])
             elif rows.size:  # the held plan's exact motion over the period

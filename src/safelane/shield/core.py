@@ -31,11 +31,12 @@ from ..safety.evasion import plan_evasion
 from ..safety.plan import EvasionPlan
 from . import assessment as assess
 from . import stages, validation
+from .command import Command, InFlight
 from .config import ShieldConfig
 from .decision import Decision
 from .monitor import Breach, Snapshot, observe_breaches
 from .policies import ASSESSMENTS, variant_flags
-from .realworld import Pending, carry_worst, delay_periods, in_flight_checked, issued_piece, own_plan, worst_corners
+from .realworld import carry_worst, delay_periods, in_flight_checked, own_plan, worst_corners
 from .rules import rule_rows
 from .situation import Situation
 from .stages import chain_analysis, exact, own_leader
@@ -55,7 +56,7 @@ class ShieldState:
     breach: Breach
     completed: np.ndarray
     last: Snapshot | None  # the previous period, for the monitor
-    pending: Pending | None = None  # the commands in flight (actuation delay), oldest first
+    pending: InFlight | None = None  # the commands in flight (actuation delay), oldest first
 
 
 def init(situation: Situation, params: Params, config: ShieldConfig | None = None, variant="CV_all") -> ShieldState:
@@ -64,13 +65,13 @@ def init(situation: Situation, params: Params, config: ShieldConfig | None = Non
     cfg = config or ShieldConfig()
     n = len(situation)
     delay = delay_periods(cfg, params) * params.dt
-    pending = Pending.idle(n, delay_periods(cfg, params), params.dt) if delay > 0.0 else None
+    pending = InFlight.idle(n, delay_periods(cfg, params)) if delay > 0.0 else None
     s = situation if cfg.sensing else exact(situation)
     s = worst_corners(s)[0]
     ex, ey, evx, evy = s.ego_x, s.ego_y, s.ego_vx, s.ego_vy
     l1x, l1v, fx, fv = s.chain_x[:, 0], s.chain_v[:, 0], s.f_x, s.f_v
     if pending is not None:  # the plan starts once the commands in flight have acted
-        ex, ey, evx, evy = pending.carry(ex, ey, evx, evy)
+        ex, ey, evx, evy = pending.carry(ex, ey, evx, evy, params.dt)
         l1x, l1v = carry_worst(l1x, l1v, params.a_x_d, delay)
         fx, fv = carry_worst(fx, fv, -params.a_x_a, delay)
     own = own_now = own_leader(s, cfg, params, np.zeros(n, bool), np.ones(n, bool))
@@ -132,13 +133,14 @@ def step(
 
     active = ~state.completed
     pending = state.pending
+    done = verdicts.completing & active
     new_state = ShieldState(
         t=obs.situation.t + params.dt, plan=plan, plan_t0=plan_t0, plan_f_aggr=plan_f_aggr, belief=obs.belief,
         breach=breach, completed=state.completed | verdicts.completing, last=snapshot,
-        pending=None if pending is None else pending.push(issued_piece(cmd.a_x, cmd.a_y, cmd.abort, params.dt)),
+        pending=None if pending is None else pending.push(Command.issued(cmd.a_x, cmd.a_y, cmd.abort, done))[1],
     )  # fmt: skip
     decision = Decision(
-        behaviour=verdicts.behaviour, a_x=cmd.a_x, a_y=cmd.a_y, completing=verdicts.completing & active,
+        behaviour=verdicts.behaviour, a_x=cmd.a_x, a_y=cmd.a_y, completing=done,
         invalid=prop.invalid & active, plan=plan, plan_t0=plan_t0, l1_decel=worst.l1_decel, f_aggressive=worst.f_aggr,
         breach=breach, nominal_x=prop.nominal_x, nominal_y=prop.nominal_y, _abort=cmd.abort,
     )  # fmt: skip

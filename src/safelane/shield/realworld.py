@@ -9,16 +9,16 @@
   conservative; ``tests/test_realworld.py`` samples the box).
 * **The own lane** (:func:`own_lane_decel`): ``L0``'s worst-case deceleration is its chain's bound where ``L0`` is
   connected (the same analysis, Eqs. 1–3, on the own lane's chain), else ``a_x_d``.
-* **Actuation delay** δ = d periods (:class:`Pending`): a command acts d periods after it is issued. The shield keeps
-  the commands in flight; the ego's state when the new command starts acting is its measured state carried through
-  them, exactly, and the others' worst cases are carried over δ along their worst-case trajectories. The candidate
-  is then checked from there — the first δ of every evasion trajectory is the commands already issued.
+* **Actuation delay** δ = d periods (:class:`~.command.InFlight`): a command acts d periods after it is issued.
+  The shield keeps the commands in flight; the ego's state when the new command starts acting is its measured
+  state carried through them, exactly, and the others' worst cases are carried over δ along their worst-case
+  trajectories. The candidate is then checked from there — the first δ of every evasion trajectory is the
+  commands already issued.
 """
 
 from __future__ import annotations
 
 import dataclasses
-from dataclasses import dataclass
 
 import numpy as np
 
@@ -94,43 +94,6 @@ def own_lane_decel(s: Situation, prm: Params, informed, broken) -> np.ndarray:
     return np.where(informed & ~unsafe & ~broken, bounds[:, 0], prm.a_x_d)
 
 
-@dataclass(frozen=True)
-class Pending:
-    """The commands in flight, oldest first: each a piecewise-constant acceleration ``(dur, a_x, a_y)``, arrays
-    ``(B, S)`` (S segments summing to one period)."""
-
-    pieces: tuple
-
-    @classmethod
-    def idle(cls, batch: int, periods: int, dt: float) -> Pending:
-        """``periods`` commands of zero acceleration (the ego cruising when the shield starts)."""
-        one = (np.full((batch, 1), dt), np.zeros((batch, 1)), np.zeros((batch, 1)))
-        return cls(pieces=(one,) * periods)
-
-    def carry(self, ex, ey, evx, evy):
-        """The ego's state after all commands in flight have acted (exact; it stops rather than reverses)."""
-        for dur, ax, ay in self.pieces:
-            for k in range(dur.shape[1]):
-                h = dur[:, k]
-                ey = ey + evy * h + 0.5 * ay[:, k] * h * h
-                evy = evy + ay[:, k] * h
-                ex, evx = advance(ex, evx, ax[:, k], h)
-        return ex, ey, evx, evy
-
-    def push(self, piece) -> Pending:
-        """Issue ``piece``: the oldest command has started acting and leaves the queue."""
-        return Pending(pieces=(*self.pieces[1:], piece))
-
-
-def knots_piece(knots, vx, vy):
-    """The piecewise-constant accelerations of exact knots ``(t, v_x, v_y)`` (an aborting row's period)."""
-    dur = np.diff(knots, axis=-1)
-    safe = np.where(dur > 0.0, dur, 1.0)
-    ax = np.where(dur > 0.0, np.diff(vx, axis=-1) / safe, 0.0)
-    ay = np.where(dur > 0.0, np.diff(vy, axis=-1) / safe, 0.0)
-    return dur, ax, ay
-
-
 def carry_worst(x, v, decel, horizon: float):
     """A vehicle's state after ``horizon`` along its worst-case trajectory: constant acceleration ``-decel``
     (``decel`` may be negative: an aggressive F accelerates), stopping at rest."""
@@ -148,8 +111,8 @@ def delay_periods(cfg, prm: Params) -> int:
 
 
 def in_flight_checked(plan: EvasionPlan, s: Situation, own, delay: float, prm: Params) -> EvasionPlan:
-    """``plan`` marked infeasible where the commands acting at the start (cruise, :meth:`Pending.idle`) break a
-    worst-case gap during the delay: to L1 and F while the ego is in the conflict zone, to L0 throughout."""
+    """``plan`` marked infeasible where the commands acting at the start (cruise, :meth:`~.command.InFlight.idle`)
+    break a worst-case gap during the delay: to L1 and F while the ego is in the conflict zone, to L0 throughout."""
     tol = FEASIBILITY_TOL_M
     ex, evx = s.ego_x, s.ego_vx
     zero = np.zeros(len(s))
@@ -175,15 +138,3 @@ def own_plan(plan: EvasionPlan, args, own, prm: Params) -> EvasionPlan:
         piece = plan_from_core(ARRAY, rows.shape, (*sub, prm.p_m, prm.p_m), exists, parts, prm.p_m, prm.p_m, prm,
                                own=(*own_r, margin))  # fmt: skip
     return set_rows(plan, [(rows, piece)])
-
-
-def issued_piece(ax_cmd, ay_cmd, abort, dt: float):
-    """The command issued this period as a piecewise-constant acceleration (7 segments: an abort's knots)."""
-    n = len(ax_cmd)
-    dur = np.zeros((n, 7))
-    dur[:, 0] = dt
-    ax, ay = np.repeat(ax_cmd[:, None], 7, 1), np.repeat(ay_cmd[:, None], 7, 1)
-    rows, knots, _, vx, _, vy = abort
-    if rows.size:
-        dur[rows], ax[rows], ay[rows] = knots_piece(knots, vx, vy)
-    return dur, ax, ay

@@ -186,7 +186,7 @@ def frame(state, obs: Observed, worst: WorstCase, prm: Params, cfg: ShieldConfig
     l1, f, own = (e.chain_x[:, 0], e.chain_v[:, 0]), (e.f_x, e.f_v), worst.own
     delay = delay_periods(cfg, prm) * prm.dt
     if delay > 0.0:
-        ego = state.pending.carry(*ego)
+        ego = state.pending.carry(*ego, prm.dt)
         l1 = carry_worst(*l1, worst.l1_decel, delay)
         f = carry_worst(*f, np.where(worst.f_aggr, -prm.a_x_a, prm.a_x_d), delay)
         if own is not None:

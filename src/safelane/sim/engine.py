@@ -14,6 +14,7 @@ import numpy as np
 import pandas as pd
 from threadpoolctl import threadpool_limits
 
+from ..errors import InputError
 from ..parallel import Backend, as_backend, map_chunks
 from ..params import Params
 from ..planners.base import ExpertPlanner, NominalPlanner
@@ -74,9 +75,9 @@ def simulate(
         traffic=traffic,
         workers=workers,
     )
-
     result.preset, result.nominal = labels["preset"], labels["nominal"]  # named in result.summary()
     return result
+
 
 def simulate_batch(
     batch: ScenarioBatch,

@@ -15,12 +15,12 @@
 from __future__ import annotations
 
 import dataclasses
-from dataclasses import dataclass
 
 import numpy as np
 
 from .._motion import advance
 from ..params import Params
+from ..shield.command import Command
 from ..shield.situation import SensingBounds, Situation
 from .kinematics import Fleet, Motion, crossing_knots, windowed_gap_extrema
 from .rng import counter_uniform
@@ -93,38 +93,7 @@ def measure(seed: int, batch, step: int, s: Situation, bounds: SensingBounds, ed
     return dataclasses.replace(s, **out)
 
 
-@dataclass(frozen=True)
-class Issued:
-    """A command as issued by the shield: ``(a_x, a_y)`` per row, the aborting rows' exact knots and accelerations,
-    and whether it completes the lane change."""
-
-    a_x: np.ndarray
-    a_y: np.ndarray
-    rows: np.ndarray
-    knots: np.ndarray | None
-    ax_seg: np.ndarray | None
-    ay_seg: np.ndarray | None
-    completing: np.ndarray
-
-
-def cruise(batch: int) -> Issued:
-    """Zero acceleration, not completing: what acts before the first issued command under actuation delay."""
-    zero = np.zeros(batch)
-    return Issued(zero, zero, np.zeros(0, np.intp), None, None, None, np.zeros(batch, bool))
-
-
-def issued(decision) -> Issued:
-    rows, knots, _, vx, _, vy = decision.abort_motion()
-    ax_seg = ay_seg = None
-    if rows.size:
-        span = np.diff(knots, axis=-1)
-        safe = np.where(span > 0.0, span, 1.0)
-        ax_seg = np.where(span > 0.0, np.diff(vx, axis=-1) / safe, 0.0)
-        ay_seg = np.where(span > 0.0, np.diff(vy, axis=-1) / safe, 0.0)
-    return Issued(decision.a_x, decision.a_y, rows, knots, ax_seg, ay_seg, decision.completing)
-
-
-def executed_motion(cmd: Issued, ego, dt: float):
+def executed_motion(cmd: Command, ego, dt: float):
     """``(lon, lat, plan)`` of the ego executing ``cmd`` from its actual state (exact; the aborting rows' segments
     integrated from where the ego is)."""
     ex, ey, evx, evy = ego

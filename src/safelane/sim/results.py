@@ -83,7 +83,7 @@ def results_table(b: ScenarioBatch, s) -> pd.DataFrame:
 
 
 def _own_lane_columns(s) -> dict:
-    """With an own-lane leader L0 (issue 17): the ego's collisions / violations against it (also counted in
+    """With an own-lane leader L0 (docs/real_roads.md): the ego's collisions / violations against it (also counted in
     ``collision`` / ``safety_violation``) and the smallest gap."""
     if getattr(s, "l0", None) is None:
         return {}

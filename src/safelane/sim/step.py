@@ -22,13 +22,14 @@ from ..safety.chain import propagate_chain
 from ..safety.lateral import LATERAL_TOL_M
 from ..shield import ABORT, HESITATE, PROCEED, ShieldConfig, ShieldState, Situation
 from ..shield import core as shield
+from ..shield.command import Command, InFlight
 from ..shield.realworld import delay_periods
 from .behaviours import FAST_MIN_ELEMENTS, traffic_kernel
 from .checks import ego_checks, lane_checks, lane_pairs
 from .config import SimConfig
 from .kinematics import Fleet, Motion
 from .link import Link
-from .realworld import cruise, executed_motion, issued, l0_motion, measure, own_lane_checks, with_own_lane
+from .realworld import executed_motion, l0_motion, measure, own_lane_checks, with_own_lane
 from .rng import counter_normal
 from .scenario import ScenarioBatch
 from .traffic import TrafficView, resolve_traffic
@@ -62,7 +63,7 @@ class SimState:
     l0_collided: np.ndarray | None = None
     l0_violated: np.ndarray | None = None
     min_gap_l0: np.ndarray | None = None
-    in_flight: tuple = ()  # commands issued but not acting yet (actuation delay), oldest first
+    in_flight: InFlight | None = None  # commands issued but not acting yet (actuation delay), oldest first
     initial_safe: np.ndarray | None = None  # the shield's initial plan is a safe evasion (inside the assumptions)
 
     @property
@@ -133,9 +134,9 @@ class ClosedLoop:
         start = self.situation(0.0, ego, x, v, None, b.v[:, 0], l0)
         if self.sensing is not None:
             start = measure(self.seed, b, -1, start, self.sensing, self.cfg.sensing_edge_share)
-        in_flight = ()
+        in_flight = None
         if self.delay_periods:  # the commands acting when the run starts: cruise
-            in_flight = (cruise(n),) * self.delay_periods
+            in_flight = InFlight.idle(n, self.delay_periods)
         start_state = shield.init(start, self.prm, self.shield_config, b.variant)
         return SimState(
             t=0.0,
@@ -256,7 +257,7 @@ class ClosedLoop:
         in_flight = s.in_flight
         completing = d.completing
         if self.delay_periods:  # the command acting now is the oldest in flight; this one acts later
-            acting, in_flight = in_flight[0], (*in_flight[1:], issued(d))
+            acting, in_flight = in_flight.push(Command.of(d))
             lon, lat, plan = executed_motion(acting, s.ego, dt)
             completing = acting.completing
         else:
