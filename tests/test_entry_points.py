@@ -133,7 +133,9 @@ def test_debug_shows_the_traceback_and_version(tmp_path):
     plain = invoke("check", "--params", tmp_path / "nope.yaml")
     assert plain.exit_code == 2 and "Traceback" not in plain.output
     debug = invoke("--debug", "check", "--params", tmp_path / "nope.yaml")
-    assert isinstance(debug.exception, InputError)  # re-raised: the runner holds it, a terminal prints it
+    # The full traceback of where the bad input arose, then the same one line and status (tests/test_cli_errors.py).
+    assert debug.exit_code == 2 and "Traceback (most recent call last)" in debug.output
+    assert "safelane.errors.InputError: Params file not found" in debug.output
     version = invoke("--version")
     assert version.exit_code == 0 and version.output.strip() == f"safelane {safelane.__version__}"
 
