@@ -2,15 +2,30 @@
 PYTHON ?= python3
 VENV   := .venv
 PY     := $(VENV)/bin/python
-STAMP  := $(VENV)/.installed
+# Two install stamps: `make run` needs only the package and its compiled kernels (the reproduction runs its planners
+# in NumPy); `make test` adds PyTorch, stable-baselines3, Gymnasium, highway-env, Ray, SUMO and the dev tools.
+RUN_STAMP := $(VENV)/.installed-run
+STAMP     := $(VENV)/.installed
+# PyTorch's CPU build, pinned with its local version: from an index that has no CPU build (PyPI) the pin fails
+# instead of pulling the CUDA-bundled wheels (gigabytes). Give the index that has it with
+# `make test TORCH_INDEX_URL=...` (docs/usage.md, "Installing").
+TORCH          := torch==2.13.0+cpu
+TORCH_INDEX_URL ?=
 
-.PHONY: run test lint bench fuzz clean install mutate mutate-ci
+.PHONY: run test lint bench fuzz clean install install-run mutate mutate-ci
 
-$(STAMP): pyproject.toml
+$(PY):
 	$(PYTHON) -m venv $(VENV)
 	$(PY) -m pip install --quiet --upgrade pip
-	# The pinned CPU build of PyTorch first: an unpinned torch would pull several GB of CUDA wheels.
-	$(PY) -m pip install --quiet torch==2.13.0
+
+$(RUN_STAMP): pyproject.toml | $(PY)
+	# The package and the compiled kernels (extra fast, numba): all the reproduction needs.
+	$(PY) -m pip install --quiet -e ".[fast]"
+	touch $(RUN_STAMP)
+
+$(STAMP): pyproject.toml $(RUN_STAMP)
+	$(PY) -m pip install --quiet "$(TORCH)" $(if $(TORCH_INDEX_URL),--extra-index-url $(TORCH_INDEX_URL)) || \
+		{ echo "no $(TORCH) on this package index: make test TORCH_INDEX_URL=<PyTorch's CPU index> (docs/usage.md)"; exit 1; }
 	$(PY) -m pip install --quiet -e ".[dev,train,gym,rl,highway,fast]"
 	# Ray (extra ray; a 79 MB wheel, about 10 s): the Ray backend's tests run in CI (docs/scale.md).
 	$(PY) -m pip install --quiet -e ".[ray]"
@@ -22,7 +37,9 @@ $(STAMP): pyproject.toml
 
 install: $(STAMP)
 
-run: $(STAMP)
+install-run: $(RUN_STAMP)
+
+run: $(RUN_STAMP)
 	$(VENV)/bin/safelane reproduce --workers 2
 
 test: $(STAMP)

@@ -12,6 +12,7 @@
 from __future__ import annotations
 
 import itertools
+import json
 import re
 
 import numpy as np
@@ -196,3 +197,88 @@ def test_rss_comparison_table_matches_the_committed_run():
                       if not _shown_equals(s, v)]
     assert not wrong, "\n".join(wrong)
     assert seen == set(pooled), f"rows missing from docs/rss.md's table: {sorted(set(pooled) - seen)}"
+
+
+# ---------------------------------------------------------------- wall times and scenario counts of commands
+
+TIMINGS = json.loads((REPO / "docs" / "results" / "timings.json").read_text(encoding="utf-8"))["measurements"]
+USAGE = (REPO / "docs" / "usage.md").read_text(encoding="utf-8")
+
+
+def test_timing_table_is_the_recorded_measurements():
+    """docs/usage.md's table: one row per recorded measurement, every cell as recorded."""
+    seen = []
+    for row in _markdown_table(USAGE, "| command | scenarios | wall time | measured |"):
+        command = re.search(r"`([^`]+)`", row[0]).group(1)
+        wall = re.fullmatch(r"([\d.]+) s", row[2])
+        assert wall, f"wall time {row[2]!r}: write it in seconds"
+        match = [m for m in TIMINGS if m["command"] == command and _shown_equals(wall.group(1), m["wall_s"])]
+        assert len(match) == 1, f"{command} {row[2]}: not a recorded measurement in docs/results/timings.json"
+        m = match[0]
+        assert (_num(row[1]) if row[1] else None) == m.get("scenarios"), (command, row[1], m.get("scenarios"))
+        assert m["date"] in row[3], (command, row[3], m["date"])
+        cpu = re.search(r"([\d.]+) CPU-seconds", row[3])
+        assert (cpu is None) == ("cpu_s" not in m), f"{command}: state the recorded CPU time with the wall time"
+        assert cpu is None or _shown_equals(cpu.group(1), m["cpu_s"])
+        seen.append(m["id"])
+    assert sorted(seen) == sorted(m["id"] for m in TIMINGS), "a recorded measurement is missing from the table"
+
+
+def _report_wall_time() -> tuple[str, int, float]:
+    report = (REPO / "docs" / "results" / "report.md").read_text(encoding="utf-8")
+    run_id = re.search(r"Run `([^`]+)`", report).group(1)
+    rows = _markdown_table(report, "| step | cells | scenarios | seconds |")
+    scenarios = sum(int(r[2]) for r in rows if r[2])
+    total = next(float(r[3].strip("*")) for r in rows if "total" in r[0])
+    return run_id, scenarios, total
+
+
+def test_recorded_reproduction_matches_the_committed_report():
+    """The full grid's scenario count is the committed report's; the idle measurement is that report's run."""
+    run_id, scenarios, total = _report_wall_time()
+    full = [m for m in TIMINGS if m["command"] == "safelane reproduce --workers 2"]
+    assert full and all(m["scenarios"] == scenarios for m in full), (scenarios, full)
+    idle = next(m for m in TIMINGS if m["id"] == "reproduce_idle")
+    assert run_id in idle["source"], (f"docs/results/report.md is now run {run_id}: record its wall time "
+                                      "(wall-time table) as reproduce_idle in docs/results/timings.json")
+    assert idle["wall_s"] == pytest.approx(total, abs=0.05)
+
+
+_COMMAND = re.compile(r"make run|reproduce|calibrate|safelane train|`train`|simulate`? with")
+_DURATION = re.compile(r"(\d[\d,]*(?:\.\d+)?) ?(s|seconds|min|minutes)\b")
+_COUNT = re.compile(r"(\d[\d,]*) (?:scenarios|lane changes)")
+
+
+def _prose_sentences(text: str) -> list[str]:
+    """Sentences outside fenced blocks and tables."""
+    text = re.sub(r"```.*?```", "", text, flags=re.S)
+    text = "\n".join(line for line in text.splitlines() if not line.lstrip().startswith("|"))
+    return [s.replace("\n", " ") for s in re.split(r"(?<=\.)\s+", text)]
+
+
+def _stated_timings() -> list[tuple[str, str]]:
+    reproduction = (REPO / "docs" / "reproduction.md").read_text(encoding="utf-8")
+    runtime = reproduction.split("## Runtime", 1)[1].split("History", 1)[0]
+    return [(where, s) for where, text in (("README.md", README), ("docs/usage.md", USAGE),
+                                          ("docs/reproduction.md ## Runtime", runtime))
+            for s in _prose_sentences(text) if _COMMAND.search(s)]
+
+
+def test_every_stated_command_time_and_count_is_recorded():
+    """A wall time or a scenario count stated beside a command in the prose is a recorded one."""
+    walls = [m["wall_s"] for m in TIMINGS] + [m["cpu_s"] for m in TIMINGS if "cpu_s" in m]
+    counts = {m["scenarios"] for m in TIMINGS if "scenarios" in m}
+    wrong, checked = [], 0
+    for where, sentence in _stated_timings():
+        for value, unit in _DURATION.findall(sentence):
+            seconds = _num(value) * (60 if unit.startswith("min") else 1)
+            checked += 1
+            if not any(abs(seconds - w) <= (0.05 if "." in value else 0.5) * (60 if unit.startswith("min") else 1)
+                       for w in walls):
+                wrong.append(f"{where}: {value} {unit} is not a recorded wall time: {sentence[:160]}")
+        for value in _COUNT.findall(sentence):
+            checked += 1
+            if _num(value) not in counts:
+                wrong.append(f"{where}: {value} scenarios is not a recorded count: {sentence[:160]}")
+    assert not wrong, "\n".join(wrong)
+    assert checked >= 3, "the README and docs/usage.md should state the reproduction's time and scenario count"
