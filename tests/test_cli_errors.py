@@ -295,3 +295,21 @@ def test_a_file_error_names_the_file_without_errno(monkeypatch, tmp_path):
     folder = runner.invoke(app, ["export-onnx", str(tmp_path), "--out", str(tmp_path / "m.onnx")])
     assert folder.exit_code == 2 and "Errno" not in folder.output
     assert f"Invalid value for MODEL: {str(tmp_path)!r} is a folder; give a model.npz file" in folder.stderr
+
+
+@pytest.mark.parametrize(
+    ("args", "line"),
+    [
+        (["falsify", "--scenarios", "-1"], "Invalid value for '--scenarios' / '-n': Input should be greater than or "
+                                           "equal to 0; got -1"),
+        (["falsify", "--minutes=nan"], "Invalid value for '--minutes' / '-m': Input should be greater than or equal "
+                                       "to 0; got nan"),
+        (["calibrate", "--candidates", "0"], "Invalid value for '--candidates': Input should be greater than or equal "
+                                             "to 1; got 0"),
+    ],
+)
+def test_clicks_own_range_checks_show_the_value(args, line, tmp_path):
+    result = runner.invoke(app, [*args, "--out", str(tmp_path / "o")])
+    assert result.exit_code == 2
+    assert result.stderr.strip().splitlines()[-1] == f"Error: {line}"
+    assert not (tmp_path / "o").exists()

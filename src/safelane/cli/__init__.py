@@ -46,6 +46,9 @@ class SafelaneGroup(TyperGroup):
                 if isinstance(cause, OSError) and cause.strerror and exc.message == str(cause):
                     exc.message = _describe(cause)  # '[Errno 2] No such file...: PATH' -> 'PATH': No such file...
                 exc.message = plain_message(exc.message)
+                if exc.param is not None and "got " not in exc.message:  # Click's own checks omit the value
+                    value = _given(getattr(exc.param, "opts", ()))
+                    exc.message += "" if value is None else f"; got {value}"
                 if exc.param_hint is None and exc.param is None:
                     exc.param_hint = _option_of(ctx, exc.__cause__)
                 if debug:
@@ -74,6 +77,20 @@ def plain_message(text: str) -> str:
     from ..errors import one_line
 
     return _NUMPY_REPR.sub(r"\1", one_line(text))
+
+
+def _given(opts) -> str | None:
+    """The value typed after an option (its last occurrence), as typed; ``None`` if not found."""
+    from . import _runs
+
+    args, value = _runs.invoked_args or [], None
+    for i, arg in enumerate(args):
+        for opt in opts:
+            if arg == opt and i + 1 < len(args):
+                value = args[i + 1]
+            elif opt.startswith("--") and arg.startswith(opt + "="):
+                value = arg[len(opt) + 1 :]
+    return value
 
 
 def _describe(exc: BaseException) -> str:
