@@ -1,6 +1,6 @@
 # ruff: noqa: E402  (the BLAS thread settings below must precede the first NumPy import)
 """Outside the assumptions, measured (issue 9): what breaks the guarantee, by how much, and what the assumption
-monitor (``SimConfig.monitor``) does about it.
+monitor (``SimConfig.shield.monitor``) does about it.
 
 Every setting runs the same scenarios — the paper's sampler, N ∈ {1, 3, 10}, ``a_x_N+1_d`` ∈ {4, 6} (8 for the
 L(N+1)-beyond-``a_x_d`` rows: 10 and 12), F connected half of the time, non-connected F aggressive half of those —

@@ -60,7 +60,7 @@ def test_check_env_passes(shield):
 def test_registered_and_made_through_gymnasium():
     env = gym.make(ENV_ID, shield=False, n_leaders=(1, 3), decel=4.0)
     assert isinstance(env.unwrapped, LaneChangeEnv)
-    assert not env.unwrapped.task.config.supervised
+    assert not env.unwrapped.task.config.shield.enabled
     env = gym.make("safelane.envs:" + ENV_ID)  # the module:id form, without importing safelane.envs first
     venv = gym.make_vec(ENV_ID, num_envs=3, vectorization_mode="vector_entry_point")
     assert isinstance(venv, LaneChangeVectorEnv) and venv.num_envs == 3

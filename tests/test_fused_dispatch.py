@@ -20,16 +20,24 @@ pytestmark = [needs_numba, pytest.mark.filterwarnings("ignore:a_x_N\\+1_d")]
 
 #: One valid non-default value for every SimConfig field (and what else it needs to be valid).
 ALTERNATIVES = {
-    "horizon_s": 6.0, "brake_start_s": 0.7, "assessment": "slow", "assess_delay_s": 0.5, "assess_miss": 0.3,
-    "completion": "paper_body_across", "sensor_noise_std": 0.3, "assess_window": 7, "assess_threshold": 0.35,
-    "follower_open_decel": 1.0, "follower_open_gap_m": 5.0, "l1_plan_steps": 4, "supervised": False,
-    "v2x_loss": 0.2, "v2x_latency_periods": 2, "v2x_max_age_s": 0.0, "leader_rule": "reactive",
-    "follower_ignores_ego": True, "monitor": False, "own_lane": True, "l0_gap_min_m": 5.0, "l0_gap_max_m": 80.0,
-    "l0_speed_spread_mps": 1.0, "l0_decel_mps2": 4.0, "l0_brake_window_s": 1.0, "sensing_error": True,
-    "sense_connected_pos_m": 0.1, "sense_connected_speed_mps": 0.05, "sense_sensed_pos_m": 2.0,
-    "sense_sensed_speed_mps": 1.0, "sensing_edge_share": 0.5, "actuation_delay_s": 0.1, "shield_own_lane": False,
-    "shield_sensing": False, "shield_delay": False,
+    "horizon_s": 6.0, "brake_start_s": 0.7, "shield.assessment": "slow", "shield.assess_delay_s": 0.5,
+    "shield.assess_miss": 0.3, "shield.completion": "paper_body_across", "sensor_noise_std": 0.3,
+    "shield.assess_window": 7, "shield.assess_threshold": 0.35, "follower_open_decel": 1.0, "follower_open_gap_m": 5.0,
+    "l1_plan_steps": 4, "shield.enabled": False, "v2x_loss": 0.2, "v2x_latency_periods": 2, "v2x_max_age_s": 0.0,
+    "leader_rule": "reactive", "follower_ignores_ego": True, "shield.monitor": False, "own_lane": True,
+    "l0_gap_min_m": 5.0, "l0_gap_max_m": 80.0, "l0_speed_spread_mps": 1.0, "l0_decel_mps2": 4.0,
+    "l0_brake_window_s": 1.0, "sensing_error": True, "sense_connected_pos_m": 0.1, "sense_connected_speed_mps": 0.05,
+    "sense_sensed_pos_m": 2.0, "sense_sensed_speed_mps": 1.0, "sensing_edge_share": 0.5, "actuation_delay_s": 0.1,
+    "shield.actuation_delay_s": 0.1, "shield.own_lane": False, "shield.sensing": False,
 }  # fmt: skip
+
+
+def _config(name: str, **extra) -> SimConfig:
+    """SimConfig with setting ``name`` (``shield.x``: the shield's) at its alternative value."""
+    value = ALTERNATIVES[name]
+    if name.startswith("shield."):
+        return SimConfig(shield={name.removeprefix("shield."): value}, **extra)
+    return SimConfig(**{name: value}, **extra)
 
 
 def _batch():
@@ -41,10 +49,10 @@ def _batch():
 
 
 def test_every_config_field_has_a_value_here_and_a_decision_in_the_dispatch():
-    assert set(ALTERNATIVES) == set(SimConfig.model_fields), "a new SimConfig field needs a case here"
+    assert set(ALTERNATIVES) == set(_fused.config_fields(SimConfig)), "a new SimConfig field needs a case here"
     assert _fused.unclassified(SimConfig) == []
     for name, value in ALTERNATIVES.items():
-        assert SimConfig.model_fields[name].default != value, name
+        assert _fused.setting(SimConfig(), name) != value and _fused.setting(_config(name), name) == value, name
 
 
 def test_a_field_the_dispatch_does_not_classify_is_refused_loudly():
@@ -65,7 +73,7 @@ def test_a_setting_the_loop_does_not_implement_runs_period_by_period_and_says_wh
     calls = []
     real = _fused.run_chunk
     monkeypatch.setattr(_fused, "run_chunk", lambda *a: calls.append(1) or real(*a))
-    cfg = SimConfig(**{name: ALTERNATIVES[name]})
+    cfg = _config(name)
     result = simulate_batch(_batch(), seed=3, config=cfg)
     assert calls == []
     assert result.engine == "period by period"
@@ -79,7 +87,7 @@ def test_a_setting_the_loop_does_not_implement_runs_period_by_period_and_says_wh
 def test_a_setting_the_loop_reads_or_that_cannot_act_runs_compiled_with_the_numpy_paths_table(monkeypatch, name):
     for env in ("SAFELANE_NO_NUMBA", "SAFELANE_NO_FUSED"):
         monkeypatch.delenv(env, raising=False)
-    cfg = SimConfig(**{name: ALTERNATIVES[name]})
+    cfg = _config(name)
     batch = _batch()
     compiled = simulate_batch(batch, seed=3, config=cfg)
     assert compiled.engine == "compiled loop", compiled.engine_reasons
@@ -93,9 +101,8 @@ def test_a_setting_the_loop_reads_or_that_cannot_act_runs_compiled_with_the_nump
 def test_each_setting_the_loop_does_not_implement_changes_this_batchs_table(monkeypatch, name):
     """The batch is sensitive to every FIXED field, so declaring one of them READ would fail the test above."""
     monkeypatch.setenv("SAFELANE_NO_NUMBA", "1")
-    other = dict(own_lane={"shield_own_lane": True})  # the alternatives act alone
     default = simulate_batch(_batch(), seed=3).table
-    changed = simulate_batch(_batch(), seed=3, config=SimConfig(**{name: ALTERNATIVES[name]}, **other.get(name, {})))
+    changed = simulate_batch(_batch(), seed=3, config=_config(name))
     assert not changed.table.equals(default), name
 
 

@@ -57,7 +57,7 @@ def test_slow_assessment_draws_do_not_depend_on_the_batch():
 def test_paper_completion_rule_is_registered_and_keeps_the_evasion_check():
     rule = COMPLETION_RULES["paper_evasion"]
     assert rule.needs_evasion and rule(*(np.zeros(4) for _ in range(7)), PRM).all()
-    assert SimConfig(completion="paper_evasion").completion == "paper_evasion"
+    assert SimConfig(completion="paper_evasion").shield.completion == "paper_evasion"
     with pytest.raises(ValueError):
         SimConfig(completion="none")
 
@@ -96,17 +96,19 @@ def test_structure_metrics_of_the_paper_itself():
 def test_the_two_modes():
     paper = load_preset("paper")
     safe = safe_preset(paper)
-    assert all(getattr(safe.sim, k) == v for k, v in SAFE_MODE.items())
+    assert safe.sim.model_copy(update=SAFE_MODE) == safe.sim != paper.sim  # every rule of the safe mode applied
+    rules = (safe.sim.shield.completion, safe.sim.leader_rule, safe.sim.shield.monitor)
+    assert rules == ("commit_guard", "worst_case", True)
     assert safe.params == paper.params and safe.planner == paper.planner
     shipped = load_preset("safe")
-    assert all(getattr(shipped.sim, k) == v for k, v in SAFE_MODE.items()) and shipped.params == paper.params
+    assert shipped.sim.model_copy(update=SAFE_MODE) == shipped.sim and shipped.params == paper.params
     assert shipped.planner == paper.planner and shipped.network == paper.network == "mlp_paper"
     assert shipped.sim == safe.sim  # every other setting is the paper preset's
-    assert paper.sim.completion == "paper_evasion" and paper.sim.leader_rule == "reactive"
+    assert paper.sim.shield.completion == "paper_evasion" and paper.sim.leader_rule == "reactive"
     point = {"a_x_d": 7.0, "k_p": 0.4, "assess_delay_s": 2.0, "assess_window": 6.4}
     preset = to_preset(point)
-    assert preset.params.a_x_d == 7.0 and preset.planner["k_p"] == 0.4 and preset.sim.assess_window == 6
-    assert preset.sim.assess_delay_s == 2.0 and preset.sim.completion == "paper_evasion"
+    assert preset.params.a_x_d == 7.0 and preset.planner["k_p"] == 0.4 and preset.sim.shield.assess_window == 6
+    assert preset.sim.shield.assess_delay_s == 2.0 and preset.sim.shield.completion == "paper_evasion"
 
 
 def test_under_the_body_across_rule_an_ego_past_the_centre_line_can_still_turn_back():
@@ -133,5 +135,5 @@ def test_structure_loss_weights_and_the_completion_rule_of_a_search_point():
     base, heavy = structure_metrics(chained), structure_metrics(chained, w_claim=3.0)
     assert base["claim_penalty"] > 0.0
     assert heavy["loss"] - base["loss"] == pytest.approx(2.0 * base["claim_penalty"])
-    assert to_preset({"k_v": 1.0}).sim.completion == "paper_evasion"
-    assert to_preset({"k_v": 1.0}, completion="paper_body_across").sim.completion == "paper_body_across"
+    assert to_preset({"k_v": 1.0}).sim.shield.completion == "paper_evasion"
+    assert to_preset({"k_v": 1.0}, completion="paper_body_across").sim.shield.completion == "paper_body_across"

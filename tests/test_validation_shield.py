@@ -51,8 +51,7 @@ def test_shield_from_preset_takes_the_presets_params_and_shield_settings():
     shield = Shield.from_preset("paper", variant="CV_follow")
     assert shield.params == preset.params and shield.variant == "CV_follow"
     cfg = shield.config
-    assert (cfg.assessment, cfg.completion, cfg.monitor) == (preset.sim.assessment, preset.sim.completion, False)
-    assert cfg.assess_window == preset.sim.assess_window and cfg.assess_miss == preset.sim.assess_miss
+    assert cfg == preset.sim.shield and not cfg.monitor  # the preset's shield settings, its one home
     assert Shield.from_preset("paper", config={"monitor": True}).config.monitor
     with pytest.raises(InputError, match="preset 'nope' not found"):
         Shield.from_preset("nope")

@@ -88,7 +88,7 @@ def simulate(
     base = chosen.sim if chosen else SimConfig()
     if assessment is not None and assessment not in ("observed", "slow", "truth"):
         raise typer.BadParameter(f"{assessment!r} is not one of 'observed', 'slow', 'truth'", param_hint="--assessment")
-    config = base.model_copy(update={"assessment": assessment or base.assessment})
+    config = base.model_copy(update={"assessment": assessment or base.shield.assessment})
     try:
         with warnings.catch_warnings():  # said once below, as one line
             warnings.simplefilter("ignore", UserWarning)
@@ -122,7 +122,7 @@ def simulate(
         "p_v": p_v,
         "samples": samples,
         "seed": seed,
-        "assessment": config.assessment,
+        "assessment": config.shield.assessment,
         "params": params.model_dump(),
         "sim": config.model_dump(),
         **record(where),
@@ -150,7 +150,7 @@ def simulate(
         info["files"] = [p.name for p in written] + ["run.json"]
         info["success_rate"] = float(table["success"].mean())
         info["collision_rate"] = float(table["collision"].mean())
-    _print_summary(table, planner, leaders, decel, samples, seed, p_v, config.assessment,
+    _print_summary(table, planner, leaders, decel, samples, seed, p_v, config.shield.assessment,
                    chosen.name if chosen else None, info["nominal"])  # fmt: skip
     for path in written:
         typer.echo(f"wrote {path}")

@@ -2,7 +2,7 @@
 
 :class:`LaneChangeTask` drives one :class:`safelane.sim.step.ClosedLoop` over ``B`` episodes at once: the agent's
 actions are the *nominal planner's proposals* (:class:`ActionPlanner`), the shield (the simulator's supervisor,
-``SimConfig.supervised``) decides what is executed, and the task turns the state change of one control period
+``SimConfig.shield.enabled``) decides what is executed, and the task turns the state change of one control period
 into observations, rewards, costs and flags. :class:`~safelane.envs.LaneChangeEnv` is this task with ``B = 1``;
 :class:`~safelane.envs.LaneChangeVectorEnv` is the same task over the whole batch.
 

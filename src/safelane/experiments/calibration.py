@@ -67,11 +67,11 @@ def published_cells() -> list[Cell]:
 
 def candidate_to_preset(candidate: dict[str, float], meta: dict | None = None) -> Preset:
     """Split a search point into ``Params``, ``SimConfig`` and planner settings."""
-    params, sim, planner = Params().model_dump(), SimConfig().model_dump(), {}
+    params, sim, planner = Params().model_dump(), {}, {}
     for key, value in candidate.items():
         target = sim if key in _SIM_KEYS else planner if key in _PLANNER_KEYS else params
         target[key] = round(value) if key in _INT_KEYS else float(value)
-    return Preset("paper", Params(**params), SimConfig(**sim), meta or {}, planner)
+    return Preset("paper", Params(**params), SimConfig().model_copy(update=sim), meta or {}, planner)
 
 
 def score(preset: Preset, samples: int, seed: int, workers: int | Backend = 1) -> tuple[float, pd.DataFrame]:
@@ -117,7 +117,8 @@ def calibrate(
     different parameter sets fit about equally well (see docs/reproduction.md): the loss surface is flat, so
     read the fitted values as one good choice, not as measured quantities."""
     rng = np.random.default_rng(seed)
-    defaults = Params().model_dump() | SimConfig().model_dump() | vars(ExpertPlanner())
+    sim = SimConfig()
+    defaults = Params().model_dump() | sim.model_dump() | sim.shield.model_dump() | vars(ExpertPlanner())
     points = [{k: v for k, v in defaults.items() if k in SEARCH_SPACE}]
     points += latin_hypercube(candidates - 1, SEARCH_SPACE, rng)
     rows = []

@@ -78,13 +78,13 @@ def to_preset(
 ) -> Preset:
     """A search point as a paper-faithful preset (``PAPER_MODE`` plus the point; ``completion``: another paper-mode
     completion rule than ``PAPER_MODE``'s, e.g. ``paper_body_across``)."""
-    params, sim, planner = Params().model_dump(), SimConfig().model_dump() | PAPER_MODE, {}
+    params, sim, planner = Params().model_dump(), dict(PAPER_MODE), {}
     if completion is not None:
         sim["completion"] = completion
     for key, value in point.items():
         target = sim if key in _SIM_KEYS else planner if key in PLANNER_KEYS else params
         target[key] = round(value) if key in _INT_KEYS else float(value)
-    return Preset(name, Params(**params), SimConfig(**sim), meta or {}, planner)
+    return Preset(name, Params(**params), SimConfig().model_copy(update=sim), meta or {}, planner)
 
 
 def _pivot(fit: pd.DataFrame, column: str) -> pd.DataFrame:
@@ -147,7 +147,7 @@ def calibrate_structure(
     rng = np.random.default_rng(seed)
     if start is None:
         base = load_preset("paper")
-        known = base.params.model_dump() | base.sim.model_dump() | base.planner
+        known = base.params.model_dump() | base.sim.model_dump() | base.sim.shield.model_dump() | base.planner
         start = {k: float(known[k]) if k in known and np.isfinite(known[k]) else float(np.mean(r))
                  for k, r in STRUCTURE_SPACE.items()}  # fmt: skip
     points = [start, *latin_hypercube(candidates - 1, STRUCTURE_SPACE, rng)]

@@ -37,15 +37,10 @@ def cell_scenarios(planner: str, n_leaders: int, decel: float, episodes: int, se
 def shield_config(config=None):
     """The :class:`~safelane.shield.ShieldConfig` the built-in simulator gives the shield for a ``SimConfig``
     (``safelane.sim.step.ClosedLoop``; the paper's world: no delay, no own lane, exact sensing)."""
-    from ..shield import ShieldConfig
     from ..sim import SimConfig
 
-    cfg = config or SimConfig()
-    return ShieldConfig(
-        assessment=cfg.assessment, assess_window=cfg.assess_window, assess_threshold=cfg.assess_threshold,
-        monitor=cfg.monitor, enabled=cfg.supervised, completion=cfg.completion, assess_delay_s=cfg.assess_delay_s,
-        assess_miss=cfg.assess_miss, own_lane=cfg.shield_own_lane, sensing=cfg.shield_sensing,
-    )  # fmt: skip
+    # The runner models no actuation delay of its own here: the shield accounts for none.
+    return (config or SimConfig()).shield.model_copy(update={"actuation_delay_s": 0.0})
 
 
 def fcd_path(fcd: str | Path | None, scenario_id: int, episodes: int) -> str | None:

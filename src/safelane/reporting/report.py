@@ -366,7 +366,7 @@ def _calibration(doc: Document, preset: Preset) -> None:
     meta = preset.meta or {}
     values = {
         **preset.params.model_dump(),
-        **{f"sim.{k}": v for k, v in preset.sim.model_dump().items()},
+        **{f"sim.{k}": v for k, v in _flat(preset.sim.model_dump()).items()},
         **{f"planner.{k}": v for k, v in getattr(preset, "planner", {}).items()},
         "nominal planner in the loop": getattr(preset, "network", None) or "the rule-based planner above",
     }
@@ -412,3 +412,11 @@ def _timings(doc: Document, r: RunRecord) -> None:
     rows += [[k, "", "", _f(v, ".2f")] for k, v in r.timings.items() if k not in r.results]
     rows.append(["**total**", "", "", f"**{sum(r.timings.values()):.2f}**"])
     doc.table(["step", "cells", "scenarios", "seconds"], rows)
+
+
+def _flat(settings: dict, prefix: str = "") -> dict:
+    """Nested settings as ``{"shield.assessment": ...}`` (one table row each)."""
+    out = {}
+    for key, value in settings.items():
+        out.update(_flat(value, f"{prefix}{key}.") if isinstance(value, dict) else {prefix + key: value})
+    return out

@@ -86,12 +86,7 @@ def preset_parts(preset, config=None):
 
     chosen = load_preset(preset)
     cfg = chosen.sim
-    base = ShieldConfig(
-        assessment=cfg.assessment, assess_window=cfg.assess_window, assess_threshold=cfg.assess_threshold,
-        monitor=cfg.monitor, enabled=cfg.supervised, completion=cfg.completion, assess_delay_s=cfg.assess_delay_s,
-        assess_miss=cfg.assess_miss, actuation_delay_s=cfg.actuation_delay_s if cfg.shield_delay else 0.0,
-        own_lane=cfg.shield_own_lane, sensing=cfg.shield_sensing,
-    )  # fmt: skip
+    base = cfg.shield
     if config is None:
         return chosen.params, base
     if isinstance(config, ShieldConfig):

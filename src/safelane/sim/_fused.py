@@ -30,37 +30,57 @@ FUSED_MIN_ROWS = 64
 PROGRESS_CHUNK = 4096
 
 
-#: How the compiled loop treats each :class:`~.config.SimConfig` field. Every field is named in exactly one of the
-#: three tables, and :func:`reasons` refuses a config whose class has a field named in none (a new setting is never
-#: run compiled as if it were at its default: ``tests/test_fused_dispatch.py`` builds its cases from the field list).
+#: How the compiled loop treats each :class:`~.config.SimConfig` field (the shield's as ``shield.<name>``:
+#: :func:`config_fields`). Every field is named in exactly one of the three tables, and :func:`reasons` refuses a
+#: config whose class has a field named in none (a new setting is never run compiled as if it were at its default:
+#: ``tests/test_fused_dispatch.py`` builds its cases from the field list).
 #: The loop reads these fields' values (any value runs compiled):
-READ = frozenset({"horizon_s", "brake_start_s", "assess_window", "assess_threshold", "follower_open_decel",
-                  "follower_open_gap_m"})  # fmt: skip
+READ = frozenset({"horizon_s", "brake_start_s", "shield.assess_window", "shield.assess_threshold",
+                  "follower_open_decel", "follower_open_gap_m"})  # fmt: skip
 #: The loop implements these fields at this value only; any other value runs period by period:
 FIXED = {
-    "assessment": "observed", "completion": "commit_guard", "sensor_noise_std": 0.0, "supervised": True,
-    "v2x_loss": 0.0, "v2x_latency_periods": 0, "leader_rule": "worst_case", "follower_ignores_ego": False,
-    "monitor": True, "own_lane": False, "sensing_error": False, "actuation_delay_s": 0.0,
+    "shield.assessment": "observed", "shield.completion": "commit_guard", "sensor_noise_std": 0.0,
+    "shield.enabled": True, "v2x_loss": 0.0, "v2x_latency_periods": 0, "leader_rule": "worst_case",
+    "follower_ignores_ego": False, "shield.monitor": True, "own_lane": False, "sensing_error": False,
+    "actuation_delay_s": 0.0, "shield.actuation_delay_s": 0.0,
 }  # fmt: skip
 #: These fields act only through another setting; while the fields named (or the nominal planner: ``"nominal"``)
 #: are at the loop's values they change nothing, so any value runs compiled:
 ONLY_WITH = {
-    "assess_delay_s": ("assessment",), "assess_miss": ("assessment",),
+    "shield.assess_delay_s": ("shield.assessment",), "shield.assess_miss": ("shield.assessment",),
     "v2x_max_age_s": ("v2x_loss", "v2x_latency_periods"),  # no message is ever late without the V2X emulation
     "l1_plan_steps": ("nominal",),  # L1's shared plan feeds the neural planners' features; the expert ignores it
     "l0_gap_min_m": ("own_lane",), "l0_gap_max_m": ("own_lane",), "l0_speed_spread_mps": ("own_lane",),
-    "l0_decel_mps2": ("own_lane",), "l0_brake_window_s": ("own_lane",), "shield_own_lane": ("own_lane",),
+    "l0_decel_mps2": ("own_lane",), "l0_brake_window_s": ("own_lane",), "shield.own_lane": ("own_lane",),
     "sense_connected_pos_m": ("sensing_error",), "sense_connected_speed_mps": ("sensing_error",),
     "sense_sensed_pos_m": ("sensing_error",), "sense_sensed_speed_mps": ("sensing_error",),
-    "sensing_edge_share": ("sensing_error",), "shield_sensing": ("sensing_error",),
-    "shield_delay": ("actuation_delay_s",),
+    "sensing_edge_share": ("sensing_error",), "shield.sensing": ("sensing_error",),
 }  # fmt: skip
+
+
+def config_fields(config_cls, prefix: str = "") -> list[str]:
+    """The settings of a config class, a nested config's as ``name.field`` (``shield.assessment``)."""
+    out = []
+    for name, field in config_cls.model_fields.items():
+        sub = field.annotation
+        if isinstance(sub, type) and hasattr(sub, "model_fields"):
+            out.extend(config_fields(sub, f"{prefix}{name}."))
+        else:
+            out.append(prefix + name)
+    return out
+
+
+def setting(cfg, name: str):
+    """The value of setting ``name`` (``shield.assessment``: a nested config's field)."""
+    for part in name.split("."):
+        cfg = getattr(cfg, part)
+    return cfg
 
 
 def unclassified(config_cls) -> list[str]:
     """The fields of ``config_cls`` that the tables above do not name (or name twice)."""
     named = [*READ, *FIXED, *ONLY_WITH]
-    fields = set(config_cls.model_fields)
+    fields = set(config_fields(config_cls))
     return sorted({f for f in fields if named.count(f) != 1} | (set(named) - fields))
 
 
@@ -87,8 +107,8 @@ def reasons(batch, cfg, nominal, traffic, trace: bool, record_observations: bool
         out.append(f"fewer than {FUSED_MIN_ROWS} scenarios")
     if type(nominal) is not ExpertPlanner:
         out.append(f"the nominal planner {type(nominal).__name__} (the loop runs ExpertPlanner only)")
-    out.extend(f"config.{name}={getattr(cfg, name)!r} (compiled: {value!r})" for name, value in FIXED.items()
-               if getattr(cfg, name) != value)  # fmt: skip
+    out.extend(f"config.{name}={setting(cfg, name)!r} (compiled: {value!r})" for name, value in FIXED.items()
+               if setting(cfg, name) != value)  # fmt: skip
     if batch.l0_x is not None:
         out.append("own-lane leaders in the batch")
     if batch.last_profile_t is not None:
@@ -139,8 +159,9 @@ def run_chunk(sim, n_steps: int) -> dict:
         dt=prm.dt, a_x_a=prm.a_x_a, a_x_d=prm.a_x_d, a_y_m=prm.a_y_m, y_safe=prm.y_safe, p_m=prm.p_m,
         lane_width=prm.lane_width, y_boundary=prm.y_boundary, vehicle_length=prm.vehicle_length, conflict=conflict,
         overlap=overlap, lat_tol=LATERAL_TOL_M, tol=FEASIBILITY_TOL_M, eps=ROOT_EPS_MPS2, monitor_tol=TOL_M,
-        brake_start_s=cfg.brake_start_s, assess_threshold=cfg.assess_threshold, open_decel=cfg.follower_open_decel,
-        open_gap_m=cfg.follower_open_gap_m, k_p=nominal.k_p, k_v=nominal.k_v, gap_fraction=nominal.gap_fraction,
+        brake_start_s=cfg.brake_start_s, assess_threshold=cfg.shield.assess_threshold,
+        open_decel=cfg.follower_open_decel, open_gap_m=cfg.follower_open_gap_m, k_p=nominal.k_p, k_v=nominal.k_v,
+        gap_fraction=nominal.gap_fraction,
         brake_comfort=nominal.brake_comfort, omega2=nominal.omega**2, two_omega=2.0 * nominal.omega,
     )  # fmt: skip
     prm_vec = np.array([float(values[name]) for name in PRM])
@@ -153,7 +174,7 @@ def run_chunk(sim, n_steps: int) -> dict:
     flags, bad = np.empty((n, len(BREACH_KINDS)), np.bool_), np.empty(n, np.int64)
     is_last, acts = traffic.roles
     loop_kernel(
-        n_steps, prm_vec, cfg.assess_window, c(b.x), c(b.v),
+        n_steps, prm_vec, cfg.shield.assess_window, c(b.x), c(b.v),
         c(np.stack([b.ego_x, b.ego_y, b.ego_vx, b.ego_vy], 1)), c(b.valid), c(b.n_connected.astype(np.int64)),
         c(b.connected[:, 0]), c(b.follower_aggressive), uses, c(sim.chain_promise), c(sim.chain_margin),
         c(traffic.margin), c(is_last), c(acts), c(traffic.v_desired), c(b.promise_decel), c(b.promise_accel),

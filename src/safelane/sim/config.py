@@ -1,4 +1,13 @@
-"""Settings of a simulation run (not of the scenario distribution)."""
+"""Settings of a simulation run (not of the scenario distribution): the world's, and the shield's as one
+:class:`~safelane.shield.config.ShieldConfig` (``SimConfig.shield``) — the shield's settings have one home.
+
+Presets and code written before the shield's settings moved still read: the flat keys of :data:`SHIELD_KEYS`
+(``assessment``, ``supervised``, ``shield_own_lane``, …) go to ``shield`` under their names there, and
+``shield_delay`` (whether the shield accounts for the world's actuation delay) sets ``shield.actuation_delay_s``.
+Unless told otherwise the shield accounts for the world's delay: ``shield.actuation_delay_s`` defaults to
+``actuation_delay_s``, and :meth:`SimConfig.model_copy` keeps it following a change of the world's delay where it
+did before.
+"""
 
 from __future__ import annotations
 
@@ -6,34 +15,33 @@ from typing import Literal
 
 from pydantic import BaseModel, ConfigDict, Field, model_validator
 
+from ..shield.config import ShieldConfig
+
+#: The flat keys that are the shield's settings, and their names in :class:`ShieldConfig`.
+SHIELD_KEYS = {
+    "assessment": "assessment", "assess_delay_s": "assess_delay_s", "assess_miss": "assess_miss",
+    "completion": "completion", "assess_window": "assess_window", "assess_threshold": "assess_threshold",
+    "monitor": "monitor", "supervised": "enabled", "shield_own_lane": "own_lane", "shield_sensing": "sensing",
+}  # fmt: skip
+
 
 class SimConfig(BaseModel):
-    """Settings of a simulation run (not of the scenario distribution)."""
+    """Settings of a simulation run (not of the scenario distribution); the shield's in :attr:`shield`."""
 
     model_config = ConfigDict(frozen=True, extra="forbid", allow_inf_nan=False)
 
+    shield: ShieldConfig = Field(
+        default_factory=ShieldConfig,
+        description="How the shield decides (assessment, completion rule, monitor, enabled, actuation delay it "
+        "accounts for, own lane, sensing; safelane.shield.ShieldConfig).",
+    )
+
     horizon_s: float = Field(10.0, gt=0.0, description="Simulated time [s] (our assumption; the paper's is unstated).")
     brake_start_s: float = Field(0.0, ge=0.0, description="When L(N+1) starts its sudden braking [s] (paper: t = 0).")
-    assessment: Literal["observed", "truth", "slow"] = Field(
-        "observed",
-        description="'truth' replaces the aggressiveness assessment by F's true type; 'slow' delays the observed "
-        "one's 'collaborative' verdicts and misses some (safelane.shield.policies).",
-    )
-    assess_delay_s: float = Field(1.5, ge=0.0, description="'slow' assessment: mean extra delay of a verdict [s].")
-    assess_miss: float = Field(0.0, ge=0.0, le=1.0, description="'slow' assessment: P(a collaborative F is missed).")
-    completion: Literal["commit_guard", "paper_evasion", "paper_body_across"] = Field(
-        "commit_guard",
-        description="Completion rule of the step that crosses the lane boundary: 'commit_guard' (safe mode; the "
-        "guarantee's), 'paper_evasion' (the paper's Eq. 9 evasion check only) or 'paper_body_across' (the same, "
-        "completing only once the whole car is across; before that the ego may still turn back).",
-    )
     sensor_noise_std: float = Field(0.0, ge=0.0, description="Std of the ego's measurements of F's speed [m/s].")
-    assess_window: int = Field(5, ge=2, description="Observations in the assessment's slope window.")
-    assess_threshold: float = Field(0.2, gt=0.0, description="Evidence threshold on F's acceleration [m/s²].")
     follower_open_decel: float = Field(0.5, ge=0.0, description="Collaborative F's gap-opening deceleration [m/s²].")
     follower_open_gap_m: float = Field(3.0, ge=0.0, description="How much a collaborative F opens the gap [m].")
     l1_plan_steps: int = Field(10, ge=1, description="Periods of L1's planned acceleration shared over V2X.")
-    supervised: bool = Field(True, description="False runs the nominal planner without the safety supervisor.")
     v2x_loss: float = Field(
         0.0, ge=0.0, lt=1.0, description="Probability that a V2X message is lost (per sender and period)."
     )
@@ -52,11 +60,6 @@ class SimConfig(BaseModel):
         description="Outside the assumptions: F never yields to the ego (it follows L1 only, even after the lane "
         "change completes). For studies of what the guarantee does not cover.",
     )
-    monitor: bool = Field(
-        True,
-        description="After a breach of the assumptions (safelane.shield.monitor) use the most conservative ones "
-        "(L1 at a_x_d, F aggressive). False only records breaches.",
-    )
     # --- Beyond the paper's world (docs/real_roads.md): all off by default (the paper's world) ---
     own_lane: bool = Field(False, description="Put a leader L0 ahead of the ego in its own lane (non-connected).")
     l0_gap_min_m: float = Field(15.0, gt=0.0, description="L0's initial gap to the ego: smallest [m].")
@@ -72,10 +75,49 @@ class SimConfig(BaseModel):
     sensing_edge_share: float = Field(0.0, ge=0.0, le=1.0, description="Share of measurement errors drawn at the "
                                       "ends of their bounds (the falsifier's corners; 0: uniform inside).")  # fmt: skip
     actuation_delay_s: float = Field(0.0, ge=0.0, le=1.0, description="Actuation delay [s], whole control periods.")
-    shield_own_lane: bool = Field(True, description="The shield keeps p_m to L0 (False: the paper's shield).")
-    shield_sensing: bool = Field(True, description="The shield takes the worst case over the error bounds (False: "
-                                 "it trusts measurements, as the paper's).")  # fmt: skip
-    shield_delay: bool = Field(True, description="The shield accounts for the actuation delay (False: the paper's).")
+
+    @model_validator(mode="before")
+    @classmethod
+    def _shield_keys(cls, data):
+        """The flat keys of :data:`SHIELD_KEYS` and ``shield_delay`` into ``shield`` (see the module docstring)."""
+        if not isinstance(data, dict):
+            return data
+        data = dict(data)
+        shield = data.get("shield", {})
+        shield = dict(shield.model_dump() if isinstance(shield, ShieldConfig) else shield)
+        for old, new in SHIELD_KEYS.items():
+            if old in data:
+                if new in shield and "shield" in data:
+                    raise ValueError(f"{old} and shield.{new} both given: give one (shield.{new})")
+                shield[new] = data.pop(old)
+        accounts = data.pop("shield_delay", None)
+        if accounts is not None and "actuation_delay_s" in shield and "shield" in data:
+            raise ValueError("shield_delay and shield.actuation_delay_s both given: give one of them")
+        if "actuation_delay_s" not in shield or accounts is not None:
+            world = data.get("actuation_delay_s", cls.model_fields["actuation_delay_s"].default)
+            shield["actuation_delay_s"] = world if accounts is None or bool(accounts) else 0.0
+        data["shield"] = shield
+        return data
+
+    def model_copy(self, *, update=None, deep: bool = False) -> SimConfig:
+        """A copy with ``update`` applied and validated (pydantic's own skips validation): flat shield keys and
+        ``shield_delay`` read as in the constructor; the shield's delay follows a change of the world's where it
+        was equal to it (the shield accounted for it)."""
+        if not update:
+            return super().model_copy(deep=deep)
+        update = dict(update)
+        data = self.model_dump()
+        shield = update.pop("shield", {})
+        shield = dict(shield.model_dump() if isinstance(shield, ShieldConfig) else shield)
+        for old, new in SHIELD_KEYS.items():
+            if old in update:
+                shield[new] = update.pop(old)
+        follows = self.shield.actuation_delay_s == self.actuation_delay_s
+        if "actuation_delay_s" in update and "actuation_delay_s" not in shield and "shield_delay" not in update:
+            shield["actuation_delay_s"] = update["actuation_delay_s"] if follows else self.shield.actuation_delay_s
+        data.update(update)
+        data["shield"] = {**data["shield"], **shield}
+        return type(self).model_validate(data)
 
     @model_validator(mode="after")
     def _check_l0(self) -> SimConfig:

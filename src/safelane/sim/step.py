@@ -20,7 +20,7 @@ from ..planners.variants import VARIANT_NAMES, VARIANTS
 from ..safety._backend import ARRAY
 from ..safety.chain import propagate_chain
 from ..safety.lateral import LATERAL_TOL_M
-from ..shield import ABORT, HESITATE, PROCEED, ShieldConfig, ShieldState, Situation
+from ..shield import ABORT, HESITATE, PROCEED, ShieldState, Situation
 from ..shield import core as shield
 from ..shield.command import Command, InFlight
 from ..shield.realworld import delay_periods
@@ -101,13 +101,7 @@ class ClosedLoop:
         self.b, self.seed, self.prm, self.cfg, self.nominal = batch, seed, prm, cfg, nominal
         self.traffic_step = resolve_traffic(traffic).bind(batch, seed, prm, cfg)
         self.uses_chain = np.array([VARIANTS[name].uses_chain for name in VARIANT_NAMES])[batch.variant]
-        self.shield_config = ShieldConfig(
-            assessment=cfg.assessment, assess_window=cfg.assess_window, assess_threshold=cfg.assess_threshold,
-            monitor=cfg.monitor, enabled=cfg.supervised, completion=cfg.completion,
-            assess_delay_s=cfg.assess_delay_s, assess_miss=cfg.assess_miss,
-            actuation_delay_s=cfg.actuation_delay_s if cfg.shield_delay else 0.0, own_lane=cfg.shield_own_lane,
-            sensing=cfg.shield_sensing,
-        )  # fmt: skip
+        self.shield_config = cfg.shield
         self.delay_periods = delay_periods(cfg, prm)
         self.sensing = cfg.sensing_bounds() if cfg.sensing_error else None
         self.planner_name = getattr(nominal, "__name__", type(nominal).__name__)
