@@ -35,10 +35,24 @@ import numba
 import numpy as np
 from numba import types
 
-from ._fast_base import _B, _F, _INF, _braked, _max, _min, _nan_to_neg, _sqrt, _stop_dist, _stop_time
+from ._fast_base import (
+    _B,
+    _F,
+    _INF,
+    _braked,
+    _max,
+    _min,
+    _nan_to_neg,
+    _sqrt,
+    _stop_dist,
+    _stop_time,
+    announce_compile,
+)
 
 # responsible.responsible_bound's dispatch finds its kernel here (fast_kernel() is this module): re-exported
 from ._fast_responsible import responsible, responsible_kernel  # noqa: F401
+
+announce_compile(__file__)
 
 # One explicit signature (compiled at import, or loaded from the cache): read-only 1-D arrays of any layout, so
 # contiguous inputs, broadcast scalars (stride 0) and read-only views all take the same machine code.

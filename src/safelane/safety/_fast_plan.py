@@ -22,6 +22,9 @@ import numpy as np
 from numba import types
 
 from ._fast import _B, _F, _braked, _follow_min, _leader_gap_min, _leader_search, _profile, _sqrt, _stop_time
+from ._fast_base import announce_compile
+
+announce_compile(__file__)
 
 _PLAN_SIGNATURE = types.void(
     *(_F,) * 9, _B, _F, _F, *(types.float64,) * 6, types.Array(types.float64, 2, "C"), types.Array(types.bool_, 2, "C")

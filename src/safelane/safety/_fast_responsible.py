@@ -16,7 +16,17 @@ import numba
 import numpy as np
 from numba import types
 
-from ._fast_base import _F, _INF, _max, _min, _sqrt, readonly
+from ._fast_base import (
+    _F,
+    _INF,
+    _max,
+    _min,
+    _sqrt,
+    announce_compile,
+    readonly,
+)
+
+announce_compile(__file__)
 
 _RESPONSIBLE_SIGNATURE = types.void(*(_F,) * 5, types.float64, types.Array(types.float64, 1, "C"))
 

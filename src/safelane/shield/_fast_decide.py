@@ -18,12 +18,20 @@ from numba import types
 
 from ..params import Params
 from ..safety._backend import ARRAY, FEASIBILITY_TOL_M
-from ..safety._fast_base import _B, _F, _max, row_function
+from ..safety._fast_base import (
+    _B,
+    _F,
+    _max,
+    announce_compile,
+    row_function,
+)
 from ..safety._fast_plan import BOOL_PARTS, FLOAT_PARTS, _plan_parts
 from ..safety._fast_responsible import _advance, _pair_min_gap
 from ..safety.lateral import LATERAL_TOL_M
 from ..safety.plan import plan_from_core
 from .decide import Verdict
+
+announce_compile(__file__)
 
 #: The rows of :func:`candidate_kernel`'s ``floats``: the predicted states, then the plan's float parts.
 STATES = ("ex", "ey", "evx", "evy", "lx", "lv", "fx", "fv")

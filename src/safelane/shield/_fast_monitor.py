@@ -10,9 +10,16 @@ import numba
 import numpy as np
 from numba import types
 
-from ..safety._fast_base import _braked, _stop_time, row_function
+from ..safety._fast_base import (
+    _braked,
+    _stop_time,
+    announce_compile,
+    row_function,
+)
 from ..safety._fast_responsible import _advance
 from .monitor import BREACH_KINDS, TOL_M, Breach
+
+announce_compile(__file__)
 
 _M = types.Array(types.float64, 2, "A", readonly=True)
 _V = types.Array(types.float64, 1, "A", readonly=True)

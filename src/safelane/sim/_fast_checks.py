@@ -19,10 +19,17 @@ import numpy as np
 from numba import types
 
 from ..params import Params
-from ..safety._fast_base import _max, _min, row_function
+from ..safety._fast_base import (
+    _max,
+    _min,
+    announce_compile,
+    row_function,
+)
 from ._fast_general import _general
 from .checks import _rows
 from .kinematics import extrema
+
+announce_compile(__file__)
 
 _INF = np.inf
 _M = types.Array(types.float64, 2, "A", readonly=True)

@@ -13,7 +13,13 @@ import numba
 import numpy as np
 from numba import types
 
-from ..safety._fast_base import _max, _min
+from ..safety._fast_base import (
+    _max,
+    _min,
+    announce_compile,
+)
+
+announce_compile(__file__)
 
 _INF = np.inf
 _OUT_V = types.Array(types.float64, 1, "C")

@@ -22,7 +22,11 @@ from __future__ import annotations
 import numba
 import numpy as np
 
-from ..safety._fast_base import _max, _min
+from ..safety._fast_base import (
+    _max,
+    _min,
+    announce_compile,
+)
 from ..safety._fast_responsible import _min_follow_decel, _responsible_bound
 from ..shield._fast_decide import _candidate
 from ..shield._fast_monitor import _breach_row
@@ -31,6 +35,8 @@ from ._fast_checks import _ego_row, _lane_row
 from ._fast_general import _general_pair
 from ._fast_held import _clip, _fleet, _motion_max, _plan_motion
 from ._fast_traffic import _chain_row, _follower_accel, _leader_accel, _responsible_accel
+
+announce_compile(__file__)
 
 _INF = np.inf
 #: Scalars of :func:`loop_kernel`'s ``prm`` vector, in order.

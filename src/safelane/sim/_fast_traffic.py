@@ -19,9 +19,16 @@ from numba import types
 
 from ..params import Params
 from ..safety._backend import FEASIBILITY_TOL_M
-from ..safety._fast_base import _max, _min, row_function
+from ..safety._fast_base import (
+    _max,
+    _min,
+    announce_compile,
+    row_function,
+)
 from ..safety._fast_responsible import _min_follow_decel, _responsible_bound, _responsible_ok
 from ..safety.responsible import ROOT_EPS_MPS2
+
+announce_compile(__file__)
 
 _M = types.Array(types.float64, 2, "A", readonly=True)
 _MB = types.Array(types.bool_, 2, "A", readonly=True)
