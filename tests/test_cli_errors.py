@@ -80,6 +80,12 @@ def test_numpy_scalars_are_shown_as_plain_numbers(tmp_path):
     result = runner.invoke(app, ["check", "--promise", "50", "--chain-p", "40", "--chain-v", "30"])
     assert result.exit_code == 2, result.output
     assert "50.0" in result.output and "np.float64" not in result.output
+    assert "--promise" in result.output.split("Error")[-1]  # the chain's error names the option that gave it
+
+
+def test_the_chains_errors_name_the_option():
+    speeds = runner.invoke(app, ["check", "--chain-p", "40", "--chain-v", "-3"])
+    assert speeds.exit_code == 2 and "Invalid value for --chain-v" in speeds.output, speeds.output
 
 
 def test_an_input_error_naming_an_option_names_it_in_the_message(tmp_path):

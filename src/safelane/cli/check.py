@@ -120,9 +120,17 @@ def _check_geometry(params, ego_py: float, l1_p: float, f_p: float, chain_p: lis
 _STATE_OPTIONS = ("ego_px", "ego_py", "ego_vx", "ego_vy", "l1_p", "l1_v", "l1_decel", "f_p", "f_v")
 
 
+#: The chain API's argument names and the options that give them (``worst_case_leader_decel(p, v, promise_decel)``).
+_CHAIN_OPTIONS = {"promise_decel": "--promise", "p": "--chain-p", "v": "--chain-v"}
+
+
 def _option_named_in(message: str) -> str | None:
-    """The option whose argument the safety API's message names (``ego_vx`` → ``--ego-vx``), if any."""
+    """The option whose argument the safety API's message names (``ego_vx`` → ``--ego-vx``, ``promise_decel`` →
+    ``--promise``), if any."""
     for name in _STATE_OPTIONS:
         if re.search(rf"\b{name}\b", message):
             return "--" + name.replace("_", "-")
+    for name, option in _CHAIN_OPTIONS.items():
+        if re.match(rf"{name}\b", message):  # the chain's messages start with the argument's name
+            return option
     return None

@@ -23,6 +23,10 @@ def reproduce(
     preset: str = typer.Option("paper", "--preset", help="Preset name (safelane/presets/NAME.yaml) or a YAML path."),
     only: list[str] = typer.Option(None, "--only", help="Run only this experiment (repeatable); default all."),
     progress: bool = typer.Option(True, "--progress/--no-progress", help="Show progress and per-experiment times."),
+    nominal: str = typer.Option(
+        None, "--nominal", help="Run this nominal planner instead of the preset's network: a registered name or a "
+        "model file (PATH.npz from safelane train, PATH.onnx from export-onnx)."
+    ),
 ) -> None:
     """Reproduce the paper: run every experiment, write CSVs, figures and the report.
 
@@ -48,6 +52,13 @@ def reproduce(
         load_preset(preset)  # fail before any work
     except ValueError as exc:
         raise typer.BadParameter(str(exc), param_hint="--preset") from exc
+    if nominal is not None:
+        from ..planners.registry import load_nominal
+
+        try:
+            load_nominal(nominal)
+        except ValueError as exc:
+            raise typer.BadParameter(str(exc), param_hint="--nominal") from exc
     for name in only or ():
         try:
             get_experiment(name)
@@ -67,6 +78,7 @@ def reproduce(
                 progress=progress,
                 experiments=only or None,
                 command=command,
+                nominal=nominal,
             )
     except KeyboardInterrupt:
         left = sorted(set(out.iterdir()) - before)

@@ -18,6 +18,7 @@ The same seed reproduces every number: the CSVs are byte-identical between runs 
 
 from __future__ import annotations
 
+import dataclasses
 import datetime as dt
 import importlib.util
 import json
@@ -55,12 +56,15 @@ def reproduce(
     experiments: Sequence[str] | None = None,
     configs: Mapping[str, BaseModel] | None = None,
     command: str | None = None,
+    nominal: str | Path | None = None,
 ) -> Path:
     """Run the experiments and write results, figures and the report; returns the run folder.
 
     ``out_dir`` is the parent folder (default ``results``). ``experiments`` selects a subset (default: all
     registered), ``configs`` overrides an experiment's config (default: its paper or ``quick`` config).
     ``command`` is the command line recorded in the report (default: the equivalent ``safelane reproduce``).
+    ``nominal``: a registered nominal planner or a model file (``.npz``/``.onnx``) that the experiments run instead
+    of the preset's network (the rule-based Table 1 still runs the preset's rule-based planner).
     ``workers``: local processes, or a :class:`~safelane.parallel.Backend` (``Backend("ray")``: a Ray cluster); the
     CSVs are byte-identical on every backend and worker count.
     With ``progress`` a Rich progress bar runs and the time of every experiment is printed.
@@ -69,6 +73,11 @@ def reproduce(
 
     preset_label = preset.name if isinstance(preset, Preset) else str(preset)
     preset = preset if isinstance(preset, Preset) else load_preset(preset)
+    if nominal is not None:  # the experiments run this planner instead of the preset's network
+        from ..planners.registry import load_nominal
+
+        load_nominal(nominal)  # a bad name or file fails here, before any work
+        preset = dataclasses.replace(preset, network=str(nominal))
     names = [get_experiment(n).name for n in (experiments or EXPERIMENTS)]
     configs = dict(configs or {})
     if set(configs) - set(names):

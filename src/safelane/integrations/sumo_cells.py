@@ -123,6 +123,6 @@ def run_episodes(
 def _track(items, progress: bool, total: int):
     if not progress:
         return items
-    from rich.progress import track
+    from .._progress import track
 
-    return track(items, total=total, description=f"SUMO: {total} episodes", transient=True)
+    return track(items, f"SUMO: {total} episodes", total=total)

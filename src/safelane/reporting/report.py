@@ -305,6 +305,11 @@ def _experiments(doc: Document, r: RunRecord) -> None:
 
 def _nominal_label(preset) -> str:
     network = getattr(preset, "network", None)
+    from ..planners.registry import is_model_path
+
+    if network and is_model_path(network):
+        return (f"`{network}` (a model file given with `--nominal`; the section “{title('table1_rules')}” runs the "
+                "preset's rule-based planner)")  # fmt: skip
     if network:
         return (
             f"`{network}` (the network distilled from the preset's rule-based planner; the section "

@@ -132,13 +132,12 @@ def run(sim, n_steps: int, progress: bool = False):
     bar (the same table: the scenarios are independent)."""
     if not progress or len(sim.b) <= PROGRESS_CHUNK:
         return _state(run_chunk(sim, n_steps))
-    from rich.progress import track
-
+    from .._progress import track
     from .step import ClosedLoop
 
     parts = np.array_split(np.arange(len(sim.b)), -(-len(sim.b) // PROGRESS_CHUNK))
     chunk = lambda rows: ClosedLoop(sim.b.take(rows), sim.seed, sim.prm, sim.cfg, sim.nominal)  # noqa: E731
-    bar = track(parts, description=f"simulating {len(sim.b)} scenarios", transient=True)
+    bar = track(parts, f"simulating {len(sim.b)} scenarios")
     done = [run_chunk(chunk(rows), n_steps) for rows in bar]
     return _state({name: np.concatenate([fields[name] for fields in done]) for name in done[0]})
 

@@ -126,9 +126,9 @@ def simulate_batch(
     rows, observations = [], []
     steps = range(n_steps)
     if progress:
-        from rich.progress import track
+        from .._progress import track
 
-        steps = track(steps, description=f"simulating {len(batch)} scenarios", transient=True)
+        steps = track(steps, f"simulating {len(batch)} scenarios")
     # The batch is elementwise NumPy plus small matrix products (NN planners): BLAS threads only oversubscribe
     # the cores (and the worker processes), so they are limited to one for the run.
     with threadpool_limits(limits=1, user_api="blas"):

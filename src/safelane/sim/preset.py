@@ -42,7 +42,8 @@ class Preset:
     planner: dict = field(default_factory=dict)  # ExpertPlanner keyword arguments
     source: str | None = None  # the file it was read from
     #: A registered nominal planner distilled from ``planner`` (``paper``: ``mlp_paper``, the paper's kind of
-    #: planner), run by the preset's experiments and ``simulate``; ``None``: the rule-based planner itself.
+    #: planner), or a model file's path (``reproduce --nominal``), run by the preset's experiments and ``simulate``;
+    #: ``None``: the rule-based planner itself.
     network: str | None = None
 
     def expert(self) -> ExpertPlanner:
@@ -50,12 +51,13 @@ class Preset:
         return ExpertPlanner(**self.planner)
 
     def nominal(self) -> NominalPlanner:
-        """The nominal planner the preset's experiments run: its ``network`` if it names one, else :meth:`expert`."""
+        """The nominal planner the preset's experiments run: its ``network`` (a registered name or a model file) if
+        it names one, else :meth:`expert`."""
         if self.network is None:
             return self.expert()
-        from ..planners.registry import get_nominal
+        from ..planners.registry import load_nominal
 
-        return get_nominal(self.network)
+        return load_nominal(self.network)
 
     def to_yaml(self) -> str:
         data = {
