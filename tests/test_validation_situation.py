@@ -15,7 +15,7 @@ from safelane import Params
 from safelane.cli import app
 from safelane.errors import InputError
 from safelane.shield import ABORT, HESITATE, PROCEED, Shield, Situation
-from safelane.shield.situation import GeometryWarning
+from safelane.shield import GeometryWarning  # exported where users filter it
 
 PRM = Params()
 

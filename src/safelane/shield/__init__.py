@@ -12,7 +12,7 @@ from .decide import ABORT, COMPLETED, HESITATE, PROCEED
 from .decision import Decision
 from .monitor import BREACH_KINDS, Breach
 from .policies import ASSESSMENTS, COMPLETION_RULES
-from .situation import LaneFrame, SensingBounds, Situation
+from .situation import GeometryWarning, LaneFrame, SensingBounds, Situation
 
 __all__ = [
     "ABORT",
@@ -24,6 +24,7 @@ __all__ = [
     "PROCEED",
     "Breach",
     "Decision",
+    "GeometryWarning",
     "LaneFrame",
     "SensingBounds",
     "Shield",
