@@ -14,8 +14,14 @@ from typer.testing import CliRunner
 from safelane import Params
 from safelane.cli import app
 from safelane.errors import InputError
-from safelane.shield import ABORT, HESITATE, PROCEED, Shield, Situation
-from safelane.shield import GeometryWarning  # exported where users filter it
+from safelane.shield import (
+    ABORT,
+    HESITATE,
+    PROCEED,
+    GeometryWarning,  # exported where users filter it
+    Shield,
+    Situation,
+)
 
 PRM = Params()
 
