@@ -83,3 +83,6 @@ def test_shield_reset_and_step_name_a_situation_that_is_not_one():
     shield = Shield()
     with pytest.raises(InputError, match=r"Shield.reset: situation must be a safelane.shield.Situation"):
         shield.reset({"ego_x": 0.0})
+    shield.reset(_situation())
+    with pytest.raises(InputError, match=r"Shield.step: situation must be a safelane.shield.Situation"):
+        shield.step({"ego_x": 0.0}, (0.0, 0.0))

@@ -49,8 +49,7 @@ class Observed:
     """Stage 1's output: what the ego knows this period, and what it learnt about the last one."""
 
     situation: Situation  # the situation as the analysis takes it (measurements exact where the config says so)
-    evaluated: Situation  # the analysis' corners of the sensing-error box
-    observed: Situation  # the monitor's corners
+    evaluated: Situation  # the analysis' corners of the sensing-error box (the monitor's are used here alone)
     belief: AssessmentState  # the assessment's belief about F after this period's observation
     bounds: np.ndarray  # (B, M) each chain vehicle's worst-case deceleration (Eqs. 1–3)
     unsafe: np.ndarray  # (B,) the chain scan found a link that cannot keep its margin
@@ -62,8 +61,7 @@ class WorstCase:
     """Stage 2's output: the worst case the decision assumes."""
 
     l1_decel: np.ndarray  # (B,) L1's worst-case deceleration [m/s²]
-    f_aggr: np.ndarray  # (B,) F taken for aggressive
-    broken: np.ndarray  # (B,) an assumption was breached and the monitor acts on it
+    f_aggr: np.ndarray  # (B,) F taken for aggressive (after a breach too, where the monitor acts on it)
     own: tuple | None  # (l0_x, l0_v, l0_decel) at the analysis' corner, or None (no own-lane leader checked)
 
 
@@ -150,7 +148,7 @@ def observe(state, situation: Situation, prm: Params, cfg: ShieldConfig, chain=N
     breach = state.breach
     if state.last is not None:
         breach = observe_breaches(state.breach, state.last, s_obs, prm, s.t)
-    return Observed(s, s_eval, s_obs, belief, bounds, unsafe, breach)
+    return Observed(s, s_eval, belief, bounds, unsafe, breach)
 
 
 def worst_case(obs: Observed, flags, prm: Params, cfg: ShieldConfig) -> WorstCase:
@@ -169,7 +167,7 @@ def worst_case(obs: Observed, flags, prm: Params, cfg: ShieldConfig) -> WorstCas
     own = own_leader(s, cfg, prm, uses_chain, broken)
     if own is not None:
         own = (obs.evaluated.own_x[:, 0], obs.evaluated.own_v[:, 0], own[2])
-    return WorstCase(l1_decel, f_aggr, broken, own)
+    return WorstCase(l1_decel, f_aggr, own)
 
 
 def proposal(raw, n: int, prm: Params, planner_name: str) -> Proposal:
