@@ -507,3 +507,46 @@ def test_own_lane_checks_take_each_rows_motion_whatever_the_sizes_of_the_groups(
     assert not collided[0] and not violated[0] and min_gap[0] == 53.0
     collided, _, min_gap = own_lane_checks(PARAMS, one, one, None, ahead, np.ones(1, bool), np.zeros(1, bool))
     assert collided[0] and min_gap[0] == 3.0
+
+
+@pytest.mark.parametrize("edge_share", [0.0, 0.5])
+def test_measure_draws_each_coordinate_from_its_documented_counter(edge_share):
+    """Same seed, same numbers: every measured coordinate is ``truth + bound * (2u - 1)`` (speeds floored at 0) with
+    ``u`` the counter-based uniform of its documented slot — F at ``_SLOT_NOISE`` (+1 for the speed), chain vehicle
+    ``j`` at ``_SLOT_NOISE + 2 + 2j`` (from the 32nd on, the same slot with one more counter element, 1), the own lane's
+    ``j`` at ``_SLOT_NOISE + 64 + 2j``; with ``edge_share`` the draw goes to the nearer end where a second uniform
+    (one more counter element, 9) falls below it. The falsifier replays a campaign's row on this contract."""
+    from safelane.shield import SensingBounds
+    from safelane.sim.realworld import _SLOT_NOISE, measure
+    from safelane.sim.rng import counter_uniform
+
+    seed, step, b = 9, 6, 40
+    s = _situation(b, 40, 2)
+    s = dataclasses.replace(s, chain_v=s.chain_v + 50.0, own_v=s.own_v + 50.0, f_v=s.f_v + 50.0)  # never floored
+    bounds = SensingBounds()
+    want = bounds.apply(s)
+    sid = np.arange(b) + 100
+    out = measure(seed, SimpleNamespace(scenario_id=sid, world_key=None), step, s, bounds, edge_share=edge_share)
+
+    def u(*counters):
+        draw = counter_uniform(seed, sid, step, *counters)
+        if edge_share > 0.0:
+            draw = np.where(counter_uniform(seed, sid, step, *counters, 9) < edge_share, np.round(draw), draw)
+        return draw
+
+    np.testing.assert_array_equal(out.f_x, s.f_x + want.err_f[:, 0] * (2.0 * u(_SLOT_NOISE) - 1.0))
+    np.testing.assert_array_equal(out.f_v, s.f_v + want.err_f[:, 1] * (2.0 * u(_SLOT_NOISE + 1) - 1.0))
+    for j in (0, 7, 30, 31, 39):
+        extra = (1,) if j >= 31 else ()
+        slot = _SLOT_NOISE + 2 + 2 * j
+        np.testing.assert_array_equal(out.chain_x[:, j],
+                                      s.chain_x[:, j] + want.err_chain[:, j, 0] * (2.0 * u(slot, *extra) - 1.0))
+        np.testing.assert_array_equal(out.chain_v[:, j],
+                                      s.chain_v[:, j] + want.err_chain[:, j, 1] * (2.0 * u(slot + 1, *extra) - 1.0))
+    present = np.isfinite(s.own_x[:, 1])
+    slot = _SLOT_NOISE + 64 + 2
+    np.testing.assert_array_equal(out.own_x[present, 1], (s.own_x[:, 1] + want.err_own[:, 1, 0]
+                                                          * (2.0 * u(slot) - 1.0))[present])  # fmt: skip
+    np.testing.assert_array_equal(out.own_v[present, 1], (s.own_v[:, 1] + want.err_own[:, 1, 1]
+                                                          * (2.0 * u(slot + 1) - 1.0))[present])  # fmt: skip
+    assert present.sum() > 10
