@@ -53,6 +53,8 @@ def test_shield_from_preset_takes_the_presets_params_and_shield_settings():
     cfg = shield.config
     assert cfg == preset.sim.shield and not cfg.monitor  # the preset's shield settings, its one home
     assert Shield.from_preset("paper", config={"monitor": True}).config.monitor
+    default = Shield.from_preset()  # the paper preset by default, as safelane.load_preset's examples
+    assert (default.params, default.config, default.variant) == (preset.params, preset.sim.shield, "CV_all")
     with pytest.raises(InputError, match="preset 'nope' not found"):
         Shield.from_preset("nope")
 
