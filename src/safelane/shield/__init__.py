@@ -10,9 +10,10 @@ See docs/architecture.md.
 from .core import Shield, ShieldConfig, ShieldState, chain_analysis, init, step
 from .decide import ABORT, COMPLETED, HESITATE, PROCEED
 from .decision import Decision
+from .geometry import GeometryWarning
 from .monitor import BREACH_KINDS, Breach
 from .policies import ASSESSMENTS, COMPLETION_RULES
-from .situation import GeometryWarning, LaneFrame, SensingBounds, Situation
+from .situation import LaneFrame, SensingBounds, Situation
 
 __all__ = [
     "ABORT",

@@ -22,33 +22,12 @@ Beyond the paper's world (all optional; absent, the shield is exactly the paper'
 from __future__ import annotations
 
 import dataclasses
-import warnings
 from dataclasses import dataclass
 
 import numpy as np
 
-from ..errors import InputError
 from ..params import Params
-
-
-class GeometryWarning(UserWarning):
-    """A :class:`Situation` whose lanes are out of order (see :meth:`Situation.from_arrays`)."""
-
-
-_GEOMETRY = ("warn", "raise", "ignore")
-
-
-def _report_order(situation: Situation, geometry: str) -> None:
-    if geometry not in _GEOMETRY:
-        raise InputError(f"geometry must be one of {', '.join(_GEOMETRY)}; got {geometry!r}", "geometry")
-    problems = [] if geometry == "ignore" else situation.order_problems()
-    if not problems:
-        return
-    field, text = problems[0]
-    if geometry == "raise":
-        raise InputError(f"Situation.{field}: {text}", field)
-    warnings.warn(f"Situation.{field}: {text}. The shield answers it conservatively (no lane change while it lasts); "
-                  "see Situation.from_arrays", GeometryWarning, stacklevel=3)  # fmt: skip
+from .geometry import order_problems, report_order
 
 
 @dataclass(frozen=True)
@@ -218,7 +197,7 @@ class Situation:
         if sensing is not None:
             situation = sensing.apply(situation)
         situation.validate(prm)
-        _report_order(situation, geometry)
+        report_order(situation, geometry)
         return situation
 
     @classmethod
@@ -297,27 +276,7 @@ class Situation:
         L(N+1)``, the own lane's ``L0 ≤ …`` (one lane: no vehicle is behind the one it follows; equal positions, an
         overlap, are not a break) — the first row of each kind; ``[]`` when there is none. Slots beyond ``L(N+1)``
         are not read by the analysis and not checked. See :meth:`from_arrays` for what the shield makes of it."""
-        out = []
-        x = self.chain_x
-        behind = (x[:, 1:] < x[:, :-1]) & (np.arange(1, x.shape[1])[None, :] <= self.n_connected[:, None])
-        if behind.any():
-            r, j = (int(i[0]) for i in np.nonzero(behind))
-            out.append(("chain_x", f"L{j + 2} at {x[r, j + 1]:g} m is behind L{j + 1} at {x[r, j]:g} m (row {r}); "
-                        "the leaders go nearest first, each at or ahead of the one before it"))  # fmt: skip
-        ahead = self.f_x > x[:, 0]
-        if ahead.any():
-            r = int(np.argmax(ahead))
-            out.append(("f_x", f"F at {self.f_x[r]:g} m is ahead of L1 at {x[r, 0]:g} m (row {r}); F is the target "
-                        "lane's follower, at or behind L1"))  # fmt: skip
-        if self.own_x is not None and self.own_x.shape[1] > 1:
-            ox = self.own_x
-            with np.errstate(invalid="ignore"):
-                behind = np.isfinite(ox[:, 1:]) & (ox[:, 1:] < ox[:, :-1])
-            if behind.any():
-                r, j = (int(i[0]) for i in np.nonzero(behind))
-                out.append(("own_x", f"own-lane leader {j + 1} at {ox[r, j + 1]:g} m is behind leader {j} at "
-                            f"{ox[r, j]:g} m (row {r}); L0 first, each at or ahead of the one before it"))  # fmt: skip
-        return out
+        return order_problems(self)
 
     def _validate_own(self, params: Params, b: int) -> None:
         own = (self.own_x, self.own_v, self.own_promise, self.own_n_connected)
