@@ -9,6 +9,8 @@ from __future__ import annotations
 
 import math
 
+import pandas as pd
+
 
 def clearly(a: tuple[float, float], b: tuple[float, float]) -> int:
     """+1 when interval ``a = (lo, hi)`` lies wholly above ``b``, -1 wholly below, 0 when they overlap."""
@@ -77,3 +79,8 @@ def join(items: list[str]) -> str:
     if len(items) <= 1:
         return "".join(items)
     return ", ".join(items[:-1]) + " and " + items[-1]
+
+
+def number(x, fmt: str = ".3f") -> str:
+    """``x`` formatted (``—`` for a missing value)."""
+    return "—" if x is None or pd.isna(x) else format(float(x), fmt)

@@ -23,7 +23,9 @@ from ..experiments.paper_data import PLANNERS, PUBLISHED_N
 from ..experiments.registry import EXPERIMENTS
 from ..shield import ABORT
 from . import prose
+from .calibration_section import calibration_section
 from .document import Document
+from .prose import number as _f
 
 if TYPE_CHECKING:
     from ..experiments.calibration import Preset
@@ -132,7 +134,7 @@ def build_document(r: RunRecord) -> Document:
         _table1(doc, r.side_by_side, r.mae)
     _claims(doc, r.claims)
     _experiments(doc, r)
-    _calibration(doc, r.preset)
+    calibration_section(doc, r.preset)
     _timings(doc, r)
     doc.heading(1, "Software")
     doc.table(["package", "version"], [[k, v] for k, v in r.versions.items()])
@@ -163,10 +165,6 @@ def _headline(r: RunRecord) -> str:
     if r.quick:
         parts.append("quick grid: few samples per cell, so intervals are wide")
     return "**Headline.** " + "; ".join(parts) + "."
-
-
-def _f(x, fmt: str = ".3f") -> str:
-    return "—" if x is None or pd.isna(x) else format(float(x), fmt)
 
 
 def _table1(doc: Document, frame: pd.DataFrame, mae: float | None) -> None:
@@ -366,42 +364,6 @@ def _trace_table(doc: Document, trace: pd.DataFrame) -> None:
     doc.table(header, rows)
 
 
-def _calibration(doc: Document, preset: Preset) -> None:
-    doc.heading(1, f"Calibration (preset `{preset.name}`)")
-    meta = preset.meta or {}
-    values = {
-        **preset.params.model_dump(),
-        **{f"sim.{k}": v for k, v in _flat(preset.sim.model_dump()).items()},
-        **{f"planner.{k}": v for k, v in getattr(preset, "planner", {}).items()},
-        "nominal planner in the loop": getattr(preset, "network", None) or "the rule-based planner above",
-    }
-    doc.table(["setting", "value"], [[k, v] for k, v in values.items()])
-    if not meta:
-        doc.paragraph("This preset carries no calibration record.")
-        return
-    keys = ("loss_mean_abs_diff", "fitted_to", "procedure", "seed")
-    notes = [f"{k.replace('_', ' ')}: {meta[k]}" for k in keys if k in meta]
-    if "command" in meta:
-        notes.append(f"command: `{meta['command']}`")
-    doc.bullets(notes)
-    if meta.get("search_space"):
-        doc.paragraph("Search space (see `safelane.experiments.calibration` for why these ranges):")
-        doc.table(["parameter", "low", "high"], [[k, *v] for k, v in meta["search_space"].items()])
-    if meta.get("per_cell"):
-        fit = pd.DataFrame(meta["per_cell"])
-        planners = [p for p in PLANNERS if p in set(fit["planner"])]
-        cell = fit.set_index(["n_leaders", "decel", "planner"])
-        rows = []
-        for (n, d), _ in fit.groupby(["n_leaders", "decel"], sort=True):
-            row = [n, f"{d:g}"]
-            for p in planners:
-                c = cell.loc[(n, d, p)] if (n, d, p) in cell.index else None
-                row.append("—" if c is None else f"{_f(c['success_rate'])} / {_f(c['paper_success'])}")
-            rows.append(row)
-        doc.paragraph("Fit per cell at calibration time (ours / paper):")
-        doc.table(["N", "a [m/s²]", *planners], rows)
-
-
 def _timings(doc: Document, r: RunRecord) -> None:
     doc.heading(1, "Wall time")
     rows = []
@@ -417,11 +379,3 @@ def _timings(doc: Document, r: RunRecord) -> None:
     rows += [[k, "", "", _f(v, ".2f")] for k, v in r.timings.items() if k not in r.results]
     rows.append(["**total**", "", "", f"**{sum(r.timings.values()):.2f}**"])
     doc.table(["step", "cells", "scenarios", "seconds"], rows)
-
-
-def _flat(settings: dict, prefix: str = "") -> dict:
-    """Nested settings as ``{"shield.assessment": ...}`` (one table row each)."""
-    out = {}
-    for key, value in settings.items():
-        out.update(_flat(value, f"{prefix}{key}.") if isinstance(value, dict) else {prefix + key: value})
-    return out
