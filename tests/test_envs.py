@@ -86,7 +86,8 @@ def test_spaces_are_the_feature_map_and_the_mechanical_limits():
 def test_batched_sampler_draws_the_paper_samplers_scenarios(n_leaders, decel, scenario):
     import dataclasses
 
-    from safelane.envs.core import ScenarioSampler, stack_rows
+    from safelane.envs.core import ScenarioSampler
+    from safelane.envs.rows import stack_rows
 
     sampler = ScenarioSampler.build("CV_follow", n_leaders, decel, scenario, p_v=0.1)
     fast = sampler.draw_many([np.random.default_rng(s) for s in range(40)])

@@ -10,7 +10,7 @@ Resets (the vector env's auto-reset): the rows that finished get fresh scenarios
 generators exactly as a single env samples them; a new ``ClosedLoop`` is built for the whole batch (its constant
 arrays), and the finished rows of the state are overwritten by the initial state of their new scenarios (where the
 initial state has no record at all — the shield's memory of the previous period — the rows' record is emptied, see
-:func:`vacate_rows`). The batch
+:func:`.rows.vacate_rows`). The batch
 shares one clock, so a row that restarts at batch time ``T`` runs its episode at ``T, T + dt, …``: its plan's clock
 is shifted by ``T`` and nothing else in the closed loop reads the absolute time — as long as ``L(N+1)`` brakes
 from ``t = 0`` (``SimConfig.brake_start_s = 0``) and V2X is perfect, which the vector env therefore requires.
@@ -32,6 +32,7 @@ from ..sim.config import SimConfig
 from ..sim.scenario import ScenarioBatch, ScenarioConfig, paper_scenarios
 from ..sim.step import ClosedLoop
 from ..sim.traffic import TrafficHooks
+from .rows import pad_vehicles, replace_rows, shift_plan_clock
 
 #: The supervisor's behaviour codes (``info["behaviour"]``) and their names.
 PROCEED, HESITATE, ABORT, COMPLETED = 0, 1, 2, -1
@@ -168,94 +169,6 @@ class ScenarioSampler:
             variant=np.full(m, VARIANT_NAMES.index(self.variant)),
             scenario_id=sid,
         )
-
-
-def pad_vehicles(batch: ScenarioBatch, k: int) -> ScenarioBatch:
-    """``batch`` with its vehicle axis padded to ``k`` slots the way :func:`safelane.sim.concat` pads (invalid,
-    not connected, 1 km apart beyond the last vehicle)."""
-    extra = k - batch.x.shape[1]
-    if extra <= 0:
-        return batch
-    out = {}
-    for f in dataclasses.fields(batch):
-        a = getattr(batch, f.name)
-        if isinstance(a, np.ndarray) and a.ndim == 2 and not f.name.startswith("last_profile"):
-            pad = np.repeat(a[:, -1:], extra, axis=1)
-            if f.name in ("valid", "connected", "human"):
-                pad = np.zeros_like(pad)
-            elif f.name == "x":
-                pad = pad + 1e6 * np.arange(1, extra + 1)
-            a = np.concatenate([a, pad], axis=1)
-        out[f.name] = a
-    return ScenarioBatch(**out)
-
-
-def stack_rows(rows: Sequence[ScenarioBatch]) -> ScenarioBatch:
-    """One batch from single-row batches of the same width."""
-    return ScenarioBatch(
-        **{
-            f.name: None if getattr(rows[0], f.name) is None else np.concatenate([getattr(r, f.name) for r in rows])
-            for f in dataclasses.fields(ScenarioBatch)
-        }
-    )
-
-
-def replace_rows(tree, fresh, rows: np.ndarray, batch: int):
-    """``tree`` (a state, a batch: nested frozen dataclasses and tuples of arrays) with ``rows`` of every array whose
-    leading axis is the batch taken from ``fresh`` (the same structure over ``len(rows)`` rows); scalars (the clock)
-    stay ``tree``'s. Arrays keep their memory layout (the engine keeps per-vehicle arrays column-major)."""
-    if isinstance(tree, np.ndarray):
-        if tree.ndim == 0 or tree.shape[0] != batch:
-            return tree
-        out = tree.copy(order="K")
-        out[rows] = fresh
-        return out
-    if isinstance(tree, tuple):
-        return tuple(replace_rows(a, b, rows, batch) for a, b in zip(tree, fresh, strict=True))
-    if dataclasses.is_dataclass(tree) and not isinstance(tree, type):
-        changes = {}
-        for f in dataclasses.fields(tree):
-            old, new = getattr(tree, f.name), getattr(fresh, f.name)
-            if new is None and dataclasses.is_dataclass(old):
-                changes[f.name] = vacate_rows(old, rows, batch)
-            elif isinstance(old, np.ndarray | tuple) or dataclasses.is_dataclass(old):
-                changes[f.name] = replace_rows(old, new, rows, batch)
-        return dataclasses.replace(tree, **changes)
-    return tree
-
-
-def vacate_rows(record, rows: np.ndarray, batch: int):
-    """``record`` with ``rows`` emptied where a fresh state has no record at all (``None``: the shield's memory of
-    the previous period before the first one): flags ``False``, counts ``-1``, values NaN — every comparison with
-    an emptied row is false, so nothing is inferred from it."""
-    if isinstance(record, np.ndarray):
-        if record.ndim == 0 or record.shape[0] != batch:
-            return record
-        out = record.copy(order="K")
-        out[rows] = False if out.dtype == bool else (-1 if out.dtype.kind in "iu" else np.nan)
-        return out
-    if isinstance(record, tuple):
-        return tuple(vacate_rows(a, rows, batch) for a in record)
-    if dataclasses.is_dataclass(record) and not isinstance(record, type):
-        return dataclasses.replace(
-            record, **{f.name: vacate_rows(getattr(record, f.name), rows, batch) for f in dataclasses.fields(record)}
-        )
-    return record
-
-
-def shift_plan_clock(tree, t: float):
-    """``tree`` (a fresh initial state) with the time origin of its held plans (every field ``plan_t0``, wherever
-    the state keeps it) moved from 0 to the batch time ``t``."""
-    if not dataclasses.is_dataclass(tree) or isinstance(tree, type):
-        return tree
-    changes = {}
-    for f in dataclasses.fields(tree):
-        value = getattr(tree, f.name)
-        if f.name == "plan_t0":
-            changes[f.name] = value + t
-        elif dataclasses.is_dataclass(value):
-            changes[f.name] = shift_plan_clock(value, t)
-    return dataclasses.replace(tree, **changes)
 
 
 @dataclasses.dataclass
