@@ -72,12 +72,30 @@ class Command:
         """The ego's state ``(x, y, vx, vy)`` after the command has acted for one period (exact; it stops rather
         than reverses)."""
         dur, ax, ay = self.piece(dt)
-        for k in range(dur.shape[1]):
-            h = dur[:, k]
-            ey = ey + evy * h + 0.5 * ay[:, k] * h * h
-            evy = evy + ay[:, k] * h
-            ex, evx = advance(ex, evx, ax[:, k], h)
-        return ex, ey, evx, evy
+        return tuple(states[-1] for states in segment_states((ex, ey, evx, evy), dur, ax, ay))
+
+    def plan_samples(self, ex, ey, evx, evy):
+        """``(px, py, vx, vy)``, each ``(R, K)``: the aborting rows' exact states at their knots, from the ego's state
+        (the rows of ``self.rows``; its knots' durations and accelerations)."""
+        r = self.rows
+        dur = np.diff(self.knots, axis=-1)
+        return tuple(np.stack(s, -1) for s in segment_states((ex[r], ey[r], evx[r], evy[r]), dur, self.ax_seg,
+                                                              self.ay_seg))  # fmt: skip
+
+
+def segment_states(ego, dur, ax, ay):
+    """``(xs, ys, vxs, vys)``: lists of the states at the start and after each of the piecewise-constant segments
+    ``(dur, ax, ay)``, arrays ``(B, S)`` (exact; longitudinally it stops rather than reverses, laterally it is
+    free)."""
+    x, y, vx, vy = ([q] for q in ego)
+    for k in range(dur.shape[1]):
+        h = dur[:, k]
+        x1, v1 = advance(x[-1], vx[-1], ax[:, k], h)
+        x.append(x1)
+        vx.append(v1)
+        y.append(y[-1] + vy[-1] * h + 0.5 * ay[:, k] * h * h)
+        vy.append(vy[-1] + ay[:, k] * h)
+    return x, y, vx, vy
 
 
 @dataclass(frozen=True)

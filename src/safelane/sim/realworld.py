@@ -18,7 +18,6 @@ import dataclasses
 
 import numpy as np
 
-from .._motion import advance
 from ..params import Params
 from ..shield.command import Command
 from ..shield.situation import SensingBounds, Situation
@@ -101,18 +100,8 @@ def executed_motion(cmd: Command, ego, dt: float):
     lat = Motion.free(ey, evy, cmd.a_y, dt)
     plan = None
     if cmd.rows.size:
-        r = cmd.rows
-        px, vx, py, vy = [ex[r]], [evx[r]], [ey[r]], [evy[r]]
-        for k in range(cmd.knots.shape[1] - 1):
-            h = cmd.knots[:, k + 1] - cmd.knots[:, k]
-            x1, v1 = advance(px[-1], vx[-1], cmd.ax_seg[:, k], h)
-            px.append(x1)
-            vx.append(v1)
-            py.append(py[-1] + vy[-1] * h + 0.5 * cmd.ay_seg[:, k] * h * h)
-            vy.append(vy[-1] + cmd.ay_seg[:, k] * h)
-        stack = lambda xs: np.stack(xs, -1)  # noqa: E731
-        plan = (r, Motion.from_samples(cmd.knots, stack(px), stack(vx)),
-                Motion.from_samples(cmd.knots, stack(py), stack(vy)))  # fmt: skip
+        px, py, vx, vy = cmd.plan_samples(ex, ey, evx, evy)
+        plan = (cmd.rows, Motion.from_samples(cmd.knots, px, vx), Motion.from_samples(cmd.knots, py, vy))
     return lon, lat, plan
 
 
