@@ -33,6 +33,10 @@ $(STAMP): pyproject.toml $(RUN_STAMP)
 	$(PY) -m pip install --quiet -e ".[rss]" || echo "ad-rss could not be installed here: the RSS parity tests will skip"
 	# libsumo (extra sumo; manylinux wheels): CI runs the SUMO integration's tests with it (they skip only without it).
 	$(PY) -m pip install --quiet -e ".[sumo]"
+	# commonroad-io and the drivability checker (extra commonroad). commonroad-io pins protobuf 3.20.2 for a format
+	# safelane never reads; onnx needs protobuf >= 6.31, restored here (pip reports the pin, the XML reader works).
+	$(PY) -m pip install --quiet -e ".[commonroad]"
+	$(PY) -m pip install --quiet "protobuf>=6.31.1"
 	touch $(STAMP)
 
 install: $(STAMP)
