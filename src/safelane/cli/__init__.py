@@ -185,6 +185,7 @@ def _register() -> None:
     from . import check  # noqa: F401
     from . import export as _export  # noqa: F401
     from . import falsify as _falsify  # noqa: F401
+    from . import replay as _replay  # noqa: F401
     from . import reproduce as _reproduce  # noqa: F401
     from . import simulate as _simulate  # noqa: F401
     from . import sumo as _sumo  # noqa: F401
