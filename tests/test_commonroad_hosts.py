@@ -11,12 +11,12 @@ from safelane.integrations.commonroad import INSTALL_HINT
 pytest.importorskip("commonroad", reason=f"commonroad-io is not installed: {INSTALL_HINT}")
 pytest.importorskip("commonroad_dc", reason=f"the drivability checker is not installed: {INSTALL_HINT}")
 
-from safelane import Params  # noqa: E402
-from safelane.integrations.commonroad import EGO_ID, read_commonroad, write_commonroad  # noqa: E402
-from safelane.integrations.commonroad_hosts import simulator_episodes  # noqa: E402
-from safelane.integrations.commonroad_referee import referee_episode  # noqa: E402
-from safelane.planners.adversarial import RecklessMerge  # noqa: E402
-from safelane.sim import SimConfig, paper_scenarios, simulate_batch  # noqa: E402
+from safelane import Params
+from safelane.integrations.commonroad import EGO_ID, read_commonroad, write_commonroad
+from safelane.integrations.commonroad_hosts import simulator_episodes
+from safelane.integrations.commonroad_referee import referee_episode
+from safelane.planners.adversarial import RecklessMerge
+from safelane.sim import SimConfig, paper_scenarios, simulate_batch
 
 
 def unshielded_merges(n: int = 24, seed: int = 1):
