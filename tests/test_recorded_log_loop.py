@@ -190,6 +190,7 @@ def test_sample_segments_matches_fine_time_stepping():
                 py, pvy = py + pvy * h + 0.5 * ay[b, k] * h * h, pvy + ay[b, k] * h
                 t += h
             assert x[b, j] == pytest.approx(px, abs=1e-4) and y[b, j] == pytest.approx(py, abs=1e-4)
+            assert vx[b, j] == pytest.approx(pvx, abs=1e-4) and vy[b, j] == pytest.approx(pvy, abs=1e-4)
 
 
 def test_blame_rule_cases():
