@@ -44,6 +44,7 @@ WRITING = {
     "calibrate": ["--candidates", "1", "--samples", "1", "--refine", "0", "--finalists", "1", "--final-samples", "1"],
     "train": ["--no-progress"],  # + --config TINY_TRAIN (written per test)
     "sumo": ["--leaders", "1", "--decel", "4", "--episodes", "1", "--no-progress"],
+    "replay": ["--connected", "0", "--no-progress"],  # the shipped sample
 }
 #: Commands with an ``--out`` that is not a run folder, and why.
 NOT_A_RUN = {"export-onnx": "--out is the one .onnx file the user names"}
