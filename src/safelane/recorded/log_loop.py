@@ -410,6 +410,7 @@ def summary(table) -> dict:
         "human_median_time_s": float(table["human_time_s"].median()),
         "human_worst_time_s": float(table["human_time_s"].max()),
         "human_median_time_s_same": float(done["human_time_s"].median()) if len(done) else float("nan"),
+        "human_worst_time_s_same": float(done["human_time_s"].max()) if len(done) else float("nan"),
         "collisions": int(table["collision"].sum()),
         "collisions_ego": int(table["collision_ego"].sum()),
         "pm_ego": int(table["pm_ego"].sum()),
