@@ -113,7 +113,7 @@ def test_a_replayed_follower_ramming_the_ego_is_its_fault():
     row = _run(rear_ram())
     assert row["collision"] and row["collision_blame"] == "other"
     assert row["collision_with"] == 101
-    assert not row["collision_ego"]
+    assert not row["collision_ego"] and not row["pm_ego"]  # nor once the replay has driven on through the ego
     assert not row["completed"]
 
 

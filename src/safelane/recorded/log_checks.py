@@ -176,7 +176,8 @@ def blame_other(behind, in_lane, clean, cut_in):
 
 class Referee:
     """The running outcome of every event, sample by sample: the first contact with each replayed vehicle (a
-    continuing overlap is one collision) and the first ``p_m`` violation, each blamed by :func:`blame_other`.
+    continuing overlap is one collision; after it, nothing more of that pair counts, as a non-reactive replay drives
+    on through the ego) and the first ``p_m`` violation, each blamed by :func:`blame_other`.
 
     A ``p_m`` violation is a replayed vehicle in a lane the ego's body takes whose bumper-to-bumper gap is below
     ``margin_m``; a pair that already breaks it at the start is the recording's (``inherited``) until it clears.
@@ -197,7 +198,10 @@ class Referee:
         blame rule says the vehicle's fault), all ``(B, V)``."""
         rows = np.arange(len(hits))
         contact = hits & ~self.touching
-        self.touching = hits
+        # After a contact a replayed vehicle drives on through the ego (it does not react): what that pair does
+        # next is not counted again.
+        breaks = breaks & ~self.touching
+        self.touching |= hits
         self.collision_ego |= (contact & ~other).any(1)
         self.collision_other |= (contact & other).any(1)
         first = contact.any(1) & np.isnan(self.collision_t)
