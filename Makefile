@@ -45,6 +45,7 @@ install-run: $(RUN_STAMP)
 
 run: $(RUN_STAMP)
 	$(VENV)/bin/safelane reproduce --workers 2
+	$(VENV)/bin/safelane replay
 
 test: $(STAMP)
 	$(VENV)/bin/ruff check src tests benchmarks
