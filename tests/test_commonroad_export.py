@@ -117,15 +117,15 @@ def test_contact_between_samples_is_recognised_for_the_continuous_host():
     """A corner graze: at step 10 the ego overlaps L1's lane laterally (centres 1.5 m apart) but is 5.2 m behind
     it, at step 11 it is 4.6 m behind but 2.1 m apart laterally (it swerved back); in between (a straight
     relative motion) both gaps are closed at once, for fractions 1/3 < f < 5/6 of the period. The simulator's
-    continuous check would say step 11; the sampled checker sees no overlap; on the period interpolated at 0.01 s it
-    finds the first contact at f = 0.4 (t = 1.04 s)."""
+    continuous check would say step 11; the sampled checker sees no overlap; on the period interpolated at 0.001 s
+    it finds the first contact at f = 0.34 (t = 1.034 s)."""
     ep = two_vehicles((lambda k: 20.0 * k * DT, lambda k: np.where(k <= 10, 2.0, 1.4)),
                       (lambda k: 20.0 * k * DT + 5.2 - 0.6 * (k - 10), lambda k: LANE), collision_step=11)  # fmt: skip
     verdict = drivability_collisions(to_commonroad(ep)[0])
     assert not verdict.collision
     agreement = compare(ep, verdict)
     assert agreement.kind == "both collide" and agreement.agree
-    assert "between samples" in agreement.reason and "t = 1.04 s" in agreement.reason
+    assert "between samples" in agreement.reason and "t = 1.034 s" in agreement.reason
     assert interpolated_contact(ep, 10) is None and interpolated_contact(ep, 12) is None
     sampled = EpisodeTrajectories(**{**ep.__dict__, "host": "sumo"})  # a sampled host has no such excuse
     assert compare(sampled, verdict).kind == "host only" and not compare(sampled, verdict).agree

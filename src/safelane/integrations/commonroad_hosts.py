@@ -13,7 +13,8 @@ the ego's collision — none of them changes the host:
   ``y`` grows to the right, so ``y`` and headings are mirrored into CommonRoad's frame; the verdict is
   ``info["crashed"]``. highway-env also flags a crash one step after it *predicts* contact within the next step (the
   polygons moved on at constant velocity intersect): it then pushes the pair apart by the penetration vector (its
-  collision response) and sets ``crashed``; those steps are kept in ``meta["predicted_contact"]``;
+  collision response) and sets ``crashed``; those steps are kept in ``meta["predicted_contact"]``, and the pushes in
+  ``meta["impacts"]`` (step → ``[(vehicle, dx, dy)]``, in the positions of that step);
 * :func:`sumo_episodes` — SUMO through :class:`~.sumo.SumoRunner` on a :class:`RecordingSumoWorld` (SUMO's own
   positions: front bumpers turned into centres along SUMO's angle); the verdict is the first entry of SUMO's
   collision list with the ego.
@@ -105,12 +106,16 @@ def highway_episode(env, policy, seed: int, *, episode_id: int | None = None) ->
     order = [vehicles.index(env.ego)] + [i for i, v in enumerate(vehicles) if v is not env.ego]
     vehicles, names = [vehicles[i] for i in order], [names[i] for i in order]
     rows = [_highway_frame(road, vehicles)]
-    crashed, partner, done, predicted = -1, "", False, []
+    crashed, partner, done, predicted, impacts = -1, "", False, [], {}
     while not done:
         _, _, terminated, truncated, info = env.step(policy(env))
         rows.append(_highway_frame(road, vehicles))
         if env.ego.impact is not None:  # contact predicted within the next step: pushed apart and flagged then
             predicted.append(len(rows) - 1)
+        pushes = [(i, float(v.impact[0]), -float(v.impact[1])) for i, v in enumerate(vehicles)
+                  if getattr(v, "impact", None) is not None]  # fmt: skip
+        if pushes:  # applied in the next step (mirrored y)
+            impacts[len(rows)] = pushes
         if info["crashed"] and crashed < 0:
             crashed, partner = len(rows) - 1, str(info.get("crash", {}).get("partner", ""))
         done = terminated or truncated
@@ -122,7 +127,8 @@ def highway_episode(env, policy, seed: int, *, episode_id: int | None = None) ->
         names=tuple(names), x=data[:, :, 0].T, y=-data[:, :, 1].T, heading=-data[:, :, 2].T, speed=data[:, :, 3].T,
         length=[float(v.LENGTH) for v in vehicles], width=[float(v.WIDTH) for v in vehicles], lanes_y=lanes_y,
         lane_width=float(lanes[0].width_at(0.0)), target_lane=int(env.target_lane[2]), shielded=bool(env.shield_on),
-        collision_step=crashed, collision_partner=partner, meta={"seed": int(seed), "predicted_contact": predicted},
+        collision_step=crashed, collision_partner=partner,
+        meta={"seed": int(seed), "predicted_contact": predicted, "impacts": impacts},
     )  # fmt: skip
 
 
