@@ -55,7 +55,7 @@ import safelane.safety
 t0 = time.perf_counter()
 import numba
 t1 = time.perf_counter()
-from safelane.safety import _fast, _fast_plan
+from safelane.safety import _fast
 from safelane.shield import _fast_decide, _fast_monitor
 from safelane.sim import _fast_checks, _fast_traffic, paper_scenarios, simulate_batch
 t2 = time.perf_counter()

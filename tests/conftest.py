@@ -16,7 +16,30 @@ settings.register_profile("explore", derandomize=False, print_blob=True)
 settings.load_profile(os.environ.get("HYPOTHESIS_PROFILE", "ci"))
 
 
+def _mutated_closed_forms() -> list[str]:
+    """The closed forms compiled into the kernels (``safety/_backend.jitable``) that mutmut has replaced by its
+    trampoline in this process: empty outside mutation testing and for a group that mutates none of them."""
+    from safelane.safety import _backend, evasion  # noqa: F401  (evasion imports every module that marks one)
+
+    return [f"{fn.__module__}.{fn.__name__}" for fn in _backend.ROW_FUNCTIONS if fn.__code__.co_name == "trampoline"]
+
+
 def pytest_collection_modifyitems(config, items):
+    """Under mutation testing of a closed form that the kernels compile (``safety/_compile.py``), the tests marked
+    ``compiled`` skip: they compare a kernel with the uncompiled path, and both are the one source, so they cannot tell
+    a mutant from the original (and numba cannot compile mutmut's trampoline at all: every mutant would fail them,
+    a kill that proves nothing). The uncompiled path is what mutation testing mutates; the other tests judge it."""
+    if "MUTANT_UNDER_TEST" in os.environ and (mutated := _mutated_closed_forms()):
+        import pytest
+
+        skip = pytest.mark.skip(reason=f"mutation testing of closed forms the kernels compile ({mutated[0]}, …)")
+        for item in items:
+            if "compiled" in item.keywords:
+                item.add_marker(skip)
+    _order_for_mutation(items)
+
+
+def _order_for_mutation(items):
     """Under mutation testing (mutmut sets ``MUTANT_UNDER_TEST``; docs/testing.md): the selected tests fastest first,
     by the durations mutmut recorded in its stats run. mutmut stops a mutant's run at the first failing test but
     passes the selected tests in the order of a set, so without this a killed mutant often runs slow tests before the

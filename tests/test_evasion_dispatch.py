@@ -18,6 +18,9 @@ from safelane.safety import evasion as ev
 from safelane.safety import evasion_exists
 from test_safety_shapes import evasion_inputs
 
+# A compiled kernel against the uncompiled path (tests/conftest.py: skipped while mutation testing mutates them).
+pytestmark = pytest.mark.compiled
+
 PARAMS = Params()
 HAS_NUMBA = importlib.util.find_spec("numba") is not None
 needs_numba = pytest.mark.skipif(not HAS_NUMBA, reason="numba is not installed (extra 'fast')")

@@ -15,7 +15,7 @@ from safelane.sim import SimConfig, checks, concat, paper_scenarios, simulate_ba
 from safelane.sim.preset import load_preset
 from test_fast_core import needs_numba, period_by_period  # noqa: F401 (a fixture)
 
-pytestmark = pytest.mark.usefixtures("period_by_period")
+pytestmark = [pytest.mark.compiled, pytest.mark.usefixtures("period_by_period")]
 
 
 

@@ -22,6 +22,9 @@ from safelane.safety._backend import ARRAY, FEASIBILITY_TOL_M
 from safelane.safety.lateral import LATERAL_TOL_M
 from test_safety_shapes import evasion_inputs
 
+# A compiled kernel against the uncompiled path (tests/conftest.py: skipped while mutation testing mutates them).
+pytestmark = pytest.mark.compiled
+
 PARAMS = Params()
 HAS_NUMBA = importlib.util.find_spec("numba") is not None
 needs_numba = pytest.mark.skipif(not HAS_NUMBA, reason="numba is not installed (extra 'fast'): no kernel to compare")
@@ -87,17 +90,17 @@ def test_kernel_gives_the_numpy_paths_bits(name, states, human, monkeypatch):
 
     args = _inputs(states, human)
     n = len(states["ego_px"])
-    monkeypatch.setenv("SAFELANE_NO_NUMBA", "1")  # evasion_core itself would run the plan kernel (_fast_plan)
+    monkeypatch.setenv("SAFELANE_NO_NUMBA", "1")  # evasion_core itself would run the plan kernel (_fast.plan_kernel)
     with np.errstate(all="ignore"):
         exists, parts = ev.evasion_core(ARRAY, *args, PARAMS)
     monkeypatch.delenv("SAFELANE_NO_NUMBA")
-    fast, gaps = _fast.run(args, (n,), PARAMS, FEASIBILITY_TOL_M, LATERAL_TOL_M, want_gaps=True)
+    fast, gaps = _fast.run(args, (n,), PARAMS, FEASIBILITY_TOL_M, want_gaps=True)
     np.testing.assert_array_equal(fast, exists, err_msg=name)
     for row, key in enumerate(("lead_gap", "follow_gap")):
         same = _same_bits(gaps[row], parts[key])
         assert same.all(), f"{name}: {key} differs at {np.flatnonzero(~same)[:5]}"
     # the verdict-only mode (early exits) and the chunked NumPy path the public function takes
-    np.testing.assert_array_equal(_fast.run(args, (n,), PARAMS, FEASIBILITY_TOL_M, LATERAL_TOL_M), exists)
+    np.testing.assert_array_equal(_fast.run(args, (n,), PARAMS, FEASIBILITY_TOL_M), exists)
     np.testing.assert_array_equal(ev._exists_chunked(args, (n,), PARAMS), exists)
     # both verdicts occur, and on the knife edges many gaps sit within the tolerance of the margin
     assert 0.05 < exists.mean() < 0.95
@@ -165,7 +168,7 @@ def test_an_edited_kernel_source_drops_every_kernels_cache(tmp_path):
     from safelane.safety._fast_base import KERNEL_SOURCES, drop_stale_caches
 
     names = {p.name for p in KERNEL_SOURCES}
-    assert {"_fast.py", "_fast_plan.py", "_fast_decide.py", "_fast_monitor.py", "_fast_traffic.py"} <= names
+    assert {"_fast.py", "_fast_decide.py", "_fast_monitor.py", "_fast_traffic.py"} <= names
     helper, kernel = tmp_path / "_fast_helper.py", tmp_path / "_fast_kernel.py"
     helper.write_text("x = 1\n")
     kernel.write_text("y = 2\n")

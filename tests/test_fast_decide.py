@@ -16,6 +16,9 @@ from safelane.shield.policies import COMPLETION_RULES
 from test_decide import ORDER, _follower_dip_states, _leader_dip_states, _states
 from test_fast_core import needs_numba
 
+# A compiled kernel against the uncompiled path (tests/conftest.py: skipped while mutation testing mutates them).
+pytestmark = pytest.mark.compiled
+
 PRM = Params()
 
 

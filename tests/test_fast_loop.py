@@ -15,7 +15,7 @@ from safelane.planners.base import ExpertPlanner
 from safelane.sim import ScenarioConfig, SimConfig, _fused, concat, paper_scenarios, simulate_batch
 from test_fast_core import needs_numba
 
-pytestmark = needs_numba
+pytestmark = [pytest.mark.compiled, needs_numba]
 
 VARIANTS = ("CV_all", "CV_follow", "CV_none", "No_agg_assess")
 MIXED_F = ScenarioConfig(follower_connected_share=0.5)  # non-connected followers, half of them aggressive

@@ -17,7 +17,7 @@ from safelane.shield.monitor import BREACH_KINDS, Breach, observe_breaches, pred
 from test_fast_core import needs_numba, period_by_period  # noqa: F401 (a fixture)
 from test_monitor_unit import OFFSETS, _snapshot
 
-pytestmark = pytest.mark.usefixtures("period_by_period")
+pytestmark = [pytest.mark.compiled, pytest.mark.usefixtures("period_by_period")]
 
 PRM = Params()
 

@@ -1,4 +1,4 @@
-"""The compiled plan kernel (:mod:`safelane.safety._fast_plan`, numba) against the NumPy path of ``evasion_core``.
+"""The compiled plan kernel (:func:`safelane.safety._fast.plan_kernel`, numba) against ``evasion_core``'s NumPy path.
 
 ``evasion_core`` runs the kernel for NumPy batches of ``FAST_PLAN_MIN`` elements or more; the shield's every
 candidate check goes through it. Every output — the verdict and all fourteen fields of the plan's parts — must be
@@ -17,6 +17,9 @@ from safelane.safety import evasion as ev
 from safelane.safety._backend import ARRAY
 from test_fast_core import _cases, _inputs, _same_bits, knife_edges, needs_numba
 from test_safety_shapes import evasion_inputs
+
+# A compiled kernel against the uncompiled path (tests/conftest.py: skipped while mutation testing mutates them).
+pytestmark = pytest.mark.compiled
 
 PARAMS = Params()
 
@@ -103,11 +106,11 @@ def test_plan_kernel_broadcasts_scalars_and_plan_evasion_agrees(monkeypatch):
 
 @needs_numba
 def test_the_kernel_runs_from_its_threshold_and_not_below(monkeypatch):
-    from safelane.safety import _fast_plan
+    from safelane.safety import _fast
 
     calls = []
-    real = _fast_plan.run_plan
-    monkeypatch.setattr(_fast_plan, "run_plan", lambda *a, **k: calls.append(a[1]) or real(*a, **k))
+    real = _fast.run_plan
+    monkeypatch.setattr(_fast, "run_plan", lambda *a, **k: calls.append(a[1]) or real(*a, **k))
     monkeypatch.delenv("SAFELANE_NO_NUMBA", raising=False)
     rng = np.random.default_rng(27)
     for n in (ev.FAST_PLAN_MIN - 1, ev.FAST_PLAN_MIN):

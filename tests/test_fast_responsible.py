@@ -20,7 +20,10 @@ from safelane import Params
 from safelane.safety.responsible import responsible_bound
 
 PRM = Params()
-pytestmark = pytest.mark.skipif(importlib.util.find_spec("numba") is None, reason="numba is not installed")
+pytestmark = [
+    pytest.mark.compiled,
+    pytest.mark.skipif(importlib.util.find_spec("numba") is None, reason="numba is not installed"),
+]
 
 
 def _numpy_bound(monkeypatch, slack, v_f, v_l, lead, brake):

@@ -16,7 +16,7 @@ from safelane.sim import behaviours
 from safelane.sim.behaviours import leader_accels, leader_roles
 from test_fast_core import needs_numba, period_by_period  # noqa: F401 (a fixture)
 
-pytestmark = pytest.mark.usefixtures("period_by_period")
+pytestmark = [pytest.mark.compiled, pytest.mark.usefixtures("period_by_period")]
 
 
 PRM = Params()

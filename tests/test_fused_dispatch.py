@@ -16,7 +16,7 @@ from safelane.planners.base import ExpertPlanner
 from safelane.sim import ScenarioConfig, SimConfig, _fused, concat, paper_scenarios, simulate_batch
 from test_fast_core import needs_numba
 
-pytestmark = [needs_numba, pytest.mark.filterwarnings("ignore:a_x_N\\+1_d")]
+pytestmark = [pytest.mark.compiled, needs_numba, pytest.mark.filterwarnings("ignore:a_x_N\\+1_d")]
 
 #: One valid non-default value for every SimConfig field (and what else it needs to be valid).
 ALTERNATIVES = {

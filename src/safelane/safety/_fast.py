@@ -1,30 +1,19 @@
-"""Optional compiled kernel of :func:`~.evasion.evasion_exists` (numba; extra ``fast``).
+"""The compiled evasion check (numba): :func:`~.evasion.evasion_parts` itself, compiled, one row at a time.
 
-:func:`exists_kernel` is :func:`~.evasion.evasion_core`'s arithmetic — the lateral time of Eq. 5
-(:func:`~.lateral.lateral_core`), the five switch-time candidates of Eqs. 6–8 and their exact leader gaps
-(:func:`~.longitudinal.longitudinal_core`, :func:`~.longitudinal.leader_gap_min`, :func:`~.longitudinal.profile`),
-the seven follower candidates of Eq. 9 clipped to ``[0, t_y_f]`` (:func:`~.longitudinal.ego_position`,
-:func:`~.evasion.follower_offset`) and the same tolerance — fused into one loop over the batch, one element at a
-time, so the few hundred element-wise temporaries of the NumPy path never touch memory.
+No formula lives here. :func:`exists_kernel` and :func:`plan_kernel` are loops over the rows of a batch that call
+the backend-generic closed form :func:`~.evasion.evasion_parts` (Eq. 5 ``lateral_core``, Eqs. 6–8
+``longitudinal_core``, Eq. 9) on ``SCALAR``, the Python-float backend, which :mod:`._compile` teaches numba; the row
+functions :func:`_plan_parts` and :func:`_ego_position` are what the compiled shield and closed loop call
+(``shield/_fast_decide.py``, ``sim/_fast_held.py``). The uncompiled path evaluates the same function on NumPy arrays.
 
-**Same bits.** Every expression is written in the NumPy path's evaluation order (``0.5 * a * t * t`` is
-``((0.5 * a) * t) * t`` in both), numba compiles without ``fastmath`` (so LLVM neither contracts ``a * b + c`` into
-a fused multiply-add nor reassociates), and ``sqrt`` and ``/`` are correctly rounded in both. ``_max`` / ``_min``
-propagate NaN as ``np.maximum`` / ``np.minimum`` do, and the guarded divisions take the same branches as
-``_backend.ARRAY``. The gaps therefore come out bit-identical to the NumPy path's (``tests/test_fast_core.py``
-compares them, not only the verdicts). What the loop skips changes no value:
+**Same bits.** numba compiles without ``fastmath`` (LLVM neither contracts ``a * b + c`` into a fused multiply-add
+nor reassociates), ``sqrt`` and ``/`` are correctly rounded in both, ``SCALAR``'s ``maximum``/``minimum`` propagate
+NaN as NumPy's do, and a row evaluates every candidate the NumPy path evaluates, in the same order. The verdicts
+and every part of the plan are bit-identical to the NumPy path's (``tests/test_fast_core.py``,
+``tests/test_fast_plan.py``).
 
-* an element with nothing to evade (``t_y_f = 0``) evaluates its candidates only at 0, where every candidate clips
-  to (the NumPy path does the same for a chunk where that holds everywhere);
-* ``longitudinal_core`` keeps the largest switch-time candidate whose gap is feasible; the kernel tries them from
-  the largest (``t_y_f``) down and stops at the first feasible one — the same candidate, hence the same gap;
-* without ``gaps`` an element stops once its verdict is known: nothing to evade (True), no feasible profile even
-  with full braking from 0 (False), or a follower candidate below the margin (False; the minimum only falls).
-
-The NumPy path stays the reference and the fallback: this module is imported only by
-:func:`~.evasion.evasion_exists` for large NumPy batches, and only when numba imports and ``SAFELANE_NO_NUMBA`` is
-not ``1``. Compiled code is cached on disk (``cache=True``: ``__pycache__`` beside this file, or numba's
-``NUMBA_CACHE_DIR``), so the compile (a few seconds) is paid once per machine and numba version.
+Imported only where numba imports and ``SAFELANE_NO_NUMBA`` is not ``1`` (:func:`~.evasion.fast_kernel`). Compiled
+code is cached on disk (``cache=True``); :mod:`._fast_base` drops the cache when any source it compiles changed.
 """
 
 from __future__ import annotations
@@ -35,266 +24,128 @@ import numba
 import numpy as np
 from numba import types
 
-from ._fast_base import (
-    _B,
-    _F,
-    _INF,
-    _braked,
-    _max,
-    _min,
-    _nan_to_neg,
-    _sqrt,
-    _stop_dist,
-    _stop_time,
-    announce_compile,
-)
+from . import _compile
+from ._backend import SCALAR, Limits
+from ._fast_base import _B, _F, announce_compile
 
 # responsible.responsible_bound's dispatch finds its kernel here (fast_kernel() is this module): re-exported
 from ._fast_responsible import responsible, responsible_kernel  # noqa: F401
+from .evasion import PARTS, evasion_parts
+from .lateral import lateral_state
+from .longitudinal import ego_position, ego_speed
 
+_compile.register_rows()
 announce_compile(__file__)
 
-# One explicit signature (compiled at import, or loaded from the cache): read-only 1-D arrays of any layout, so
+#: The float fields of the plan, in the rows of :func:`plan_kernel`'s ``floats`` output.
+FLOAT_PARTS = PARTS[:10]
+#: ``exists`` and the bool fields of the plan, in the rows of :func:`plan_kernel`'s ``flags`` output.
+BOOL_PARTS = ("exists", *PARTS[10:])
+
+_OUT = (types.Array(types.float64, 2, "C"), types.Array(types.bool_, 2, "C"))
+# One explicit signature each (compiled at import, or loaded from the cache): read-only 1-D arrays of any layout, so
 # contiguous inputs, broadcast scalars (stride 0) and read-only views all take the same machine code.
-_SIGNATURE = types.void(
-    *(_F,) * 9, _B, _F, _F, *(types.float64,) * 6, types.Array(types.bool_, 1, "C"), types.Array(types.float64, 2, "C")
-)
-
-
-@numba.njit(inline="always")
-def _profile(u, v, v1, a1, a_a, a_d, l1_stop):  # longitudinal.profile -> (V, t2, match)
-    V = v + a_a * u
-    rel = V - _max(v1 - a1 * u, 0.0)
-    m = a_d - a1
-    if rel == 0.0:
-        t_match = u + 0.0
-    else:
-        t_match = u + (rel / m if m != 0.0 else _INF)
-    match = (rel >= 0.0) and (t_match <= l1_stop)
-    t2 = t_match if match else u + V / a_d
-    return V, t2, match
+_EXISTS_SIGNATURE = types.void(*(_F,) * 9, _B, _F, _F, *(types.float64,) * 5, types.Array(types.bool_, 1, "C"), _OUT[0])
+_PLAN_SIGNATURE = types.void(*(_F,) * 9, _B, _F, _F, *(types.float64,) * 5, *_OUT)
 
 
 @numba.njit(error_model="numpy", nogil=True)
-def _leader_gap_min(u, T, d0, p, v, p1, v1, a1, margin, a_a, a_d, l1_stop, l1_at_T):  # longitudinal.leader_gap_min
-    V, t2, match = _profile(u, v, v1, a1, a_a, a_d, l1_stop)
-    at_u = p + v * u + 0.5 * a_a * u * u
-    t_b = _min(t2, T)
-    tb = _max(_min(T, t2) - u, 0.0)
-    braking_T = at_u + V * tb - 0.5 * a_d * tb * tb
-    if match:
-        l1_at_t2 = _braked(p1, v1, a1, t2, l1_stop)
-        ego_at_T = braking_T + (_braked(p1, v1, a1, _max(T, t2), l1_stop) - l1_at_t2)
-    else:
-        ego_at_T = braking_T + 0.0
-    gmin = _min(d0, (_braked(p1, v1, a1, u, l1_stop) - at_u) - margin)
-    tb = _max(_min(t_b, t2) - u, 0.0)
-    braking_tb = at_u + V * tb - 0.5 * a_d * tb * tb
-    gmin = _min(gmin, (_braked(p1, v1, a1, t_b, l1_stop) - braking_tb) - margin)
-    return _min(gmin, (l1_at_T - ego_at_T) - margin)
-
-
-@numba.njit(inline="always")
-def _ego_position(t, p, v, u, V, t2, match, p1, v1, a1, a_a, a_d, l1_stop):  # longitudinal.ego_position
-    ta = _min(t, u)
-    pos = p + v * ta + 0.5 * a_a * ta * ta
-    tb = _max(_min(t, t2) - u, 0.0)
-    pos = pos + V * tb - 0.5 * a_d * tb * tb
-    if match:
-        t_late = _max(t, t2)
-        return pos + (_braked(p1, v1, a1, t_late, l1_stop) - _braked(p1, v1, a1, t2, l1_stop))
-    return pos + 0.0
+def _plan_parts(py, vy, p, v, p1, v1, a1, fp, fv, aggr, margin, fmargin, a_a, a_d, a_y, y_safe, tol):
+    """One row of :func:`~.evasion.evasion_parts`: ``(floats, flags)`` as tuples in the orders of
+    :data:`FLOAT_PARTS` and :data:`BOOL_PARTS`."""
+    r = evasion_parts(SCALAR, p, py, v, vy, p1, v1, a1, fp, fv, aggr, margin, fmargin, Limits(a_a, a_d, a_y, y_safe),
+                      tol)  # fmt: skip
+    return (r[1], r[2], r[3], r[4], r[5], r[6], r[7], r[8], r[9], r[10]), (r[0], r[11], r[12], r[13], r[14])
 
 
 @numba.njit(error_model="numpy", nogil=True)
-def _follow_gap(
-    c, ego_px, ego_vx, u, V, t2, match, l1_p, l1_v, l1_decel, f_p, f_v, aggr, margin, a_a, a_d, l1_stop, f_stop
-):
-    ego = _ego_position(c, ego_px, ego_vx, u, V, t2, match, l1_p, l1_v, l1_decel, a_a, a_d, l1_stop)
-    if aggr:  # evasion.follower_offset
-        follower = f_p + f_v * c + 0.5 * a_a * c * c
-    else:
-        follower = _braked(f_p, f_v, a_d, c, f_stop)
-    return ego - follower - margin
-
-
-@numba.njit(inline="always")
-def _lateral_time(py, vy, a_y, y_safe, lat_tol):
-    """:func:`~.lateral.lateral_core`'s ``t_y_f`` (Eq. 5)."""
-    e = py - y_safe
-    sl = e + vy * abs(vy) / (2.0 * a_y)
-    if (e <= lat_tol) and ((vy <= 0.0) or (sl <= lat_tol)):  # nothing to evade
-        return 0.0
-    if sl > 0.0:
-        return (vy + 2.0 * _sqrt(a_y * e + 0.5 * vy * vy)) / a_y
-    return (-vy - _sqrt(vy * vy - 2.0 * a_y * e)) / a_y
+def _ego_position(t, p, v, u, V, t2, match, p1, v1, a1, a_a, a_d, l1_stop):
+    """One row of :func:`~.longitudinal.ego_position`."""
+    return ego_position(SCALAR, t, p, v, u, V, t2, match, p1, v1, a1, Limits(a_a, a_d, 0.0, 0.0), l1_stop)
 
 
 @numba.njit(error_model="numpy", nogil=True)
-def _leader_search(T, gap0, d0, p, v, p1, v1, a1, margin, a_a, a_d, s, s_a, l1_stop, l1_at_T, tol):
-    """:func:`~.longitudinal.longitudinal_core`'s choice of the switch time: ``(u, its leader gap)``; ``gap0`` is the
-    gap of ``u = 0``, kept when no candidate is feasible."""
-    best = 0.0 * T
-    best_gap = gap0
-    if T != 0.0:  # with nothing to evade every candidate clips to 0, the first
-        # longitudinal_core keeps the largest candidate whose gap is feasible (a later one on a tie, which has
-        # the same gap: it is the same arithmetic on the same number). Trying them from the largest down and
-        # stopping at the first feasible one selects the same candidate with the same gap.
-        g = _leader_gap_min(T, T, d0, p, v, p1, v1, a1, margin, a_a, a_d, l1_stop, l1_at_T)
-        if g >= -tol:
-            return T, g
-        big_r = l1_at_T - margin - p - v * T
-        u_a = T - _sqrt(T * T - (a_d * T * T + 2.0 * big_r) / s)
-        p1_stop = p1 + _stop_dist(v1, a1)
-        u_b = -v / a_a + _sqrt((v / a_a) * (v / a_a) - (v * v + 2.0 * a_d * (p + margin - p1_stop)) / s_a)
-        w = v - v1
-        k = a_a + a1
-        u_c = (-w + _sqrt(w * w - k * (w * w - 2.0 * (a_d - a1) * d0) / s)) / k
-        # clipped to [0, T]; a NaN (never selected: `cand >= best` is false) becomes -1, never tried
-        c1 = _nan_to_neg(_min(_max(u_a, 0.0), T))
-        c2 = _nan_to_neg(_min(_max(u_b, 0.0), T))
-        c3 = _nan_to_neg(_min(_max(u_c, 0.0), T))
-        if c1 < c2:
-            c1, c2 = c2, c1
-        if c2 < c3:
-            c2, c3 = c3, c2
-        if c1 < c2:
-            c1, c2 = c2, c1
-        for j in range(3):
-            cand = c1 if j == 0 else (c2 if j == 1 else c3)
-            if cand < 0.0 or cand == T:  # never tried / the same number as T, which failed
-                continue
-            g = _leader_gap_min(cand, T, d0, p, v, p1, v1, a1, margin, a_a, a_d, l1_stop, l1_at_T)
-            if g >= -tol:
-                return cand, g
-    return best, best_gap
+def _ego_speed(t, v, u, V, t2, match, v1, a1, a_a, a_d):
+    """One row of :func:`~.longitudinal.ego_speed`."""
+    return ego_speed(SCALAR, t, v, u, V, t2, match, v1, a1, Limits(a_a, a_d, 0.0, 0.0))
 
 
 @numba.njit(error_model="numpy", nogil=True)
-def _follow_min(T, p, v, u, V, t2, match, p1, v1, a1, fp, fv, aggr, fmargin, a_a, a_d, s, l1_stop, tol, early):
-    """The follower gap of Eq. 9: its minimum over the seven candidates clipped to ``[0, T]``; ``early`` stops once
-    it is below ``-tol`` (the minimum only falls: the verdict is known). ``s`` is ``a_a + a_d``."""
-    f_stop = _stop_time(fv, a_d)
-    fgap = _follow_gap(0.0 * T, p, v, u, V, t2, match, p1, v1, a1, fp, fv, aggr, fmargin, a_a, a_d, l1_stop, f_stop)
-    if T != 0.0:
-        m1 = a_d - a1
-        for j in range(6):
-            if j == 0:
-                cand = u
-            elif j == 1:
-                cand = t2
-            elif j == 2:
-                cand = f_stop
-            elif j == 3:
-                cand = (fv - v) / s
-            elif j == 4:
-                cand = (fv - v1) / m1 if m1 != 0.0 else 0.0
-            else:
-                cand = T
-            cand = _min(_max(cand, 0.0), T)
-            fgap = _min(
-                fgap,
-                _follow_gap(cand, p, v, u, V, t2, match, p1, v1, a1, fp, fv, aggr, fmargin, a_a, a_d, l1_stop, f_stop),
-            )
-            if early and not fgap >= -tol:  # the minimum can only fall further: False
-                break
-    return fgap
+def _lateral_state(t, p_y, v_y, t_1, acc_1, acc_2, t_end):
+    """One row of :func:`~.lateral.lateral_state`."""
+    return lateral_state(SCALAR, t, p_y, v_y, t_1, acc_1, acc_2, t_end)
 
 
-@numba.njit(_SIGNATURE, cache=True, nogil=True)
+@numba.njit(_EXISTS_SIGNATURE, cache=True, nogil=True, error_model="numpy")
 def exists_kernel(
-    ego_px,
-    ego_py,
-    ego_vx,
-    ego_vy,
-    l1_p,
-    l1_v,
-    l1_decel,
-    f_p,
-    f_v,
-    aggressive,
-    lead_margin,
-    follow_margin,
-    a_a,
-    a_d,
-    a_y,
-    y_safe,
-    lat_tol,
-    tol,
-    out,
-    gaps,
-):
-    """Write :func:`~.evasion.evasion_core`'s ``exists`` for each element into ``out`` (bool, length ``n``).
+    ego_px, ego_py, ego_vx, ego_vy, l1_p, l1_v, l1_decel, f_p, f_v, aggressive, lead_margin, follow_margin, a_a, a_d,
+    a_y, y_safe, tol, out, gaps,
+):  # fmt: skip
+    """Write :func:`~.evasion.evasion_parts`' ``exists`` for each row into ``out`` (bool, length ``n``).
 
     Every input is a 1-D array of length ``n`` (stride 0 for a broadcast scalar). ``gaps`` is ``(2, n)`` to also
-    receive ``lead_gap`` and ``follow_gap`` (every element then evaluated in full, for the tests), or ``(2, 0)``.
-    """
+    receive ``lead_gap`` and ``follow_gap``, or ``(2, 0)``."""
     n = out.shape[0]
     want_gaps = gaps.shape[1] == n and n > 0
-    s = a_a + a_d
-    s_a = s * a_a
+    prm = Limits(a_a, a_d, a_y, y_safe)
     for i in range(n):
-        T = _lateral_time(ego_py[i], ego_vy[i], a_y, y_safe, lat_tol)
-        if T <= 0.0 and not want_gaps:
-            out[i] = True
-            continue
-        # longitudinal_core
-        p = ego_px[i]
-        v = ego_vx[i]
-        p1 = l1_p[i]
-        v1 = l1_v[i]
-        a1 = l1_decel[i]
-        margin = lead_margin[i]
-        d0 = p1 - p - margin
-        l1_stop = _stop_time(v1, a1)
-        l1_at_T = _braked(p1, v1, a1, T, l1_stop)
-        best_gap = _leader_gap_min(0.0 * T, T, d0, p, v, p1, v1, a1, margin, a_a, a_d, l1_stop, l1_at_T)
-        feasible = best_gap >= -tol
-        if not feasible and not want_gaps:
-            out[i] = False
-            continue
-        u, best_gap = _leader_search(T, best_gap, d0, p, v, p1, v1, a1, margin, a_a, a_d, s, s_a, l1_stop, l1_at_T, tol)
-        V, t2, match = _profile(u, v, v1, a1, a_a, a_d, l1_stop)
-        fgap = _follow_min(
-            T,
-            p,
-            v,
-            u,
-            V,
-            t2,
-            match,
-            p1,
-            v1,
-            a1,
-            f_p[i],
-            f_v[i],
-            aggressive[i],
-            follow_margin[i],
-            a_a,
-            a_d,
-            s,
-            l1_stop,
-            tol,
-            not want_gaps,
-        )
-        out[i] = (T <= 0.0) or (feasible and fgap >= -tol)
+        r = evasion_parts(
+            SCALAR, ego_px[i], ego_py[i], ego_vx[i], ego_vy[i], l1_p[i], l1_v[i], l1_decel[i], f_p[i], f_v[i],
+            aggressive[i], lead_margin[i], follow_margin[i], prm, tol,
+        )  # fmt: skip
+        out[i] = r[0]
         if want_gaps:
-            gaps[0, i] = best_gap
-            gaps[1, i] = fgap
+            gaps[0, i] = r[9]
+            gaps[1, i] = r[10]
 
 
-def run(args, shape, params, tol: float, lat_tol: float, want_gaps: bool = False):
-    """Evaluate :func:`exists_kernel` on ``evasion_core``'s argument tuple (arrays broadcastable to ``shape``).
+@numba.njit(_PLAN_SIGNATURE, cache=True, nogil=True, error_model="numpy")
+def plan_kernel(
+    ego_px, ego_py, ego_vx, ego_vy, l1_p, l1_v, l1_decel, f_p, f_v, aggressive, lead_margin, follow_margin, a_a, a_d,
+    a_y, y_safe, tol, floats, flags,
+):  # fmt: skip
+    """Write :func:`~.evasion.evasion_parts` for each row: ``floats`` ``(10, n)`` in the order of
+    :data:`FLOAT_PARTS`, ``flags`` ``(5, n)`` in that of :data:`BOOL_PARTS`. Inputs as :func:`exists_kernel`'s."""
+    for i in range(floats.shape[1]):
+        f, b = _plan_parts(
+            ego_py[i], ego_vy[i], ego_px[i], ego_vx[i], l1_p[i], l1_v[i], l1_decel[i], f_p[i], f_v[i], aggressive[i],
+            lead_margin[i], follow_margin[i], a_a, a_d, a_y, y_safe, tol,
+        )  # fmt: skip
+        for j in range(10):
+            floats[j, i] = f[j]
+        for j in range(5):
+            flags[j, i] = b[j]
 
-    Returns ``exists`` (bool, ``shape``) and, with ``want_gaps``, ``(lead_gap, follow_gap)`` as a ``(2, n)`` array
-    (``n`` the number of elements). Scalars are passed with stride 0 and full contiguous arrays as they are."""
+
+def _flat(args, shape):
     n = math.prod(shape)
     flat = []
     for j, a in enumerate(args):
         a = np.asarray(a, dtype=np.bool_ if j == 9 else np.float64)
         flat.append(np.broadcast_to(a, (n,)) if a.size == 1 else np.broadcast_to(a, shape).reshape(-1))
+    return n, flat
+
+
+def run(args, shape, params, tol: float, want_gaps: bool = False):
+    """:func:`exists_kernel` on ``evasion_core``'s argument tuple (arrays broadcastable to ``shape``).
+
+    Returns ``exists`` (bool, ``shape``) and, with ``want_gaps``, ``(lead_gap, follow_gap)`` as a ``(2, n)`` array
+    (``n`` the number of elements)."""
+    n, flat = _flat(args, shape)
     out = np.empty(n, dtype=np.bool_)
     gaps = np.empty((2, n if want_gaps else 0))
-    exists_kernel(*flat, params.a_x_a, params.a_x_d, params.a_y_m, params.y_safe, lat_tol, tol, out, gaps)
+    exists_kernel(*flat, params.a_x_a, params.a_x_d, params.a_y_m, params.y_safe, tol, out, gaps)
     out = out.reshape(shape)
     return (out, gaps) if want_gaps else out
+
+
+def run_plan(args, shape, params, tol: float):
+    """:func:`plan_kernel` on ``evasion_core``'s argument tuple: ``(exists, parts)`` as ``evasion_core`` returns
+    them, every array of ``shape``."""
+    n, flat = _flat(args, shape)
+    floats = np.empty((len(FLOAT_PARTS), n))
+    flags = np.empty((len(BOOL_PARTS), n), dtype=np.bool_)
+    plan_kernel(*flat, params.a_x_a, params.a_x_d, params.a_y_m, params.y_safe, tol, floats, flags)
+    parts = {name: floats[j].reshape(shape) for j, name in enumerate(FLOAT_PARTS)}
+    parts.update((name, flags[j].reshape(shape)) for j, name in enumerate(BOOL_PARTS[1:], start=1))
+    return flags[0].reshape(shape), parts

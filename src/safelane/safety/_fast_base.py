@@ -1,10 +1,10 @@
-"""The scalar building blocks of the compiled kernels (numba; extra ``fast``): NaN-propagating ``min``/``max`` as
-``np.minimum``/``np.maximum``, the guarded square root, stop time and distance of :mod:`._backend` and
-:func:`~.chain.braked_position`, each written in the NumPy path's evaluation order (see :mod:`._fast`), and the
-array types of the kernels' explicit signatures.
+"""What every compiled kernel shares (numba; extra ``fast``): the scalar operations under their kernel names (the
+backend's own functions, :mod:`._backend`, not copies), the row-function decorator, the array types of the kernels'
+explicit signatures, the compile announcement and the on-disk cache's invalidation.
 
 **The kernels' on-disk cache.** numba keys a cached kernel on the stamp of the file that defines it, but the helpers
-a kernel calls from another file (these, :mod:`._fast_responsible`'s, :mod:`._fast_plan`'s) are compiled into it:
+a kernel calls from another file (these, :mod:`._fast_responsible`'s, the closed forms marked ``jitable``) are
+compiled into it:
 an edit there would leave the kernel's cached machine code stale. Every kernel module imports this one first, and
 :func:`drop_stale_caches` runs once per process: when any kernel source changed since the stamp it keeps in
 ``__pycache__``, it deletes every kernel module's in-tree cache (``__pycache__/<module>.*.nbi|nbc``), so the next
@@ -22,10 +22,28 @@ import numba
 import numpy as np
 from numba import types
 
+from . import _backend, _compile  # noqa: F401  (_compile registers the marked closed forms with numba)
+from .chain import braked_position
+
 _INF = math.inf
 _PACKAGE = Path(__file__).resolve().parents[1]
-#: Every module with a compiled kernel or its helpers.
-KERNEL_SOURCES = tuple(sorted(p for sub in ("safety", "shield", "sim") for p in (_PACKAGE / sub).glob("_fast*.py")))
+
+
+def _compiled_sources() -> tuple[Path, ...]:
+    """Every module with a compiled kernel or its helpers: the ``_fast*.py`` modules, the backend and its numba
+    registration, and every module with a closed form marked ``jitable`` (compiled into the kernels that call it)."""
+    found = set()
+    for sub in ("safety", "shield", "sim"):
+        for path in (_PACKAGE / sub).glob("*.py"):
+            if path.name.startswith("_fast") or path.name in ("_backend.py", "_compile.py"):
+                found.add(path)
+            elif "\njitable(" in path.read_text(encoding="utf-8"):
+                found.add(path)
+    return tuple(sorted(found))
+
+
+#: Every module whose source is compiled into a kernel (:func:`_compiled_sources`).
+KERNEL_SOURCES = _compiled_sources()
 
 
 def drop_stale_caches(sources=KERNEL_SOURCES, stamp: Path | None = None) -> bool:
@@ -80,44 +98,14 @@ _F = types.Array(types.float64, 1, "A", readonly=True)
 _B = types.Array(types.bool_, 1, "A", readonly=True)
 
 
-@numba.njit(inline="always")
-def _max(a, b):
-    return a if (a >= b or a != a) else b  # NaN propagates (np.maximum)
-
-
-@numba.njit(inline="always")
-def _min(a, b):
-    return a if (a <= b or a != a) else b  # NaN propagates (np.minimum)
-
-
-@numba.njit(inline="always")
-def _sqrt(x):
-    return math.sqrt(_max(x, 0.0))  # _Array.sqrt
-
-
-@numba.njit(inline="always")
-def _nan_to_neg(x):
-    return x if x == x else -1.0
-
-
-@numba.njit(inline="always")
-def _stop_time(v, a):
-    if a > 0.0:
-        return v / a
-    return _INF if v > 0.0 else 0.0
-
-
-@numba.njit(inline="always")
-def _stop_dist(v, a):
-    if a > 0.0:
-        return v * v / (2.0 * a)
-    return _INF if v > 0.0 else 0.0
-
-
-@numba.njit(inline="always")
-def _braked(p, v, decel, t, t_stop):  # chain.braked_position
-    tt = _min(t, t_stop)
-    return p + v * tt - 0.5 * decel * tt * tt
+# The scalar operations are the backend's own (``_backend``'s marked functions, registered with numba by
+# ``_compile``): one definition of each, whether a closed form runs on NumPy arrays, on Python floats or compiled.
+_max = _backend._maximum
+_min = _backend._minimum
+_sqrt = _backend._sqrt
+_stop_time = _backend._stop_time
+_stop_dist = _backend._stop_dist
+_braked = braked_position  # called with the backend first: _braked(SCALAR, p, v, decel, t, t_stop)
 
 
 def readonly(a: np.ndarray) -> np.ndarray:

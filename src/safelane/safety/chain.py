@@ -19,7 +19,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..params import Params
-from ._backend import ARRAY, FEASIBILITY_TOL_M, INF, SCALAR
+from ._backend import ARRAY, FEASIBILITY_TOL_M, INF, SCALAR, jitable
 from ._checks import bool_array, check_params, finish, float_array, prepare
 
 
@@ -227,3 +227,7 @@ def _as_chain(name: str, value) -> np.ndarray:
     if not np.isfinite(arr).all():
         raise ValueError(f"{name} must be finite; got {arr[~np.isfinite(arr)].flat[0]!r}")
     return arr
+
+
+# The closed forms compiled into the kernels (safety/_compile.py): the same functions, evaluated row by row.
+jitable(braked_position)

@@ -21,10 +21,10 @@ import os
 import numpy as np
 
 from ..params import Params
-from ._backend import ARRAY
+from ._backend import ARRAY, jitable
 from ._checks import bool_array, check_params, finish, prepare
 from .chain import braked_position
-from .lateral import LATERAL_TOL_M, lateral_core
+from .lateral import lateral_core
 from .longitudinal import FEASIBILITY_TOL_M, ego_position, longitudinal_core
 from .plan import EvasionPlan, check_broadcasts, plan_from_core
 
@@ -49,6 +49,72 @@ def follower_position(p, v, aggressive, t, params: Params):
 _PLAN_INPUTS = ("ego_px", "ego_py", "ego_vx", "ego_vy", "l1_p", "l1_v", "l1_decel", "f_p", "f_v")
 
 
+#: The fields of an evasion check's plan, in the order :func:`evasion_parts` returns them after ``exists``.
+PARTS = (
+    "t_y_f", "t_y_switch", "y_acc_1", "y_acc_2", "t_y_end", "t_x1", "v_switch", "t_brake_end", "lead_gap", "follow_gap",
+    "lead_ok", "follow_ok", "nothing", "follows_leader",
+)  # fmt: skip
+
+
+def evasion_parts(
+    xp,
+    ego_px,
+    ego_py,
+    ego_vx,
+    ego_vy,
+    l1_p,
+    l1_v,
+    l1_decel,
+    f_p,
+    f_v,
+    aggressive,
+    lead_margin,
+    follow_margin,
+    prm,
+    tol=FEASIBILITY_TOL_M,
+):
+    """The evasion check of Eq. 9 with its plan, backend-generic: the one source of the check (NumPy arrays on
+    ``ARRAY``, Python floats on ``SCALAR``, one row of a compiled kernel in :mod:`._fast`).
+
+    Returns ``(exists, t_y_f, t_y_switch, y_acc_1, y_acc_2, t_y_end, t_x1, v_switch, t_brake_end, lead_gap,
+    follow_gap, lead_ok, follow_ok, nothing, follows_leader)``: ``exists`` then the fields named by :data:`PARTS`.
+    ``prm`` is a :class:`~safelane.Params` or its :class:`~._backend.Limits`.
+    """
+    T, t_y1, y_acc_1, y_acc_2, t_y_end = lateral_core(xp, ego_py, ego_vy, prm)
+    lead_ok, u, V, t2, match, lead_gap = longitudinal_core(
+        xp, ego_px, ego_vx, l1_p, l1_v, l1_decel, T, lead_margin, prm, tol
+    )
+    a_a, a_d = prm.a_x_a, prm.a_x_d
+    l1_stop = xp.stop_time(l1_v, l1_decel)
+    f_stop = xp.stop_time(f_v, a_d)
+    # The follower gap's exact minimum over [0, T]: its value at every candidate clipped to [0, T] (module docstring).
+    follow_gap = _follow_gap_at(
+        xp, 0.0 * T, T, ego_px, ego_vx, u, V, t2, match, l1_p, l1_v, l1_decel, f_p, f_v, aggressive, follow_margin,
+        prm, l1_stop, f_stop,
+    )  # fmt: skip
+    for c in (u, t2, f_stop, xp.div(f_v - ego_vx, a_a + a_d, 0.0), xp.div(f_v - l1_v, a_d - l1_decel, 0.0), T):
+        gap = _follow_gap_at(
+            xp, c, T, ego_px, ego_vx, u, V, t2, match, l1_p, l1_v, l1_decel, f_p, f_v, aggressive, follow_margin,
+            prm, l1_stop, f_stop,
+        )  # fmt: skip
+        follow_gap = xp.minimum(follow_gap, gap)
+    follow_ok = follow_gap >= -tol
+    nothing = T <= 0.0
+    exists = nothing | (lead_ok & follow_ok)
+    return (
+        exists, T, t_y1, y_acc_1, y_acc_2, t_y_end, u, V, t2, lead_gap, follow_gap, lead_ok, follow_ok, nothing, match
+    )  # fmt: skip
+
+
+def _follow_gap_at(
+    xp, c, T, ego_px, ego_vx, u, V, t2, match, l1_p, l1_v, l1_decel, f_p, f_v, aggressive, margin, prm, l1_stop, f_stop
+):
+    """``p(t) − p_f(t) − margin`` at ``t = clip(c, 0, T)`` (Eq. 9's worst-case follower)."""
+    t = xp.clip(c, 0.0, T)
+    ego = ego_position(xp, t, ego_px, ego_vx, u, V, t2, match, l1_p, l1_v, l1_decel, prm, l1_stop)
+    return ego - follower_offset(xp, t, f_p, f_v, aggressive, prm, f_stop) - margin
+
+
 def evasion_core(
     xp,
     ego_px,
@@ -66,66 +132,20 @@ def evasion_core(
     prm: Params,
     tol: float = FEASIBILITY_TOL_M,
 ):
-    """Backend-generic core shared by :func:`plan_evasion` and :func:`evasion_exists`.
+    """:func:`evasion_parts` as ``(exists, parts)``, ``parts`` a dict of the plan's fields (:data:`PARTS`); used by
+    :func:`plan_evasion`, :func:`evasion_exists` and the shield.
 
-    Returns ``(exists, parts)`` where ``parts`` is a dict of the plan's fields. NumPy batches of
-    :data:`FAST_PLAN_MIN` elements or more run the compiled kernel (:mod:`._fast_plan`, extra ``fast``) where numba
-    imports and ``SAFELANE_NO_NUMBA`` is not ``1``: the same bits as the NumPy path below, which stays the reference.
+    NumPy batches of :data:`FAST_PLAN_MIN` elements or more run the compiled kernel (:mod:`._fast`: the same function
+    compiled, one row at a time) where numba imports and ``SAFELANE_NO_NUMBA`` is not ``1``; smaller ones and every
+    batch without numba evaluate it on NumPy arrays.
     """
+    args = (ego_px, ego_py, ego_vx, ego_vy, l1_p, l1_v, l1_decel, f_p, f_v, aggressive, lead_margin, follow_margin)
     if xp is ARRAY:
-        args = (ego_px, ego_py, ego_vx, ego_vy, l1_p, l1_v, l1_decel, f_p, f_v, aggressive, lead_margin, follow_margin)
         shape = np.broadcast_shapes(*(np.shape(a) for a in args))
-        if math.prod(shape) >= FAST_PLAN_MIN and (kernel := fast_plan_kernel()) is not None:
-            return kernel.run_plan(args, shape, prm, tol, LATERAL_TOL_M)
-    T, t_y1, y_acc_1, y_acc_2, t_y_end = lateral_core(xp, ego_py, ego_vy, prm)
-    lead_ok, u, V, t2, match, lead_gap = longitudinal_core(
-        xp, ego_px, ego_vx, l1_p, l1_v, l1_decel, T, lead_margin, prm, tol
-    )
-    a_a, a_d = prm.a_x_a, prm.a_x_d
-    l1_stop = xp.stop_time(l1_v, l1_decel)
-    f_stop = xp.stop_time(f_v, a_d)
-    candidates = (
-        0.0 * T,
-        u,
-        t2,
-        f_stop,
-        xp.div(f_v - ego_vx, a_a + a_d, 0.0),
-        xp.div(f_v - l1_v, a_d - l1_decel, 0.0),
-        T,
-    )
-    if xp is ARRAY and bool(np.all(T == 0.0)):  # nothing to evade anywhere: every candidate clips to 0
-        candidates = candidates[:1]
-    if xp is ARRAY:  # every candidate in one stacked evaluation (the same arithmetic)
-        c = xp.clip(np.stack(np.broadcast_arrays(*candidates)), 0.0, T)
-        ego = ego_position(xp, c, ego_px, ego_vx, u, V, t2, match, l1_p, l1_v, l1_decel, prm, l1_stop)
-        follow_gap = (ego - follower_offset(xp, c, f_p, f_v, aggressive, prm, f_stop) - follow_margin).min(0)
-    else:
-        follow_gap = None
-        for c in candidates:
-            c = xp.clip(c, 0.0, T)
-            ego = ego_position(xp, c, ego_px, ego_vx, u, V, t2, match, l1_p, l1_v, l1_decel, prm, l1_stop)
-            gap = ego - follower_offset(xp, c, f_p, f_v, aggressive, prm, f_stop) - follow_margin
-            follow_gap = gap if follow_gap is None else xp.minimum(follow_gap, gap)
-    follow_ok = follow_gap >= -tol
-    nothing = T <= 0.0
-    exists = nothing | (lead_ok & follow_ok)
-    parts = dict(
-        t_y_f=T,
-        t_y_switch=t_y1,
-        y_acc_1=y_acc_1,
-        y_acc_2=y_acc_2,
-        t_y_end=t_y_end,
-        lead_ok=lead_ok,
-        follow_ok=follow_ok,
-        nothing=nothing,
-        t_x1=u,
-        v_switch=V,
-        t_brake_end=t2,
-        follows_leader=match,
-        lead_gap=lead_gap,
-        follow_gap=follow_gap,
-    )
-    return exists, parts
+        if math.prod(shape) >= FAST_PLAN_MIN and (kernel := fast_kernel()) is not None:
+            return kernel.run_plan(args, shape, prm, tol)
+    exists, *fields = evasion_parts(xp, *args, prm, tol)
+    return exists, dict(zip(PARTS, fields, strict=True))
 
 
 def _prepare_evasion(
@@ -208,7 +228,7 @@ def evasion_exists(
     if xp is ARRAY and size >= FAST_MIN_BATCH:
         kernel = fast_kernel()
         if kernel is not None:
-            return kernel.run(args, shape, params, FEASIBILITY_TOL_M, LATERAL_TOL_M)
+            return kernel.run(args, shape, params, FEASIBILITY_TOL_M)
     if xp is ARRAY and size > CHUNK:
         return _exists_chunked(args, shape, params)
     with np.errstate(all="ignore"):
@@ -246,18 +266,9 @@ def fast_kernel():
     return _FAST[0]
 
 
-#: :func:`evasion_core` runs the compiled plan kernel (:mod:`._fast_plan`) for NumPy batches of at least this many
-#: elements: its call costs about as much as a dozen array operations, the NumPy path a few hundred.
+#: :func:`evasion_core` runs the compiled plan kernel (:func:`._fast.plan_kernel`) for NumPy batches of at least this
+#: many elements: its call costs about as much as a dozen array operations, the NumPy path a few hundred.
 FAST_PLAN_MIN = 32
-
-
-def fast_plan_kernel():
-    """The compiled plan kernel's module :mod:`._fast_plan`, or ``None`` where :func:`fast_kernel` is ``None``."""
-    if fast_kernel() is None:
-        return None
-    from . import _fast_plan
-
-    return _fast_plan
 
 
 def _exists_chunked(args, shape, params: Params) -> np.ndarray:
@@ -312,3 +323,7 @@ def plan_evasion(
     with np.errstate(all="ignore"):
         exists, parts = evasion_core(xp, *args, params)
     return plan_from_core(xp, shape, args, exists, parts, lead_margin, follow_margin, params, chain_unsafe)
+
+
+# The closed forms compiled into the kernels (safety/_compile.py): the same functions, evaluated row by row.
+jitable(follower_offset, evasion_parts, _follow_gap_at)

@@ -20,6 +20,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..params import Params
+from ._backend import jitable
 from ._checks import check_params, finish, prepare
 
 #: Intrusions up to this many metres beyond ``y_s`` count as none (round-off of the exact return profile).
@@ -76,3 +77,7 @@ def lateral_evasion_time(p_y, v_y, params: Params):
     with np.errstate(all="ignore"):
         t_y_f, t_1, *_ = lateral_core(xp, a["p_y"], a["v_y"], params)
     return finish(xp, shape, t_y_f), finish(xp, shape, t_1)
+
+
+# The closed forms compiled into the kernels (safety/_compile.py): the same functions, evaluated row by row.
+jitable(lateral_core, lateral_state)

@@ -32,7 +32,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..params import Params
-from ._backend import ARRAY, FEASIBILITY_TOL_M, INF
+from ._backend import FEASIBILITY_TOL_M, INF, jitable
 from ._checks import check_params, finish, prepare
 from .chain import braked_position
 
@@ -123,17 +123,12 @@ def longitudinal_core(xp, p, v, p1, v1, a1, T, margin, prm: Params, tol: float =
     k = a_a + a1
     u_c = (-w + xp.sqrt(w * w - k * (w * w - 2.0 * (a_d - a1) * d0) / s)) / k
     best = 0.0 * T
-    # With nothing to evade anywhere (T = 0) every candidate clips to 0, the first: evaluate it alone.
-    at_rest = xp is ARRAY and bool(np.all(T == 0.0))
-    cands = [] if at_rest else [xp.clip(c, 0.0, T) for c in (u_a, u_b, u_c, T)]
-    if xp is ARRAY:  # every candidate in one stacked evaluation: the same arithmetic, a fifth of the calls
-        stacked = np.stack(np.broadcast_arrays(best, *cands))
-        gaps = list(leader_gap_min(xp, stacked, T, d0, p, v, p1, v1, a1, margin, prm, l1_stop, l1_at_T))
-    else:
-        gaps = [leader_gap_min(xp, c, T, d0, p, v, p1, v1, a1, margin, prm, l1_stop, l1_at_T) for c in (best, *cands)]
-    best_gap = gaps[0]
+    best_gap = leader_gap_min(xp, best, T, d0, p, v, p1, v1, a1, margin, prm, l1_stop, l1_at_T)
     feasible = best_gap >= -tol
-    for cand, g in zip(cands, gaps[1:], strict=True):
+    # The largest feasible candidate clipped to [0, T] (a later one on a tie: the same gap).
+    for c in (u_a, u_b, u_c, T):
+        cand = xp.clip(c, 0.0, T)
+        g = leader_gap_min(xp, cand, T, d0, p, v, p1, v1, a1, margin, prm, l1_stop, l1_at_T)
         better = (g >= -tol) & (cand >= best)
         best = xp.where(better, cand, best)
         best_gap = xp.where(better, g, best_gap)
@@ -188,3 +183,7 @@ def longitudinal_evasion(ego_px, ego_vx, l1_p, l1_v, l1_decel, t_y_f, params: Pa
         case=finish(xp, shape, case, np.int8),
         min_gap=finish(xp, shape, gap + params.p_m),
     )
+
+
+# The closed forms compiled into the kernels (safety/_compile.py): the same functions, evaluated row by row.
+jitable(profile, ego_position, ego_speed, leader_gap_min, longitudinal_core)

@@ -3,7 +3,7 @@
 :func:`candidate_kernel` is ``check_candidate`` for rows without an own-lane leader, element by element: the
 period at the candidate's accelerations with L1 and F at their worst case (``_motion.advance``), the conflict-zone
 test (``free_max``), both worst-case gaps over the period (``pair_min_gap``), whether the step completes, and the
-evasion check with its whole plan from the predicted state (:func:`safelane.safety._fast_plan._plan_parts`). The
+evasion check with its whole plan from the predicted state (:func:`safelane.safety._fast._plan_parts`). The
 completion rule itself runs afterwards on the completing rows (few), in NumPy, as in ``check_candidate``: any
 registered rule works. Every expression is in the NumPy path's evaluation order (the shared scalar helpers), so
 the verdicts and plans are its bits (``tests/test_fast_decide.py``); the NumPy function stays the reference and
@@ -18,6 +18,7 @@ from numba import types
 
 from ..params import Params
 from ..safety._backend import ARRAY, FEASIBILITY_TOL_M
+from ..safety._fast import BOOL_PARTS, FLOAT_PARTS, _plan_parts
 from ..safety._fast_base import (
     _B,
     _F,
@@ -25,7 +26,6 @@ from ..safety._fast_base import (
     announce_compile,
     row_function,
 )
-from ..safety._fast_plan import BOOL_PARTS, FLOAT_PARTS, _plan_parts
 from ..safety._fast_responsible import _advance, _pair_min_gap
 from ..safety.lateral import LATERAL_TOL_M
 from ..safety.plan import plan_from_core
@@ -44,7 +44,7 @@ _SIGNATURE = types.void(
 def _candidate(x, y, vx, vy, ax, ay, x1, v1, d1, xf, vf, aggr, a_a, a_d, a_ym, y_safe, p_m, dt, level, lat_tol, tol):
     """One row of :func:`candidate_kernel`: ``(state, period_ok, completing, parts, bits)`` — the predicted states
     (:data:`STATES`), the period's verdict, whether the step completes, and the plan from the predicted state
-    (``_fast_plan.FLOAT_PARTS``, ``_fast_plan.BOOL_PARTS``)."""
+    (``_fast.FLOAT_PARTS``, ``_fast.BOOL_PARTS``)."""
     ex, evx = _advance(x, vx, ax, dt)
     ey = y + vy * dt + 0.5 * ay * dt * dt
     evy = vy + ay * dt
@@ -58,8 +58,7 @@ def _candidate(x, y, vx, vy, ax, ay, x1, v1, d1, xf, vf, aggr, a_a, a_d, a_ym, y
     gap_l = _pair_min_gap(x1 - x - p_m, vx, ax, v1, -d1, dt)
     gap_f = _pair_min_gap(x - xf - p_m, vf, a_f, vx, ax, dt)
     period_ok = (not conflict) or (gap_l >= -tol and gap_f >= -tol)
-    parts, bits = _plan_parts(ey, evy, ex, evx, lx, lv, d1, fx, fv, aggr, p_m, p_m, a_a, a_d, a_ym, y_safe, lat_tol,
-                              tol)  # fmt: skip
+    parts, bits = _plan_parts(ey, evy, ex, evx, lx, lv, d1, fx, fv, aggr, p_m, p_m, a_a, a_d, a_ym, y_safe, tol)
     return (ex, ey, evx, evy, lx, lv, fx, fv), period_ok, ey >= level, parts, bits
 
 
@@ -68,8 +67,8 @@ def candidate_kernel(
     ego_x, ego_y, ego_vx, ego_vy, a_x, a_y, l1_x, l1_v, l1_decel, f_x, f_v, f_aggr, a_a, a_d, a_ym, y_safe, p_m, dt,
     level, lat_tol, tol, floats, flags,
 ):  # fmt: skip
-    """Per row: ``floats`` ``(18, n)`` — :data:`STATES`, then ``_fast_plan.FLOAT_PARTS``; ``flags`` ``(7, n)`` —
-    ``period_ok``, ``completing``, then ``_fast_plan.BOOL_PARTS``."""
+    """Per row: ``floats`` ``(18, n)`` — :data:`STATES`, then ``_fast.FLOAT_PARTS``; ``flags`` ``(7, n)`` —
+    ``period_ok``, ``completing``, then ``_fast.BOOL_PARTS``."""
     for i in range(floats.shape[1]):
         state, period_ok, completing, parts, bits = _candidate(
             ego_x[i], ego_y[i], ego_vx[i], ego_vy[i], a_x[i], a_y[i], l1_x[i], l1_v[i], l1_decel[i], f_x[i], f_v[i],

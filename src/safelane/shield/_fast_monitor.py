@@ -10,6 +10,7 @@ import numba
 import numpy as np
 from numba import types
 
+from ..safety._backend import SCALAR
 from ..safety._fast_base import (
     _braked,
     _stop_time,
@@ -39,13 +40,13 @@ def _breach_row(chain_x, chain_v, bounds, r, now_x, nr, off, n_connected, plan_l
     if same_chain:
         for i in range(chain_x.shape[1]):
             p, v, d = chain_x[r, i], chain_v[r, i], bounds[r, i]
-            behind = now_x[nr, i + off] < _braked(p, v, d, dt, _stop_time(v, d)) - tol
+            behind = now_x[nr, i + off] < _braked(SCALAR, p, v, d, dt, _stop_time(v, d)) - tol
             if i < n_connected:
                 leader = leader or behind
             elif i == n_connected:
                 last = last or behind
         p, v, d = chain_x[r, 0], chain_v[r, 0], plan_l1_decel
-        l1 = active and now_x[nr, off] < _braked(p, v, d, dt, _stop_time(v, d)) - tol
+        l1 = active and now_x[nr, off] < _braked(SCALAR, p, v, d, dt, _stop_time(v, d)) - tol
     limit = f_limit
     highest, _ = _advance(f_x, f_v, 0.0 if limit == np.inf or limit == -np.inf else limit, dt)
     follower = (limit == limit and limit != np.inf and limit != -np.inf) and now_f_x > highest + tol

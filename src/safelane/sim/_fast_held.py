@@ -13,7 +13,7 @@ from __future__ import annotations
 import numba
 import numpy as np
 
-from ..safety._fast import _ego_position
+from ..safety._fast import _ego_position, _ego_speed, _lateral_state
 from ..safety._fast_base import _max, _min, _stop_time
 
 _INF = np.inf
@@ -42,19 +42,9 @@ def _plan_sample(tq, plan, follows, a_a, a_d):
     tt = _min(tq, T)
     l1_stop = _stop_time(v1, a1)
     px = _ego_position(tt, p, v, u, V, t2, follows, p1, v1, a1, a_a, a_d, l1_stop)
-    # longitudinal.ego_speed
-    ta = _min(tt, u)
-    tb = _max(_min(tt, t2) - u, 0.0)
-    own = v + a_a * ta - a_d * tb
-    vx = _max(v1 - a1 * tt, 0.0) if (follows and tt > t2) else _max(own, 0.0)
+    vx = _ego_speed(tt, v, u, V, t2, follows, v1, a1, a_a, a_d)
     px = px + vx * _max(tq - tt, 0.0)
-    # lateral.lateral_state
-    ta = _min(tq, t_1)
-    y = py0 + vy0 * ta + 0.5 * acc_1 * ta * ta
-    vy = vy0 + acc_1 * ta
-    tb = _max(_min(tq, t_end) - t_1, 0.0)
-    y = y + vy * tb + 0.5 * acc_2 * tb * tb
-    vy = vy + acc_2 * tb
+    y, vy = _lateral_state(tq, py0, vy0, t_1, acc_1, acc_2, t_end)
     return px, y, vx, vy
 
 
