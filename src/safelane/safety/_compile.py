@@ -70,7 +70,8 @@ _REGISTERED: set = set()
 
 
 def register_rows() -> None:
-    """Register every function marked so far with numba (idempotent; call before compiling a kernel that uses one)."""
+    """Register every function marked so far with numba (idempotent). A kernel module imports the modules whose
+    closed forms it compiles, then calls this before it defines a kernel (an explicit signature compiles at once)."""
     for fn in _backend.ROW_FUNCTIONS:
         if fn not in _REGISTERED:
             register_jitable(fn)

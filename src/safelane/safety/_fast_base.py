@@ -22,8 +22,10 @@ import numba
 import numpy as np
 from numba import types
 
-from . import _backend, _compile  # noqa: F401  (_compile registers the marked closed forms with numba)
+from . import _backend, _compile
 from .chain import braked_position
+
+_compile.register_rows()
 
 _INF = math.inf
 _PACKAGE = Path(__file__).resolve().parents[1]
