@@ -49,6 +49,7 @@ NOT_RUN: dict[str, str] = {
     ".venv/bin/python benchmarks/bench_rss.py": _BENCH,
     ".venv/bin/python benchmarks/bench_backends.py": _BENCH,
     ".venv/bin/python benchmarks/bench_core.py": _BENCH,
+    ".venv/bin/python benchmarks/bench_commonroad_referee.py": _BENCH,
     ".venv/bin/python benchmarks/bench_core.py --repeat 3": _BENCH,
     ".venv/bin/python benchmarks/bench_core.py --repeat 5": _BENCH,
     ".venv/bin/python benchmarks/ray_cluster.py": "starts and stops a Ray head node (tens of seconds); " + _BENCH,
@@ -131,6 +132,7 @@ EXTRAS: list[tuple[str, tuple[str, ...]]] = [
     (r"export-onnx|from_onnx", ("onnx", "onnxruntime")),
     (r"highway", ("gymnasium", "highway_env")),
     (r"gymnasium|gym\.", ("gymnasium",)),
+    (r"integrations\.commonroad", ("commonroad", "commonroad_dc")),
 ]
 
 TIMEOUT_S = 240
