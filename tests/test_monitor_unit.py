@@ -100,6 +100,16 @@ def test_a_chain_that_changed_length_skips_the_leader_comparisons():
     assert same.flags[:, 1:3].any(1).all() and (same.flags[:, 0] == last.active).all()
 
 
+def test_only_a_finite_follower_limit_is_watched():
+    """F far ahead of any position it could reach: a ``follower`` breach exactly where its limit is finite (NaN and
+    ±inf are not watched, as ``np.isfinite`` says)."""
+    limit = np.array([0.0, -2.0, np.nan, np.inf, -np.inf, 1.0])
+    b = len(limit)
+    last = Snapshot(**{**_snapshot(np.random.default_rng(4), b, 2).__dict__, "f_limit": limit})
+    now = SimpleNamespace(chain_x=last.chain_x + 100.0, f_x=last.f_x + 100.0)
+    out = observe_breaches(Breach.none(b), last, now, PRM, 1.0)
+    np.testing.assert_array_equal(out.flags[:, 3], np.isfinite(limit))
+
 def test_inside_the_assumptions_nothing_is_flagged_and_the_record_is_kept():
     """Everyone exactly at the assumed worst case (braking at the bound, F at its limit): no breach; a previous
     breach stays with its time."""

@@ -1,8 +1,9 @@
 """Optional compiled kernel of the assumption monitor's period check (:func:`~.monitor.observe_breaches`; numba,
-extra ``fast``): per scenario, the chain braking at its bounds and L1 at the held plan's deceleration
-(``braked_position``), F at its responsible limit (``_motion.advance``), each compared with where the vehicle is
-now, to ``TOL_M`` — the NumPy function's arithmetic in its evaluation order, so the same flags and times
-(``tests/test_fast_monitor.py``). The NumPy function stays the reference and the fallback."""
+extra ``fast``): loops and indexing only. Per scenario it calls the monitor's own comparisons, compiled as they are
+(:func:`~.monitor.braked_harder` for every chain vehicle at its bound and for L1 at the held plan's deceleration,
+:func:`~.monitor.pushed_harder` for F at its responsible limit, whose position ``_motion.advance`` gives through its
+compiled row ``_fast_responsible._advance``), so the flags and times are the NumPy path's
+(``tests/test_fast_monitor.py``)."""
 
 from __future__ import annotations
 
@@ -10,16 +11,13 @@ import numba
 import numpy as np
 from numba import types
 
+from ..safety import _compile
 from ..safety._backend import SCALAR
-from ..safety._fast_base import (
-    _braked,
-    _stop_time,
-    announce_compile,
-    row_function,
-)
+from ..safety._fast_base import announce_compile, row_function
 from ..safety._fast_responsible import _advance
-from .monitor import BREACH_KINDS, TOL_M, Breach
+from .monitor import BREACH_KINDS, TOL_M, Breach, braked_harder, pushed_harder
 
+_compile.register_rows()
 announce_compile(__file__)
 
 _M = types.Array(types.float64, 2, "A", readonly=True)
@@ -39,18 +37,14 @@ def _breach_row(chain_x, chain_v, bounds, r, now_x, nr, off, n_connected, plan_l
     l1 = leader = last = False
     if same_chain:
         for i in range(chain_x.shape[1]):
-            p, v, d = chain_x[r, i], chain_v[r, i], bounds[r, i]
-            behind = now_x[nr, i + off] < _braked(SCALAR, p, v, d, dt, _stop_time(v, d)) - tol
+            behind = braked_harder(SCALAR, now_x[nr, i + off], chain_x[r, i], chain_v[r, i], bounds[r, i], dt, tol)
             if i < n_connected:
                 leader = leader or behind
             elif i == n_connected:
                 last = last or behind
-        p, v, d = chain_x[r, 0], chain_v[r, 0], plan_l1_decel
-        l1 = active and now_x[nr, off] < _braked(SCALAR, p, v, d, dt, _stop_time(v, d)) - tol
-    limit = f_limit
-    highest, _ = _advance(f_x, f_v, 0.0 if limit == np.inf or limit == -np.inf else limit, dt)
-    follower = (limit == limit and limit != np.inf and limit != -np.inf) and now_f_x > highest + tol
-    return l1, leader, last, follower
+        l1 = active and braked_harder(SCALAR, now_x[nr, off], chain_x[r, 0], chain_v[r, 0], plan_l1_decel, dt, tol)
+    highest, _ = _advance(f_x, f_v, 0.0 if f_limit == np.inf or f_limit == -np.inf else f_limit, dt)
+    return l1, leader, last, pushed_harder(SCALAR, now_f_x, highest, f_limit, tol)
 
 
 @numba.njit(_SIGNATURE, cache=True, nogil=True, error_model="numpy")

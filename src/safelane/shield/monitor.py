@@ -16,7 +16,9 @@ conservative assumptions from then on (``L1`` at ``a_x_d``, ``F`` aggressive). K
   assumes the worst of everyone.
 
 Everything compared is what the ego observes: consecutive situations (positions of the chain and F) against the
-positions the assumptions allow; exact up to ``TOL_M``.
+positions the assumptions allow; exact up to ``TOL_M``. The comparison per vehicle is written once
+(:func:`braked_harder`, :func:`pushed_harder`, backend-generic and marked ``jitable``): :func:`observe_breaches`
+evaluates it on NumPy arrays, the compiled monitor (:mod:`._fast_monitor`) and the compiled closed loop row by row.
 """
 
 from __future__ import annotations
@@ -27,7 +29,7 @@ import numpy as np
 
 from .._motion import advance
 from ..params import Params
-from ..safety._backend import ARRAY
+from ..safety._backend import ARRAY, INF, jitable
 from ..safety.chain import braked_position
 from ..safety.evasion import fast_kernel
 
@@ -97,16 +99,17 @@ def observe_breaches(prev: Breach, last, situation, prm: Params, t_now: float) -
     if bsz >= FAST_MIN_ROWS and (kernel := monitor_kernel()) is not None:
         return kernel.observe_breaches(prev, last, situation, prm, t_now)
     flags = np.zeros((bsz, len(BREACH_KINDS)), bool)
-    lowest, f_highest = predicted_positions(last, prm.dt)
-    active = last.active
+    dt = prm.dt
     if situation.chain_x.shape == last.chain_x.shape:
-        behind = situation.chain_x < lowest - TOL_M
-        l1_lowest = braked_position(ARRAY, last.chain_x[:, 0], last.chain_v[:, 0], last.plan_l1_decel, prm.dt)
-        flags[:, 0] = active & (situation.chain_x[:, 0] < l1_lowest - TOL_M)
+        now = situation.chain_x
+        behind = braked_harder(ARRAY, now, last.chain_x, last.chain_v, last.bounds, dt, TOL_M)
+        l1 = braked_harder(ARRAY, now[:, 0], last.chain_x[:, 0], last.chain_v[:, 0], last.plan_l1_decel, dt, TOL_M)
+        flags[:, 0] = last.active & l1
         slots = np.arange(behind.shape[1])[None, :]
         flags[:, 1] = (behind & (slots < last.n_connected[:, None])).any(1)
         flags[:, 2] = (behind & (slots == last.n_connected[:, None])).any(1)
-    flags[:, 3] = np.isfinite(last.f_limit) & (situation.f_x > f_highest + TOL_M)  # finite only where watched
+    _, f_highest = predicted_positions(last, dt)
+    flags[:, 3] = pushed_harder(ARRAY, situation.f_x, f_highest, last.f_limit, TOL_M)
     new = flags & ~prev.flags
     first = np.where(np.isnan(prev.first_s) & new.any(1), t_now, prev.first_s)
     return Breach(flags=prev.flags | flags, first_s=first)
@@ -118,3 +121,26 @@ def predicted_positions(snapshot: Snapshot, dt: float):
     tx = braked_position(ARRAY, snapshot.chain_x, snapshot.chain_v, snapshot.bounds, dt)
     fx, _ = advance(snapshot.f_x, snapshot.f_v, np.where(np.isinf(snapshot.f_limit), 0.0, snapshot.f_limit), dt)
     return tx, fx
+
+
+def braked_harder(xp, now, p, v, decel, dt, tol):
+    """The breach test of a vehicle assumed to brake at no more than ``decel`` (a leader at its chain bound, L1 at the
+    held plan's deceleration): it is now (``now``) more than ``tol`` behind where braking at ``decel`` from ``(p, v)``
+    for ``dt`` would have put it (exact, stopping at rest: :func:`~safelane.safety.chain.braked_position`).
+    Backend-generic; every argument broadcasts."""
+    return now < braked_position(xp, p, v, decel, dt) - tol
+
+
+def pushed_harder(xp, now, highest, limit, tol):
+    """The breach test of F: watched (a finite ``limit``, the largest acceleration a responsible follower of the ego
+    could apply) and now (``now``) more than ``tol`` ahead of ``highest``, where that limit would have put it
+    (:func:`predicted_positions`). Backend-generic; every argument broadcasts.
+
+    The position itself is ``_motion.advance``'s, computed by the caller (NumPy here, its compiled row in
+    :mod:`._fast_monitor`) until that motion is backend-generic; then it moves in here."""
+    watched = (limit == limit) & (limit != INF) & (limit != -INF)
+    return watched & (now > highest + tol)
+
+
+# The comparisons compiled into the monitor's kernel and the closed loop (safety/_compile.py): the same functions.
+jitable(braked_harder, pushed_harder)
