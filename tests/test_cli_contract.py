@@ -45,6 +45,7 @@ WRITING = {
     "train": ["--no-progress"],  # + --config TINY_TRAIN (written per test)
     "sumo": ["--leaders", "1", "--decel", "4", "--episodes", "1", "--no-progress"],
     "replay": ["--connected", "0", "--no-progress"],  # the shipped sample
+    "traffic": ["--penetration", "0", "--demand", "1000", "--seconds", "20", "--warmup", "10", "--no-progress"],
 }
 #: Commands with an ``--out`` that is not a run folder, and why.
 NOT_A_RUN = {"export-onnx": "--out is the one .onnx file the user names"}
@@ -67,7 +68,7 @@ def test_the_list_covers_every_command_with_an_out_folder():
 def test_every_writing_command_keeps_the_run_folder_contract(command, tmp_path):
     if command == "train":
         pytest.importorskip("torch")
-    if command == "sumo" and not _libsumo():
+    if command in ("sumo", "traffic") and not _libsumo():
         pytest.skip("libsumo is not installed: pip install 'safelane[sumo]'")
     args = [command, *WRITING[command], "--out", str(tmp_path / "out")]
     if command == "train":

@@ -189,6 +189,7 @@ def _register() -> None:
     from . import reproduce as _reproduce  # noqa: F401
     from . import simulate as _simulate  # noqa: F401
     from . import sumo as _sumo  # noqa: F401
+    from . import traffic as _traffic  # noqa: F401
     from . import train as _train  # noqa: F401
 
 

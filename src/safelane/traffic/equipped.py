@@ -1,0 +1,249 @@
+"""Equipped vehicles' lane changes under the shield (docs/traffic.md).
+
+Equipped vehicles are connected: each period they broadcast their state and promise (``PROMISE_DECEL``; the V2X
+link is ideal here — no loss or latency —, held as arrays rather than per-vehicle messages). They keep SUMO's
+car following, but SUMO never changes their lane (lane-change mode 0): SUMO's LC2013 only *wishes*
+(:meth:`.world.TrafficWorld.wishes`, every ``wish_every_s``), and the wish starts a lane change that the shield
+executes. While it changes lanes a vehicle is a point mass driven from here (the nominal planner proposes — the
+expert, as in the other integrations —, the shield decides, ``moveToXY`` places it), until it has completed and
+reached the target lane's centre, or has returned to its own lane after an abort, or has hesitated in its own lane
+for ``give_up_s``: then SUMO drives it again.
+
+All changers of a period are one batch: their :class:`~safelane.shield.Situation` is built from the fleet's arrays
+lane by lane (F the nearest behind in the target lane, the chain ``L1…L(M)`` ahead of it, the connected ones the
+equipped vehicles at its head, ``L0`` the nearest ahead in the own lane — or the end of the acceleration lane, a
+standing obstacle), and :func:`.shielding.decide` makes one ``Shield.step`` for all of them. A vehicle belongs to
+every lane its body overlaps (a vehicle across a lane boundary counts in both).
+
+Connected leaders honour their promises as the guarantee needs: an equipped vehicle among the connected leaders
+of a changer's chain brakes at most at its chain bound (``max(promise, bound)``, the smallest over the chains it is
+in; SUMO's ``decel``/``emergencyDecel`` capped for that period).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from .._motion import advance
+from ..params import Params
+from ..planners.base import ExpertPlanner, Observation
+from ..shield import ABORT, HESITATE, Situation
+from ..shield.stages import chain_analysis
+from . import demand as dem
+from .shielding import ShieldPool, decide, take_rows
+
+PROMISE_DECEL = 0.5  # [m/s²] the promise every equipped vehicle broadcasts (the SUMO integration's default)
+CHAIN_SLOTS = 4  # L1..L4 in the situation: up to N = 3 connected leaders
+FAR_M = 1e4
+SETTLED_Y_M, SETTLED_VY = 0.05, 0.1
+
+
+class LaneChanges:
+    """The equipped vehicles' lane changes in one run; ``counts`` says what happened."""
+
+    def __init__(self, world, params: Params, *, variant: str = "CV_all", wish_every_s: float = 0.5,
+                 give_up_s: float = 15.0, settle_s: float = 6.0, cooldown_s: float = 2.0):  # fmt: skip
+        self.world, self.params = world, params
+        self.pool = ShieldPool(params, variant)
+        self.planner = ExpertPlanner()
+        self.wish_every = max(1, round(wish_every_s / params.dt))
+        self.give_up_s, self.settle_s, self.cooldown_s = give_up_s, settle_s, cooldown_s
+        self.ids: list[str] = []
+        z = np.zeros(0)
+        self.g0, self.sign = np.zeros(0, np.int64), z.copy()
+        self.ex, self.ey, self.evx, self.evy, self.t0, self.t_done = (z.copy() for _ in range(6))
+        self.aborted = np.zeros(0, bool)
+        self.cool: dict[str, float] = {}
+        self.capped: dict[str, float] = {}
+        self.counts = {"started": 0, "completed": 0, "aborted": 0, "gave_up": 0, "decisions": 0, "hesitate": 0,
+                       "abort_steps": 0, "shield_calls": 0}  # fmt: skip
+        self.k = 0
+
+    # -- one period -------------------------------------------------------------------------------------------------
+    def period(self, fleet, t: float) -> None:
+        prm = self.params
+        index = {vid: i for i, vid in enumerate(fleet.ids)}
+        self._fleet_ids, self._alive = fleet.ids, index
+        alive = np.array([vid in index for vid in self.ids], bool)
+        keep = np.flatnonzero(alive)
+        self._select(keep)
+        new = self._starters(fleet, t, index) if self.k % self.wish_every == 0 else []
+        self.k += 1
+        n_new = len(new)
+        if n_new:
+            fi = np.array([index[v] for v in new])
+            lane = fleet.lane[fi]
+            direction = np.array(self._new_dirs)
+            self.ids += list(new)
+            self.g0 = np.concatenate([self.g0, lane])
+            self.sign = np.concatenate([self.sign, direction.astype(float)])
+            self.ex = np.concatenate([self.ex, fleet.x[fi]])
+            self.ey = np.concatenate([self.ey, direction * (fleet.y[fi] - dem.lane_y(lane))])
+            self.evx = np.concatenate([self.evx, fleet.v[fi]])
+            self.evy = np.concatenate([self.evy, np.zeros(n_new)])
+            self.t0 = np.concatenate([self.t0, np.full(n_new, t)])
+            self.t_done = np.concatenate([self.t_done, np.full(n_new, np.nan)])
+            self.aborted = np.concatenate([self.aborted, np.zeros(n_new, bool)])
+            self.counts["started"] += n_new
+            for vid in new:
+                self.world.take(vid)
+        if not self.ids:
+            self._cap({})
+            return
+        rows = np.array([index[v] for v in self.ids])
+        x = fleet.x.copy()
+        x[rows] = self.ex  # the changers at their exact states
+        situation, chain_ids = self.situation(fleet, x, rows, t)
+        completed_before = np.zeros(len(self.ids), bool)
+        if self.pool.shield.state is not None and len(keep):
+            completed_before[: len(keep)] = self.pool.shield.state.completed[keep]
+        proposal = self.planner(self._observation(situation, fleet, chain_ids, completed_before), prm)
+        d = decide(self.pool, situation, proposal, keep, n_new)
+        self.counts["shield_calls"] = self.pool.calls
+        self.counts["decisions"] += len(self.ids)
+        self.counts["hesitate"] += int((d.behaviour == HESITATE).sum())
+        self.counts["abort_steps"] += int((d.behaviour == ABORT).sum())
+        self.aborted |= d.behaviour == ABORT
+        self._move(d)
+        self._cap_chains(situation, chain_ids)
+        self._finish(t)
+
+    def _select(self, rows) -> None:
+        self.ids = [self.ids[i] for i in rows]
+        for name in ("g0", "sign", "ex", "ey", "evx", "evy", "t0", "t_done", "aborted"):
+            setattr(self, name, getattr(self, name)[rows])
+
+    def _starters(self, fleet, t, index) -> list[str]:
+        changing = set(self.ids)
+        cand = [vid for i, vid in enumerate(fleet.ids)
+                if fleet.equipped[i] and vid not in changing and fleet.lane[i] >= 0 and self.cool.get(vid, -1e9) <= t
+                and fleet.x[i] < dem.ACCEL_X[1] + 1000.0]  # fmt: skip
+        wish = self.world.wishes(cand) if cand else np.zeros(0, np.int64)
+        out, dirs = [], []
+        for vid, w in zip(cand, wish.tolist(), strict=True):
+            target = int(fleet.lane[index[vid]]) - w  # left (+1) is towards g = 0
+            if w and 0 <= target < dem.ACCEL_LANE:  # never into the acceleration lane
+                out.append(vid)
+                dirs.append(w)
+        self._new_dirs = dirs
+        return out
+
+    # -- the batch situation ---------------------------------------------------------------------------------------
+    def situation(self, fleet, x, rows, t):
+        """The changers' :class:`Situation` (shield frame: own lane ``y = 0``, target ``y = lane_width``) and the
+        fleet index of each chain slot (``-1`` where padded)."""
+        prm = self.params
+        b, m = len(self.ids), CHAIN_SLOTS
+        target = self.g0 - self.sign.astype(np.int64)
+        half = 0.5 * (prm.lane_width + prm.vehicle_width) - 1e-6
+        lx, lv, fx, fv, fcon = (np.zeros((b, m)), np.zeros((b, m)), np.zeros(b), np.zeros(b), np.zeros(b, bool))
+        chain_ids = np.full((b, m), -1)
+        ox, ov = np.full(b, np.inf), np.zeros(b)
+        members = {}
+        for g in np.unique(np.concatenate([target, self.g0])):
+            mem = np.flatnonzero((fleet.lane >= 0) & (np.abs(fleet.y - dem.lane_y(g)) < half))
+            members[int(g)] = mem[np.argsort(x[mem], kind="stable")]
+        for g in np.unique(target):
+            r = np.flatnonzero(target == g)
+            mem = members[int(g)]
+            xs = x[mem]
+            lo, hi = np.searchsorted(xs, self.ex[r], "left"), np.searchsorted(xs, self.ex[r], "right")
+            has_f = lo > 0
+            fi = mem[np.maximum(lo - 1, 0)] if len(mem) else np.zeros(len(r), np.int64)
+            fx[r] = np.where(has_f, x[fi] if len(mem) else 0.0, self.ex[r] - FAR_M)
+            fv[r] = np.where(has_f, fleet.v[fi] if len(mem) else 0.0, 0.0)
+            fcon[r] = has_f & (fleet.equipped[fi] if len(mem) else False)
+            slot = hi[:, None] + np.arange(m)[None, :]
+            ok = slot < len(mem)
+            li = mem[np.minimum(slot, max(len(mem) - 1, 0))] if len(mem) else np.zeros_like(slot)
+            pad = self.ex[r, None] + FAR_M * (1.0 + np.arange(m)[None, :])
+            lx[r] = np.where(ok, x[li], pad)
+            lv[r] = np.where(ok, fleet.v[li], self.evx[r, None])
+            chain_ids[r] = np.where(ok, li, -1)
+        for g in np.unique(self.g0):
+            r = np.flatnonzero(self.g0 == g)
+            mem = members[int(g)]
+            hi = np.searchsorted(x[mem], self.ex[r], "right")
+            ok = hi < len(mem)
+            oi = mem[np.minimum(hi, max(len(mem) - 1, 0))] if len(mem) else np.zeros(len(r), np.int64)
+            ox[r] = np.where(ok, x[oi] if len(mem) else np.inf, np.inf)
+            ov[r] = np.where(ok, fleet.v[oi] if len(mem) else 0.0, 0.0)
+            if g == dem.ACCEL_LANE:  # the lane's end: a standing obstacle its rear bumper at the end
+                end = dem.ACCEL_X[1] + 0.5 * prm.vehicle_length
+                ox[r], ov[r] = np.where(ox[r] < end, ox[r], end), np.where(ox[r] < end, ov[r], 0.0)
+        equipped = np.where(chain_ids >= 0, fleet.equipped[np.maximum(chain_ids, 0)], False)
+        n_conn = np.cumprod(equipped[:, : m - 1], axis=1).sum(1)
+        situation = Situation.from_arrays(
+            t=t, ego=(self.ex, self.ey, self.evx, self.evy), follower=(fx, fv), leaders=(lx, lv),
+            n_connected=n_conn, promise_decel=PROMISE_DECEL, human_driven=False, f_connected=fcon,
+            f_collaborative=False, params=prm, own_leaders=(ox[:, None], ov[:, None]), own_n_connected=0,
+            geometry="ignore",
+        )  # fmt: skip
+        return situation, chain_ids
+
+    def _observation(self, s: Situation, fleet, chain_ids, completed) -> Observation:
+        l1 = chain_ids[:, 0]
+        l1_conn = s.n_connected > 0
+        acc = np.where(l1_conn, fleet.a[np.maximum(l1, 0)], 0.0)
+        return Observation(p_x=s.ego_x, p_y=s.ego_y, v_x=s.ego_vx, v_y=s.ego_vy, p_x_l=s.chain_x[:, 0],
+                           v_x_l=s.chain_v[:, 0], p_x_f=s.f_x, v_x_f=s.f_v, l1_plan=np.repeat(acc[:, None], 10, 1),
+                           l1_connected=l1_conn, f_connected=s.f_connected, completed=completed, t=s.t,
+                           scenario_id=np.zeros(len(s), np.int64))  # fmt: skip
+
+    # -- acting ---------------------------------------------------------------------------------------------------
+    def _move(self, d) -> None:
+        dt = self.params.dt
+        nx, nv = advance(self.ex, self.evx, d.a_x, dt)
+        ny, nvy = self.ey + self.evy * dt + 0.5 * d.a_y * dt * dt, self.evy + d.a_y * dt
+        rows, _, px, vx, py, vy = d.abort_motion()
+        if len(rows):
+            nx[rows], nv[rows], ny[rows], nvy[rows] = px[:, -1], vx[:, -1], py[:, -1], vy[:, -1]
+        self.ex, self.evx, self.ey, self.evy = nx, nv, ny, nvy
+        done = np.asarray(self.pool.shield.state.completed, bool)
+        self.t_done = np.where(done & np.isnan(self.t_done), self.world.time() + dt, self.t_done)
+        self.world.place(self.ids, self.ex, dem.lane_y(self.g0) + self.sign * self.ey, self.evx)
+
+    def _finish(self, t: float) -> None:
+        w = self.params.lane_width
+        done = ~np.isnan(self.t_done)
+        settled = done & (((np.abs(self.ey - w) < SETTLED_Y_M) & (np.abs(self.evy) < SETTLED_VY))
+                          | (t - self.t_done > self.settle_s))  # fmt: skip
+        home = ~done & (np.abs(self.ey) < SETTLED_Y_M) & (np.abs(self.evy) < SETTLED_VY)
+        returned = home & self.aborted
+        gave_up = home & ~self.aborted & (t - self.t0 > self.give_up_s)
+        out = np.flatnonzero(settled | returned | gave_up)
+        if not len(out):
+            return
+        self.counts["completed"] += int(settled.sum())
+        self.counts["aborted"] += int(returned.sum())
+        self.counts["gave_up"] += int(gave_up.sum())
+        y_end = np.where(settled, w, 0.0)[out]
+        vids = [self.ids[i] for i in out]
+        self.world.place(vids, self.ex[out], dem.lane_y(self.g0[out]) + self.sign[out] * y_end, self.evx[out])
+        for vid in vids:
+            self.world.release(vid)
+            self.cool[vid] = t + self.cooldown_s
+        stay = np.setdiff1d(np.arange(len(self.ids)), out)
+        self._select(stay)
+        self.pool.shield.state = None if not len(stay) else take_rows(self.pool.shield.state, stay)
+
+    def _cap_chains(self, situation, chain_ids) -> None:
+        bounds, _ = chain_analysis(situation, self.params)
+        slots = np.arange(chain_ids.shape[1] - 1)[None, :] < situation.n_connected[:, None]
+        caps: dict[str, float] = {}
+        changing = set(self.ids)
+        fleet_ids = self._fleet_ids
+        for r, k in zip(*np.nonzero(slots), strict=True):
+            vid = fleet_ids[chain_ids[r, k]]
+            if vid not in changing:
+                caps[vid] = min(caps.get(vid, np.inf), max(PROMISE_DECEL, float(bounds[r, k])))
+        self._cap(caps)
+
+    def _cap(self, caps: dict[str, float]) -> None:
+        lifted = [vid for vid in self.capped if vid not in caps and vid in self._alive]
+        if lifted:
+            self.world.cap_braking(lifted, np.full(len(lifted), dem.EQUIPPED["emergencyDecel"]))
+        changed = [vid for vid, c in caps.items() if self.capped.get(vid) != c]
+        if changed:
+            self.world.cap_braking(changed, [caps[v] for v in changed])
+        self.capped = caps

@@ -1,0 +1,116 @@
+"""Network measures of a traffic-level run: SUMO's collision list with a responsibility rule, SSM conflicts,
+throughput, speed, travel time (docs/traffic.md).
+
+**Responsibility** (:func:`blame`, in the spirit of RSS's "the rear vehicle keeps a safe distance"): in a collision
+SUMO names the ``collider`` (the rear vehicle of a rear-end) and the ``victim``. The collider is responsible, unless
+the victim **cut in**: it entered the collision's lane (a lane change, SUMO's or the shield's) in front of the
+collider at most ``CUT_IN_WINDOW_S`` before the collision, with a bumper gap below the collider's safe distance
+``v_r·τ + v_r²/(2·b_r) − v_f²/(2·b_f)`` (``τ = 0.5`` s, ``b_r = 4.5`` m/s² the rear's comfortable braking, ``b_f =
+8`` m/s² the front's hardest, ``Params.a_x_d``) at that moment. Then the victim is responsible.
+"""
+
+from __future__ import annotations
+
+import xml.etree.ElementTree as ET
+from pathlib import Path
+
+import numpy as np
+
+from .demand import SSM_THRESHOLDS
+
+CUT_IN_WINDOW_S = 3.0
+TAU_S, B_REAR, B_FRONT = 0.5, 4.5, 8.0
+
+
+def safe_distance(v_rear, v_front) -> np.ndarray:
+    """The rear vehicle's safe distance [m] to a front vehicle (see the module docstring)."""
+    v_rear, v_front = np.asarray(v_rear, float), np.asarray(v_front, float)
+    return np.maximum(v_rear * TAU_S + v_rear**2 / (2 * B_REAR) - v_front**2 / (2 * B_FRONT), 0.0)
+
+
+def blame(collisions: list[dict], entries: list[dict]) -> list[dict]:
+    """Each collision (``t``, ``collider``, ``victim``, …) with ``responsible`` (a vehicle id) and ``rule``
+    (``"rear"`` or ``"cut-in"``). ``entries``: lane entries (``t``, ``vid``, ``follower``, ``gap_m``, ``v_follower``,
+    ``v_vid``) — a vehicle entering a lane in front of ``follower``."""
+    out = []
+    for c in collisions:
+        cut = [e for e in entries if e["vid"] == c["victim"] and e["follower"] == c["collider"]
+               and 0.0 <= c["t"] - e["t"] <= CUT_IN_WINDOW_S
+               and e["gap_m"] < float(safe_distance(e["v_follower"], e["v_vid"]))]  # fmt: skip
+        rule = "cut-in" if cut else "rear"
+        out.append({**c, "responsible": c["victim"] if cut else c["collider"], "rule": rule})
+    return out
+
+
+def ssm_conflicts(path: Path | None, warmup_s: float = 0.0) -> list[dict]:
+    """The conflicts of SUMO's SSM output with at least one measure past its threshold (:data:`SSM_THRESHOLDS`),
+    begun after ``warmup_s``: ``ego``, ``foe``, ``begin``, ``ttc``, ``drac``, ``pet`` (nan where not measured)."""
+    if path is None or not Path(path).exists() or Path(path).stat().st_size == 0:
+        return []
+    out = []
+    for conflict in ET.parse(path).getroot().iter("conflict"):
+        if float(conflict.get("begin")) < warmup_s:
+            continue
+        row = {"ego": conflict.get("ego"), "foe": conflict.get("foe"), "begin": float(conflict.get("begin"))}
+        for tag, key in (("minTTC", "ttc"), ("maxDRAC", "drac"), ("PET", "pet")):
+            el = conflict.find(tag)
+            value = el.get("value") if el is not None else None
+            row[key] = float(value) if value not in (None, "NA", "") else np.nan
+        th = SSM_THRESHOLDS
+        if row["ttc"] < th["TTC"] or row["drac"] > th["DRAC"] or row["pet"] < th["PET"]:
+            out.append(row)
+    return out
+
+
+class Tally:
+    """Running sums of one run after the warm-up: speeds, departures, arrivals, travel times."""
+
+    def __init__(self, warmup_s: float):
+        self.warmup_s = warmup_s
+        self.v_sum, self.v_n = 0.0, 0
+        self.depart: dict[str, float] = {}
+        self.travel: list[float] = []
+        self.arrived = 0
+        self.inserted = 0
+
+    def speeds(self, t: float, v: np.ndarray) -> None:
+        if t >= self.warmup_s:
+            self.v_sum += float(v.sum())
+            self.v_n += len(v)
+
+    def departed(self, t: float, vids) -> None:
+        for vid in vids:
+            self.depart[vid] = t
+            self.inserted += 1
+
+    def arrivals(self, t: float, vids) -> None:
+        for vid in vids:
+            t0 = self.depart.pop(vid, np.nan)
+            if t >= self.warmup_s:
+                self.arrived += 1
+                if t0 >= self.warmup_s:
+                    self.travel.append(t - t0)
+
+    @property
+    def mean_speed(self) -> float:
+        return self.v_sum / self.v_n if self.v_n else np.nan
+
+
+def lane_entries(t: float, fleet, prev_lane: dict[str, int]) -> list[dict]:
+    """The vehicles whose lane (from the left) changed since the last period, each with the nearest vehicle behind
+    it in its new lane (``follower``), their bumper gap and speeds; ``prev_lane`` is updated."""
+    lane = fleet.lane
+    old = np.array([prev_lane.get(vid, -2) for vid in fleet.ids], np.int64)
+    for vid, g in zip(fleet.ids, lane.tolist(), strict=True):
+        prev_lane[vid] = g
+    moved = np.flatnonzero((old >= 0) & (lane >= 0) & (old != lane))
+    out = []
+    for i in moved.tolist():
+        same = np.flatnonzero((lane == lane[i]) & (fleet.x < fleet.x[i]))
+        if not len(same):
+            continue
+        j = same[np.argmax(fleet.x[same])]
+        out.append({"t": t, "vid": fleet.ids[i], "lane": int(lane[i]), "follower": fleet.ids[j],
+                    "gap_m": float(fleet.x[i] - fleet.x[j] - 4.8), "v_follower": float(fleet.v[j]),
+                    "v_vid": float(fleet.v[i])})  # fmt: skip
+    return out

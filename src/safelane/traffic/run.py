@@ -1,0 +1,115 @@
+"""One traffic-level run (:func:`run_cell`) and a sweep over penetration and demand (:func:`sweep`) through
+:func:`safelane.parallel.map_chunks` — one SUMO per process (libsumo is a singleton), seeds explicit in every job,
+so every backend and worker count gives the same tables."""
+
+from __future__ import annotations
+
+import time
+import warnings
+from dataclasses import asdict
+
+import numpy as np
+
+from ..params import Params
+from . import measures
+from .demand import Demand
+from .equipped import LaneChanges
+
+#: The columns of a sweep's ``cells.csv`` (one row per run), in order.
+CELL_COLUMNS = ("p", "main_vph", "ramp_vph", "demand_vph", "seconds", "warmup_s", "seed", "inserted", "arrived",
+                "throughput_vph", "mean_speed_mps", "mean_travel_time_s", "collisions", "collisions_equipped_involved",
+                "collisions_equipped_responsible", "collisions_cut_in", "ssm_conflicts", "ssm_ttc", "ssm_drac",
+                "ssm_pet", "ssm_equipped_involved", "lc_started", "lc_completed", "lc_aborted", "lc_gave_up",
+                "shield_decisions", "shield_calls", "human_lane_changes")  # fmt: skip
+
+
+def run_cell(demand: Demand, params: Params | None = None) -> dict:
+    """Run one cell in this process: ``{"row": {CELL_COLUMNS...}, "collisions": [...]}`` (wall time apart, in
+    ``"wall_s"``, so that the table does not depend on the machine)."""
+    from .world import TrafficWorld
+
+    prm = params or Params()
+    t_wall = time.perf_counter()
+    tally = measures.Tally(demand.warmup_s)
+    entries, collisions, seen = [], [], set()
+    prev_lane: dict[str, int] = {}
+    human_changes = 0
+    with warnings.catch_warnings(), TrafficWorld(demand, prm) as world:
+        warnings.simplefilter("ignore")  # geometry warnings of cut-ins: the situation is built with "ignore"
+        changes = LaneChanges(world, prm)
+        steps = round(demand.seconds / prm.dt)
+        for _ in range(steps):
+            t = world.time()
+            departed = world.api.simulation.getDepartedIDList()
+            fleet = world.read()
+            tally.departed(t, departed)
+            tally.speeds(t, fleet.v)
+            new = measures.lane_entries(t, fleet, prev_lane)
+            entries = [e for e in entries if t - e["t"] <= measures.CUT_IN_WINDOW_S] + new
+            if t >= demand.warmup_s:
+                human_changes += sum(1 for e in new if not e["vid"].startswith("cav."))
+            if len(fleet):
+                changes.period(fleet, t)
+            world.step()
+            tally.arrivals(world.time(), world.arrived())
+            for c in world.collisions():
+                pair = (c["collider"], c["victim"])
+                if pair not in seen:
+                    seen.add(pair)
+                    if c["t"] >= demand.warmup_s:
+                        collisions.append(measures.blame([c], entries)[0])
+            if world.api.simulation.getMinExpectedNumber() == 0 and t > demand.warmup_s:
+                break
+        inserted = tally.inserted
+        world.close()
+        conflicts = measures.ssm_conflicts(world.ssm_file, demand.warmup_s)
+    span_h = (demand.seconds - demand.warmup_s) / 3600.0
+    cav = lambda vid: vid.startswith("cav.")  # noqa: E731
+    c = changes.counts
+    row = {
+        **{k: v for k, v in asdict(demand).items() if k != "p"}, "p": demand.p, "demand_vph": demand.total_vph,
+        "inserted": inserted, "arrived": tally.arrived, "throughput_vph": tally.arrived / span_h,
+        "mean_speed_mps": tally.mean_speed,
+        "mean_travel_time_s": float(np.mean(tally.travel)) if tally.travel else np.nan,
+        "collisions": len(collisions),
+        "collisions_equipped_involved": sum(cav(x["collider"]) or cav(x["victim"]) for x in collisions),
+        "collisions_equipped_responsible": sum(cav(x["responsible"]) for x in collisions),
+        "collisions_cut_in": sum(x["rule"] == "cut-in" for x in collisions),
+        "ssm_conflicts": len(conflicts), "ssm_ttc": sum(r["ttc"] < 1.5 for r in conflicts),
+        "ssm_drac": sum(r["drac"] > 3.35 for r in conflicts), "ssm_pet": sum(r["pet"] < 1.0 for r in conflicts),
+        "ssm_equipped_involved": sum(cav(r["ego"]) or cav(r["foe"]) for r in conflicts),
+        "lc_started": c["started"], "lc_completed": c["completed"], "lc_aborted": c["aborted"],
+        "lc_gave_up": c["gave_up"], "shield_decisions": c["decisions"], "shield_calls": c["shield_calls"],
+        "human_lane_changes": human_changes,
+    }  # fmt: skip
+    row = {k: row[k] for k in CELL_COLUMNS}
+    return {"row": row, "collisions": [{"p": demand.p, "demand_vph": demand.total_vph, **x} for x in collisions],
+            "wall_s": time.perf_counter() - t_wall, "steps": steps}  # fmt: skip
+
+
+def _cell_job(job: dict) -> dict:
+    """A sweep's job (module level: Ray workers import it by name)."""
+    return run_cell(Demand(**job))
+
+
+def cells(penetrations, demands_vph, *, seconds: float, warmup_s: float, seed: int,
+          ramp_share: float = 0.15) -> list[dict]:  # fmt: skip
+    """The jobs of a sweep: every penetration × total demand (the ramp takes ``ramp_share`` of it), one seed for all
+    (the same arrivals at every penetration: common random numbers)."""
+    return [{"p": float(p), "main_vph": float(q) * (1 - ramp_share), "ramp_vph": float(q) * ramp_share,
+             "seconds": float(seconds), "warmup_s": float(warmup_s), "seed": int(seed)}
+            for q in demands_vph for p in penetrations]  # fmt: skip
+
+
+def sweep(jobs: list[dict], backend="process", workers: int | None = None, ray_address: str | None = None):
+    """``(cells table, collisions table, wall seconds per job)``: :func:`run_cell` of every job on ``backend``."""
+    import pandas as pd
+
+    from ..parallel import map_chunks
+
+    out = map_chunks(_cell_job, jobs, backend, workers, ray_address)
+    table = pd.DataFrame([o["row"] for o in out], columns=list(CELL_COLUMNS))
+    cols = ["p", "demand_vph", "t", "collider", "victim", "type", "lane", "pos", "collider_speed", "victim_speed",
+            "responsible", "rule"]  # fmt: skip
+    coll = pd.DataFrame([x for o in out for x in o["collisions"]], columns=cols)
+    return table, coll, [o["wall_s"] for o in out]
