@@ -1,0 +1,87 @@
+"""Shielded decisions per second against libsumo's own step cost, with 100, 1,000 and 5,000 vehicles in the network
+(safelane.traffic; docs/traffic.md). Same run, same process, for each size:
+
+* SUMO: ``simulationStep`` of the long merge network (``merge3_long.net.xml``) holding that many vehicles (half of
+  them equipped, spread over the 40 km downstream section at 20 m/s), the mean over ``--steps`` steps;
+* ours, per period: reading the fleet (subscriptions) and building the changers' batch ``Situation``;
+* the shield: one ``Shield.step`` over every equipped vehicle in lanes 1–2 treated as changing left (a batch of
+  about a third of the fleet), the step after ``init``; decisions per second = rows / its wall time.
+
+    .venv/bin/python benchmarks/bench_traffic.py [--sizes 100 1000 5000] [--steps 20]
+"""
+
+from __future__ import annotations
+
+import argparse
+import time
+
+import numpy as np
+
+
+def routes(n: int, seed: int = 0) -> str:
+    rng = np.random.default_rng(seed)
+    pos = np.sort(rng.uniform(50.0, 38_500.0, n))
+    lines = ['<routes><vType id="human" length="4.8" width="1.8" sigma="0.5" emergencyDecel="8"/>',
+             '<vType id="cav" length="4.8" width="1.8" sigma="0" emergencyDecel="8"/>', '<route id="r" edges="out"/>']
+    for k, x in enumerate(pos.tolist()):
+        kind = "cav" if k % 2 else "human"
+        lines.append(f'<vehicle id="{kind}.{k}" type="{kind}" route="r" depart="0" departLane="{k % 3}" '
+                     f'departPos="{x:.1f}" departSpeed="20" insertionChecks="none"/>')  # fmt: skip
+    return "\n".join([*lines, "</routes>"]) + "\n"
+
+
+def bench(n: int, steps: int) -> dict:
+    from safelane import Params
+    from safelane.traffic.demand import Demand, net_file
+    from safelane.traffic.equipped import LaneChanges
+    from safelane.traffic.shielding import decide
+    from safelane.traffic.world import TrafficWorld
+
+    prm = Params()
+    with TrafficWorld(Demand(p=0.5, seconds=600, warmup_s=1), prm, net=net_file(long=True), routes=routes(n),
+                      ssm=False) as world:  # fmt: skip
+        world.step()
+        fleet = world.read()
+        t_sumo = t_read = 0.0
+        for _ in range(steps):
+            t0 = time.perf_counter()
+            world.step()
+            t1 = time.perf_counter()
+            fleet = world.read()
+            t_read += time.perf_counter() - t1
+            t_sumo += t1 - t0
+        changes = LaneChanges(world, prm)
+        sel = np.flatnonzero(fleet.equipped & (fleet.lane >= 1) & (fleet.lane <= 2))
+        b = len(sel)
+        changes.ids = [fleet.ids[i] for i in sel]
+        changes.g0, changes.sign = fleet.lane[sel], np.ones(b)
+        changes.ex, changes.ey, changes.evx, changes.evy = fleet.x[sel], np.zeros(b), fleet.v[sel], np.zeros(b)
+        changes.situation(fleet, fleet.x, sel, world.time())  # first call: imports
+        t0 = time.perf_counter()
+        situation, chain = changes.situation(fleet, fleet.x, sel, world.time())
+        t_sit = time.perf_counter() - t0
+        proposal = changes.planner(changes._observation(situation, fleet, chain, np.zeros(b, bool)), prm)
+        decide(changes.pool, situation, proposal, np.zeros(0, np.int64), b)  # init + first step
+        t0 = time.perf_counter()
+        decide(changes.pool, situation, proposal, np.arange(b), 0)
+        t_shield = time.perf_counter() - t0
+    return {"vehicles": len(fleet), "sumo_step_ms": 1e3 * t_sumo / steps, "read_ms": 1e3 * t_read / steps,
+            "situation_ms": 1e3 * t_sit, "batch": b, "shield_step_ms": 1e3 * t_shield,
+            "decisions_per_s": b / t_shield}  # fmt: skip
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--sizes", type=int, nargs="+", default=[100, 1000, 5000])
+    ap.add_argument("--steps", type=int, default=20)
+    args = ap.parse_args()
+    print(f"{'vehicles':>8} {'SUMO step ms':>12} {'read ms':>8} {'situation ms':>12} {'batch':>6} "
+          f"{'shield step ms':>14} {'decisions/s':>11}")  # fmt: skip
+    for n in args.sizes:
+        r = bench(n, args.steps)
+        print(f"{r['vehicles']:>8} {r['sumo_step_ms']:>12.2f} {r['read_ms']:>8.2f} {r['situation_ms']:>12.2f} "
+              f"{r['batch']:>6} {r['shield_step_ms']:>14.1f} {r['decisions_per_s']:>11.0f}")  # fmt: skip
+
+
+if __name__ == "__main__":
+    main()
