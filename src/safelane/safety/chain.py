@@ -23,7 +23,7 @@ from ._backend import ARRAY, FEASIBILITY_TOL_M, INF, SCALAR, jitable
 from ._checks import bool_array, check_params, finish, float_array, prepare
 
 
-def min_follow_decel(xp, slack, v_f, v_l, a_l):
+def min_follow_decel(xp, slack, v_f, v_l, a_l, tol=FEASIBILITY_TOL_M):
     """Smallest constant deceleration ``z`` keeping a follower ``slack`` metres clear of its margin.
 
     ``slack = p_l − p_f − p_m`` (> 0), follower speed ``v_f``, leader speed ``v_l``, leader braking at ``a_l``
@@ -46,38 +46,28 @@ def min_follow_decel(xp, slack, v_f, v_l, a_l):
     closing needs far beyond ``a_x_d`` (unsafe). So ``z`` is continuous as ``slack → 0`` (up to the tolerance)
     wherever the true bound is; it is ``inf`` only for pairs inside the margin beyond the tolerance.
 
-    Returns ``z`` (``inf`` when ``slack < −FEASIBILITY_TOL_M``).
+    ``tol``: that tolerance (the compiled rows pass it on; every caller uses ``FEASIBILITY_TOL_M``).
+
+    Backend-generic and compiled as it is (marked ``jitable``): one formula for NumPy arrays, floats and the kernels.
+    Every division is guarded (``xp.div``, or a divisor that cannot be zero where the quotient is used); a NumPy
+    caller that feeds extreme magnitudes (products overflowing) sets its own ``errstate``.
+
+    Returns ``z`` (``inf`` when ``slack < −tol``).
     """
-    if xp is ARRAY:
-        return _min_follow_decel_array(slack, v_f, v_l, a_l)
-    half = 0.5 * FEASIBILITY_TOL_M
-    slack = slack if slack > half else (max(slack + half, 0.0) if slack >= -FEASIBILITY_TOL_M else slack)
-    lead_stop2 = 2.0 * xp.stop_dist(v_l, a_l)  # v_l² / a_l
-    z_b = xp.div(v_f * v_f, 2.0 * slack + lead_stop2, 0.0) if v_f > 0.0 else 0.0
+    half = 0.5 * tol
+    slack = xp.where(slack > half, slack, xp.where(slack >= -tol, xp.maximum(slack + half, 0.0), slack))
+    # 2·(v_l²/(2 a_l)) = v_l²/a_l and 2·slack: the exact rescalings of the stopping distances.
+    lead_stop2 = xp.where(a_l > 0.0, xp.div(v_l * v_l, a_l, 0.0), xp.where(v_l > 0.0, INF, 0.0))
+    two_slack = 2.0 * slack
+    # The denominator is > 0 wherever slack > 0; at slack = 0 it is 0 only with the leader at rest (or v_l²
+    # underflowing), where a pair that is not closing needs 0 (a closing one takes z_A); NaN gives 0 (not > 0).
+    den = two_slack + lead_stop2
+    z_b = xp.where(den > 0.0, xp.div(v_f * v_f, den, 0.0), 0.0)
     dv = v_f - v_l
-    z_a = a_l + xp.div(dv * dv, 2.0 * slack, INF)
-    interior = (dv > 0.0) & (2.0 * slack * a_l <= v_l * dv)
+    # A zero divisor (slack taken as 0) with a closing pair: z_A is infinite.
+    z_a = a_l + xp.div(dv * dv, two_slack, INF)
+    interior = (dv > 0.0) & (two_slack * a_l <= v_l * dv)
     return xp.where(slack >= 0.0, xp.where(interior, z_a, z_b), INF)
-
-
-def _min_follow_decel_array(slack, v_f, v_l, a_l):
-    """:func:`min_follow_decel` for NumPy arrays: the same arithmetic, with the guarded divisions written as raw
-    ones under ``errstate`` and masked after (the hot path of the simulator's scans)."""
-    with np.errstate(all="ignore"):
-        half = 0.5 * FEASIBILITY_TOL_M  # the tolerance at the margin (see min_follow_decel)
-        edge = np.where(slack >= -FEASIBILITY_TOL_M, np.maximum(slack + half, 0.0), slack)
-        slack = np.where(slack > half, slack, edge)
-        # 2·(v²/(2a)) = v²/a and 2·slack are exact rescalings: the same bits as the scalar formula, fewer passes.
-        lead_stop2 = np.where(a_l > 0.0, v_l * v_l / a_l, np.where(v_l > 0.0, INF, 0.0))
-        two_slack = 2.0 * slack
-        # The denominator is > 0 wherever slack > 0; at slack = 0 it is 0 only with the leader at rest (or v_l²
-        # underflowing), where a pair that is not closing needs 0 (a closing one takes z_A), as the scalar div.
-        den = two_slack + lead_stop2
-        z_b = np.where(den > 0.0, v_f * v_f / den, 0.0)
-        dv = v_f - v_l
-        z_a = a_l + dv * dv / two_slack
-        interior = (dv > 0.0) & (two_slack * a_l <= v_l * dv)
-        return np.where(slack >= 0.0, np.where(interior, z_a, z_b), INF)
 
 
 @dataclass(frozen=True)
@@ -230,4 +220,4 @@ def _as_chain(name: str, value) -> np.ndarray:
 
 
 # The closed forms compiled into the kernels (safety/_compile.py): the same functions, evaluated row by row.
-jitable(braked_position)
+jitable(braked_position, min_follow_decel)
