@@ -274,3 +274,23 @@ def test_bad_input_names_the_field(change, field):
         blame(kw["t"], ego, other, kw["event_t"], RSS)
     assert info.value.where == field
     assert field.split(".")[-1] in str(info.value)
+
+
+def test_pair_tracker_keys_vehicles_by_id():
+    """Two vehicles, one rear-ending the ego, the other appearing late beside it: the tracker follows each by its id
+    and agrees with the trajectory form; an unknown id is NONE."""
+    from safelane.blame import PairTracker
+
+    ego, rear = rear_end_by_faster_follower()
+    beside = cruise(0.0, 20.0, y=LANE)
+    t_event = first_contact(ego, rear)
+    tracker = PairTracker(RSS)
+    for k in np.flatnonzero(T <= t_event):
+        ids = ["rear", "beside"] if T[k] >= 3.0 else ["rear"]
+        now = [Track(*(np.asarray(q)[k] if np.ndim(q) else q for q in tr)) for tr in (ego, rear, beside)]
+        others = now[1 : 1 + len(ids)]
+        tracker.observe(T[k], now[0], ids, Track(*(np.array([getattr(o, q) for o in others]) for q in Track._fields)))
+    out = tracker.verdict(["rear", "beside", "nobody"])
+    assert list(out.labels()) == ["other", "both", None]
+    assert out.blame_t[0] == pytest.approx(float(blame(T, ego, rear, t_event, RSS).blame_t))
+    assert out.blame_t[1] == pytest.approx(t_event)  # laterally safe all along: its own sample

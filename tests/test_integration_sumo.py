@@ -126,3 +126,15 @@ def test_delay_and_sensing_bounds_in_sumo(runner):
                             policy=sumo.reckless)
     paper.delay_periods = 2  # the host delays by 0.2 s; this shield assumes instant actuation
     assert paper.run_many(scenarios).collided.sum() > 0
+
+
+def test_reckless_collisions_are_blamed_on_the_ego(runner):
+    """The blame rule (safelane.blame) on SUMO's own list: the unshielded reckless ego merges into the target lane
+    without RSS's safe distance, so each of its collisions is the ego's, by the lateral clause; and the row says so."""
+    res = [runner.run(sc, shielded=False) for sc in _scenarios()[:6]]
+    hits = [c for r in res for c in r.collisions if c["collider"] == "ego"]
+    assert hits, "no collision: the scenarios are wrong"
+    assert {(c["responsible"], c["blame"], c["blame_clause"]) for c in hits} == {("ego", "collider", "lateral")}
+    assert all(c["blame_t"] < c["t"] for c in hits)
+    assert {r.collision_blame for r in res if r.collided} == {"ego"}
+    assert {r.results_row("reckless")["collision_blame"] for r in res} <= {"ego", ""}

@@ -316,3 +316,36 @@ def blame(t, ego: Track, other: Track, event_t, rss: RssParams = _DEFAULT_RSS, *
             state = update(state, tt[..., k], Track(*(q[..., k] for q in e)), Track(*(q[..., k] for q in o)), rss,
                            min_lon_gap_m=min_lon_gap_m, min_lat_gap_m=min_lat_gap_m, active=active)  # fmt: skip
     return verdict(state, rss, event=np.isfinite(event_t))
+
+
+class PairTracker:
+    """The running rule for one ego against a changing set of other vehicles, keyed by the host's ids (vehicles come
+    and go; one that is not observed in a sample is forgotten). For hosts that step one sample at a time (highway-env,
+    SUMO): :meth:`observe` every sample, :meth:`verdict` for the vehicles of an event."""
+
+    def __init__(self, rss: RssParams = _DEFAULT_RSS, *, min_lon_gap_m: float = 0.0, min_lat_gap_m: float = 0.0):
+        self.rss, self.min_lon_gap_m, self.min_lat_gap_m = rss, min_lon_gap_m, min_lat_gap_m
+        self.ids: list = []
+        self.state = start((0,))
+
+    def observe(self, t: float, ego: Track, ids, others: Track) -> None:
+        """One sample at time ``t``: the ego (scalars) and the other vehicles ``ids`` (``others``: ``(n,)`` arrays)."""
+        ids = list(ids)
+        row = {key: i for i, key in enumerate(self.ids)}
+        rows = np.array([row.get(key, -1) for key in ids], np.int64)
+        known = rows >= 0
+        prior = start((len(ids),))
+        if known.any():
+            prior = self.state.take(np.where(known, rows, 0)).where(known, prior)
+        self.state = update(prior, t, ego, others, self.rss, min_lon_gap_m=self.min_lon_gap_m,
+                            min_lat_gap_m=self.min_lat_gap_m)  # fmt: skip
+        self.ids = ids
+
+    def verdict(self, ids) -> Blame:
+        """The rule for an event with each of ``ids`` at the latest sample (:data:`NONE` for an id not observed)."""
+        row = {key: i for i, key in enumerate(self.ids)}
+        rows = np.array([row.get(key, -1) for key in ids], np.int64)
+        if not len(self.ids):
+            return verdict(start((len(rows),)), self.rss)
+        out = verdict(self.state.take(np.where(rows >= 0, rows, 0)), self.rss, event=rows >= 0)
+        return out

@@ -27,11 +27,21 @@ try:
 except ImportError as exc:  # pragma: no cover - exercised only without the extra
     raise ImportError(f"safelane.integrations.highway needs gymnasium and highway-env: {INSTALL_HINT}") from exc
 
+from ..baselines.rss import RssParams  # noqa: E402
+from ..blame import PairTracker  # noqa: E402
 from ..params import Params  # noqa: E402
 from ..shield import ABORT, COMPLETED, HESITATE, PROCEED, LaneFrame, Shield, ShieldConfig, Situation  # noqa: E402
 from ..shield.command import Command, InFlight  # noqa: E402
 from ..v2x import MAX_AGE_S, SensedVehicle, V2XMessage, leader_arrays  # noqa: E402
-from .highway_road import check_frequencies, check_road, classify_crash, longitudinal, own_lane_leaders  # noqa: E402
+from .highway_road import (  # noqa: E402
+    blame_tracks,
+    check_frequencies,
+    check_road,
+    classify_crash,
+    crash_partner,
+    longitudinal,
+    own_lane_leaders,
+)
 from .highway_vehicles import (  # noqa: E402
     NoCutInIDMVehicle,
     PointMassVehicle,
@@ -119,6 +129,11 @@ class SafeLaneShield(gym.Wrapper, gym.utils.RecordConstructorArgs):
     was not yet wholly in the target lane, another vehicle began moving into the target lane or the ego's original
     lane beside the ego or between it and its nearest leader there — :func:`~.highway_vehicles.cuts_in`: outside the
     shield's assumptions) and, on a crash, ``crash`` (:func:`classify_crash`); highway-env's ``crashed`` is kept.
+    ``crash_blame`` (every step): who is responsible for the ego's crash — ``"ego"``, ``"other"``, ``"both"``, or
+    ``None`` without a crash — by :mod:`safelane.blame`'s rule on the states of the ego and its crash partner (the
+    nearest other vehicle highway-env flags ``crashed``), followed every period since the reset; ``crash`` then adds
+    the rule's ``blame_clause`` and ``blame_t``. ``blame_rss``: the rule's RSS parameters (default
+    ``RssParams.matched(params)``: this world's limits, ρ one period).
     The manoeuvre is published as ``road.safelane_manoeuvre`` for :class:`~.highway_vehicles.NoCutInIDMVehicle`
     (:data:`NO_CUT_IN_CONFIG`).
     """
@@ -126,11 +141,11 @@ class SafeLaneShield(gym.Wrapper, gym.utils.RecordConstructorArgs):
     def __init__(self, env, shield: bool = True, variant: str | None = None, params: Params | None = None,
                  config: ShieldConfig | None = None, target: str = "auto", connected: bool = False,
                  promise: float = 0.5, own_leaders: int = 1, sensing=None, v2x_loss: float = 0.0,
-                 v2x_seed: int | None = None):  # fmt: skip
+                 v2x_seed: int | None = None, blame_rss: RssParams | None = None):  # fmt: skip
         gym.utils.RecordConstructorArgs.__init__(self, shield=shield, variant=variant, params=params, config=config,
                                                  target=target, connected=connected, promise=promise,
                                                  own_leaders=own_leaders, sensing=sensing, v2x_loss=v2x_loss,
-                                                 v2x_seed=v2x_seed)  # fmt: skip
+                                                 v2x_seed=v2x_seed, blame_rss=blame_rss)  # fmt: skip
         gym.Wrapper.__init__(self, env)
         if target not in ("left", "right", "auto"):
             raise ValueError(f"target must be 'left', 'right' or 'auto'; got {target!r}")
@@ -158,6 +173,9 @@ class SafeLaneShield(gym.Wrapper, gym.utils.RecordConstructorArgs):
         self.inbox: dict = {}  # the latest message received from each connected vehicle (id(vehicle) -> message)
         self.chain_v2x = None  # the last LeaderChain (safelane.v2x.leader_arrays), with connected=True
         self.n_own = int(own_leaders)
+        self.blame_rss = blame_rss or RssParams.matched(prm)
+        self.blame = PairTracker(self.blame_rss)
+        self.crash_blame: tuple | None = None  # (responsible, clause, blame time) of the ego's first crash
         self.action_space = gym.spaces.Box(np.array([-prm.a_x_d, -prm.a_y_m], np.float32),
                                            np.array([prm.a_x_a, prm.a_y_m], np.float32), dtype=np.float32)  # fmt: skip
         self.ego: PointMassVehicle | None = None
@@ -265,6 +283,18 @@ class SafeLaneShield(gym.Wrapper, gym.utils.RecordConstructorArgs):
             situation = dataclasses.replace(situation, v2x_stale=np.array([stale]))
         return situation
 
+    def reset_blame(self) -> None:
+        """Start the blame rule afresh from the road as it is now (reset does; a test that rebuilds the scene after
+        reset calls it too)."""
+        self.blame, self.crash_blame = PairTracker(self.blame_rss), None
+        self._observe_blame()
+
+    def _observe_blame(self) -> None:
+        """One sample of the ego against every other road vehicle for the blame rule (:mod:`safelane.blame`)."""
+        others = [v for v in self.env.unwrapped.road.vehicles if v is not self.ego]
+        ego, tracks = blame_tracks(self.ego, others)
+        self.blame.observe(self.t, ego, [id(v) for v in others], tracks)
+
     # --- Gymnasium ------------------------------------------------------------------------------------------------
     def reset(self, *, seed=None, options=None):
         obs, info = self.env.reset(seed=seed, options=options)
@@ -294,6 +324,7 @@ class SafeLaneShield(gym.Wrapper, gym.utils.RecordConstructorArgs):
         # until the ego lies wholly in the target lane: read by NoCutInIDMVehicle, and for info["cut_in"]
         u.road.safelane_manoeuvre = (self.ego, (self.original_lane, self.target_lane))
         self.shield.reset(self.situation())
+        self.reset_blame()
         self.in_flight = InFlight.idle(1, self.delay_periods)  # the commands acting at the start: cruise
         obs = u.observation_type.observe()
         info.update(original_lane=lane[2], target_lane=tid, crashed=bool(self.ego.crashed))
@@ -352,14 +383,23 @@ class SafeLaneShield(gym.Wrapper, gym.utils.RecordConstructorArgs):
                 rear is not None and ego.position[0] - rear.position[0] < prm.p_m)  # fmt: skip
             if close:
                 cost, self.costed = 1.0, True
+        self._observe_blame()
+        if ego.crashed and self.crash_blame is None:
+            partner = crash_partner(ego, road)
+            if partner is not None:
+                b = self.blame.verdict([id(partner)])
+                self.crash_blame = (b.labels()[0], b.clause_names()[0], float(b.blame_t[0]))
         info.update(
             shield=name, intervened=intervened, nominal_action=a.copy(),
             executed_action=np.array([(ego.speed - vx0) / prm.dt, (vy1 - vy0) / prm.dt]), reason=reason, cost=cost,
             completed=self.completed, cut_in=self.cut_in, crashed=bool(ego.crashed),
+            crash_blame=self.crash_blame[0] if ego.crashed and self.crash_blame else None,
         )  # fmt: skip
         if ego.crashed:
             info["crash"] = classify_crash(ego, self.env.unwrapped.road, self.roles, frame, prm, self.original_lane,
                                            self.target_lane)  # fmt: skip
+            if self.crash_blame:
+                info["crash"].update(blame_clause=self.crash_blame[1], blame_t=round(self.crash_blame[2], 3))
         return obs, reward, terminated, truncated, info
 
 

@@ -1,6 +1,7 @@
 """What :class:`~.highway.SafeLaneShield` reads from a highway-env road: whether the host fits the shield (its
 frequencies, straight lanes of the right width), a vehicle's longitudinal state, the ego's own-lane leaders, and,
-on a crash, who hit whom (:func:`classify_crash`). Needs highway-env (extra ``highway``).
+on a crash, who hit whom (:func:`classify_crash`, :func:`crash_partner`) and the vehicles' states for the blame rule
+(:func:`blame_tracks`). Needs highway-env (extra ``highway``).
 """
 
 from __future__ import annotations
@@ -66,6 +67,29 @@ def own_lane_leaders(road, ego, lane_index, k: int = 1) -> tuple[np.ndarray, np.
     return x, v, found
 
 
+def crash_partner(ego, road):
+    """The ego's collision partner: the nearest other vehicle with highway-env's ``crashed`` flag (``None``: none)."""
+    others = [v for v in road.vehicles if v is not ego and getattr(v, "crashed", False)]
+    if not others:
+        return None
+    return min(others, key=lambda v: float(np.linalg.norm(v.position - ego.position)))
+
+
+def blame_tracks(ego, vehicles):
+    """The ego and ``vehicles`` as :class:`safelane.blame.Track` s in highway-env's road frame (``x`` along the
+    straight road, ``y`` to the right: the blame rule is symmetric in ``y``), velocities from highway-env's
+    ``velocity`` (the point-mass ego's is ``(speed, lateral_speed)``)."""
+    from ..blame import Track
+
+    def track(vs):
+        vel = np.array([v.velocity for v in vs], float).reshape(-1, 2)
+        pos = np.array([v.position for v in vs], float).reshape(-1, 2)
+        size = np.array([(v.LENGTH, v.WIDTH) for v in vs], float).reshape(-1, 2)
+        return Track(pos[:, 0], pos[:, 1], vel[:, 0], vel[:, 1], size[:, 0], size[:, 1])
+
+    return Track(*(q[0] for q in track([ego]))), track(vehicles)
+
+
 def classify_crash(ego, road, roles: dict, frame: LaneFrame, params: Params, original_lane, target_lane) -> dict:
     """Who hit whom, where: the ego's collision partner (the nearest crashed vehicle), its role (``F``, ``L1``,
     ``L0``, … from ``roles``: vehicle id → name, else ``other``), its lane (``target``, ``original``, ``other``),
@@ -75,10 +99,9 @@ def classify_crash(ego, road, roles: dict, frame: LaneFrame, params: Params, ori
     y = float(y)
     phase = "original lane" if y <= params.y_safe else ("target lane" if y >= params.lane_width - params.y_safe
                                                           else "straddling")  # fmt: skip
-    others = [v for v in road.vehicles if v is not ego and getattr(v, "crashed", False)]
-    if not others:
+    partner = crash_partner(ego, road)
+    if partner is None:
         return {"partner": "none", "lane": "-", "ego_phase": phase, "kind": "unknown"}
-    partner = min(others, key=lambda v: float(np.linalg.norm(v.position - ego.position)))
     lane_id = partner.lane_index[2] if partner.lane_index else None
     lane = "target" if lane_id == target_lane[2] else ("original" if lane_id == original_lane[2] else "other")
     dx = float(partner.position[0] - ego.position[0])

@@ -36,10 +36,11 @@ import numpy as np
 
 from .. import v2x
 from .._motion import advance
+from ..baselines.rss import RssParams
 from ..params import Params
 from ..shield import ABORT, HESITATE, PROCEED, Shield, ShieldConfig, Situation
 from ..shield.command import Command, InFlight
-from .sumo_episode import EpisodeResult, SumoScenario, scenarios_from_batch, sumo_scenarios
+from .sumo_episode import EpisodeResult, StateLog, SumoScenario, scenarios_from_batch, sumo_scenarios
 from .sumo_traffic import TRAFFIC_MODES, TargetLaneTraffic, V2XLink, profile_accel
 from .sumo_world import SumoWorld, VehicleSpec, libsumo_available, net_file, overlaps
 
@@ -199,6 +200,9 @@ class SumoRunner:
         if sc.own_x is not None:
             vehicles.append(VehicleSpec("L0", 0, ROAD_X0 + sc.own_x, sc.own_v))
         world.load(vehicles, frozenset(slot_ids[i] for i in traffic.sumo_driven))
+        # The blame rule's record (safelane.blame), with RSS at this world's limits (rho one period).
+        self.log = StateLog([veh.vid for veh in vehicles], prm.vehicle_length, prm.vehicle_width,
+                            RssParams.matched(prm))  # fmt: skip
         origin, sign = world.lane_y[0], (1.0 if world.lane_y[1] > world.lane_y[0] else -1.0)
         link = V2XLink(prm, seed=self.seed * 1_000_003 + sc.scenario_id, **self.v2x)
         config = self.config if shielded else self.config.model_copy(update={"enabled": False})
@@ -277,7 +281,7 @@ class SumoRunner:
                 if not np.isfinite(acc[i]):
                     last_acc[vid] = float((v_new[i] - vs[i]) / dt)
             traffic.observe(vs, v_new)
-            self._referee(res, t + dt, ey, origin, sign, vehicles)
+            self._referee(res, t + dt, ey, origin, sign, vehicles, evy)
             if res.collided and self.stop_on_collision:
                 break
         res.completed = completed
@@ -345,16 +349,19 @@ class SumoRunner:
         stale = bool(chain.stale_ids) or (isinstance(f, v2x.V2XMessage) and not f_conn)
         return dataclasses.replace(situation, v2x_stale=np.array([stale]))
 
-    def _referee(self, res: EpisodeResult, t, ey, origin, sign, vehicles) -> None:
+    def _referee(self, res: EpisodeResult, t, ey, origin, sign, vehicles, evy=0.0) -> None:
         prm = self.params
         phase = "original lane" if ey <= prm.y_safe else ("straddling" if ey < prm.lane_width - prm.y_safe
                                                           else "target lane")  # fmt: skip
-        for c in self.world.collisions():
-            res.collided = True
-            res.collisions.append({**c, "t": round(t, 3), "phase": phase, "ego_y": ey})
         ids = [veh.vid for veh in vehicles]
         pos = [self.world.position(vid) for vid in ids]
         x, y = [p[0] for p in pos], [p[1] for p in pos]
+        speed = [self.world.api.vehicle.getSpeed(vid) for vid in ids]
+        self.log.record(t, x, y, speed, [sign * evy if vid == "ego" else np.nan for vid in ids])
+        new = [{**c, "t": round(t, 3), "phase": phase, "ego_y": ey} for c in self.world.collisions()]
+        self.log.classify(new)
+        res.collided = res.collided or bool(new)
+        res.collisions.extend(new)
         pairs = [(0, j) for j in range(1, len(ids))]
         same_lane = sorted(range(1, len(ids)), key=lambda i: (vehicles[i].lane, x[i]))
         pairs += [(i, j) for i, j in itertools.pairwise(same_lane) if vehicles[i].lane == vehicles[j].lane]

@@ -1,7 +1,7 @@
 """What a SUMO episode takes and gives (:mod:`safelane.integrations.sumo`): the scenario of one lane change
 (:class:`SumoScenario`, built from the built-in simulator's sampler) and its outcome (:class:`EpisodeResult`: SUMO's
-collision list as the referee, our geometric cross-check, what the shield did), in the built-in simulator's table
-layout. Pure data: nothing here needs libsumo.
+collision list as the referee, our geometric cross-check, what the shield did, who is responsible for each collision:
+:class:`StateLog`), in the built-in simulator's table layout. Pure data: nothing here needs libsumo.
 """
 
 from __future__ import annotations
@@ -11,6 +11,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from ..baselines.rss import RssParams
+from ..blame import Track, blame
 from ..shield.monitor import BREACH_KINDS
 
 
@@ -98,6 +100,47 @@ def sumo_scenarios(
     return out
 
 
+class StateLog:
+    """Every vehicle's state at every step of an episode, and the blame rule (:mod:`safelane.blame`) on SUMO's
+    collision list from it: each entry gets ``blame`` (``"collider"``, ``"victim"`` or ``"both"``), ``responsible``
+    (that vehicle's id, or ``"both"``), ``blame_clause`` and ``blame_t``. SUMO gives a vehicle's speed along its lane
+    but not its lateral speed: lateral speeds are differenced from consecutive positions (0 at the first sample),
+    except where the runner knows them (the ego's, exact)."""
+
+    def __init__(self, ids, length: float, width: float, rss: RssParams):
+        self.ids, self.length, self.width, self.rss = list(ids), float(length), float(width), rss
+        self.t: list[float] = []
+        self.rows: list[np.ndarray] = []  # per sample: (4, n) x, y, vx, vy
+
+    def record(self, t: float, x, y, vx, vy=None) -> None:
+        """One sample (arrays in ``ids`` order); ``vy``: NaN where unknown (then differenced)."""
+        x, y, vx = (np.asarray(q, float) for q in (x, y, vx))
+        diff = (y - self.rows[-1][1]) / (t - self.t[-1]) if self.rows else np.zeros_like(y)
+        vy = diff if vy is None else np.where(np.isnan(np.asarray(vy, float)), diff, np.asarray(vy, float))
+        self.t.append(float(t))
+        self.rows.append(np.stack([x, y, vx, vy]))
+
+    def classify(self, collisions: list[dict]) -> None:
+        """Add the rule's verdict to each of SUMO's collision entries (``collider``, ``victim``, ``t``) in place,
+        all entries in one batch."""
+        known = [c for c in collisions if c.get("collider") in self.ids and c.get("victim") in self.ids]
+        if not known or not self.rows:
+            return
+        data = np.stack(self.rows, -1)  # (4, n, T)
+        # The ego's slot is the ego where it takes part (so "ego" reads as the ego), else the collider.
+        first = [c["victim"] if c["victim"] == "ego" else c["collider"] for c in known]
+        second = [c["collider"] if c["victim"] == "ego" else c["victim"] for c in known]
+        a, b = (np.array([self.ids.index(v) for v in who]) for who in (first, second))
+        track = lambda i: Track(*data[:, i], self.length, self.width)  # noqa: E731
+        out = blame(np.array(self.t), track(a), track(b), np.array([c["t"] for c in known], float), self.rss)
+        for c, f, s, who, clause, t_b in zip(known, first, second, out.labels(), out.clause_names(), out.blame_t,
+                                             strict=True):  # fmt: skip
+            responsible = {"ego": f, "other": s, "both": "both"}.get(who, "")
+            role = "both" if who == "both" else ("collider" if responsible == c["collider"] else "victim")
+            c.update(blame=role if who else "", responsible=responsible, blame_clause=clause,
+                     blame_t=round(float(t_b), 3) if np.isfinite(t_b) else np.nan)  # fmt: skip
+
+
 @dataclass
 class EpisodeResult:
     """One episode: what happened by SUMO's list (``collided``, ``collisions``), our geometric cross-check
@@ -137,6 +180,15 @@ class EpisodeResult:
     def success(self) -> bool:
         return self.completed and not self.collided
 
+    @property
+    def collision_blame(self) -> str:
+        """Who is responsible for the ego's first collision by the blame rule (:class:`StateLog`): ``"ego"``,
+        ``"other"``, ``"both"``, or ``""`` without one."""
+        for c in self.collisions:
+            if "ego" in (c.get("collider"), c.get("victim")) and c.get("responsible"):
+                return {"ego": "ego", "both": "both"}.get(c["responsible"], "other")
+        return ""
+
     def row(self) -> dict:
         first = self.collisions[0] if self.collisions else {}
         return {
@@ -145,9 +197,14 @@ class EpisodeResult:
             "completed": self.completed, "success": self.success, "collided": self.collided,
             "collider": first.get("collider", ""), "victim": first.get("victim", ""), "lane": first.get("lane", ""),
             "phase": first.get("phase", ""), "t_collision_s": first.get("t", np.nan),
+            "collision_blame": self.collision_blame, "collision_blame_clause": self._first_ego("blame_clause"),
             "geometric_overlap": bool(self.overlaps), "n_hesitate": self.n_hesitate, "n_abort": self.n_abort,
             "breach": self.breach, "promise_violations": self.promise_violations, "wall_s": self.wall_s,
         }  # fmt: skip
+
+    def _first_ego(self, key: str):
+        hits = [c for c in self.collisions if "ego" in (c.get("collider"), c.get("victim"))]
+        return hits[0].get(key, "") if hits else ""
 
     def results_row(self, planner: str) -> dict:
         """The row in the built-in simulator's results table layout (``safelane.sim.results.results_table``), for
@@ -160,6 +217,7 @@ class EpisodeResult:
         return {
             "scenario_id": self.scenario_id, "planner": planner, "n_leaders": self.n_leaders, "decel": self.decel,
             "p_v": 0.0, "success": self.completed and not ego_hit, "collision": bool(ego_hit),
+            "collision_blame": self.collision_blame, "collision_blame_clause": self._first_ego("blame_clause"),
             "leader_collision": bool(others), "completed": self.completed,
             "completion_time_s": self.completion_time_s, "n_proceed": self.n_proceed, "n_hesitate": self.n_hesitate,
             "n_abort": self.n_abort, "follower_connected": self.f_connected, "follower_aggressive": self.f_aggressive,
