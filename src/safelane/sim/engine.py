@@ -19,6 +19,7 @@ from ..parallel import Backend, as_backend, map_chunks
 from ..params import Params
 from ..planners.base import ExpertPlanner, NominalPlanner
 from . import _fused as fused
+from . import blame_log
 from ._alloc import tune_allocator
 from .config import SimConfig
 from .inputs import cell_rng, check_cell_args, check_settings, resolve
@@ -46,6 +47,7 @@ def simulate(
     trace_limit: int = 16,
     traffic=None,
     workers: int | Backend = 1,
+    blame: bool = False,
 ) -> SimResult:
     """Simulate one experiment cell of the paper's sampler.
 
@@ -53,8 +55,8 @@ def simulate(
     nominal planner where those are not given; ``nominal`` takes a registered name (``"mlp"``) or the path of a
     model file (``"model.npz"`` as ``safelane train`` writes it, or ``.onnx``). The cell's
     scenarios come from :func:`~safelane.sim.inputs.cell_rng`, as in ``safelane reproduce``: the same cell and
-    seed give the same numbers as the report. Bad arguments raise ``InputError`` naming the argument. ``traffic``
-    and ``workers``: as for :func:`simulate_batch`.
+    seed give the same numbers as the report. Bad arguments raise ``InputError`` naming the argument. ``traffic``,
+    ``workers`` and ``blame``: as for :func:`simulate_batch`.
 
     Example: ``simulate("CV_all", n_leaders=5, decel=5.0, samples=1000, seed=0).summary()``.
     """
@@ -74,6 +76,7 @@ def simulate(
         trace_limit=trace_limit,
         traffic=traffic,
         workers=workers,
+        blame=blame,
     )
     result.preset, result.nominal = labels["preset"], labels["nominal"]  # named in result.summary()
     return result
@@ -92,6 +95,7 @@ def simulate_batch(
     trace_limit: int = 16,
     workers: int | Backend = 1,
     traffic=None,
+    blame: bool = False,
 ) -> SimResult:
     """Run every scenario of ``batch`` in closed loop; see :class:`SimResult`.
 
@@ -101,7 +105,10 @@ def simulate_batch(
     recorded in this process only: with them the batch runs here). ``traffic``: the target-lane traffic — a
     registered name (``safelane.sim.traffic.TRAFFIC_MODELS``), a :class:`~safelane.sim.traffic.TrafficModel`, or
     :class:`~safelane.sim.traffic.TrafficHooks` (the paper's model with some wishes replaced); with workers it must be
-    picklable and index per-scenario data by ``scenario_id``.
+    picklable and index per-scenario data by ``scenario_id``. ``blame``: add who is responsible for each scenario's
+    first collision and first ``p_m`` violation (:mod:`.blame_log`: ``collision_blame``, ``pm_blame``, their clause,
+    blame time and partner; ``summary()`` then reports the ego's share beside each total). The compiled loop does not
+    record it: its rows with an event are run again period by period (the same scenarios, the same bits).
     """
     prm = params or Params()
     cfg = config or SimConfig()
@@ -113,12 +120,15 @@ def simulate_batch(
     if not (trace or record_observations) and not backend.in_process:
         chunks = min(backend.parallelism(), len(batch) // 2)
         if chunks > 1 or (chunks == 1 and backend.name == "ray"):  # Ray: the driver may be a laptop
-            return _simulate_parallel(batch, seed, prm, cfg, nominal, backend, chunks, traffic)
-    sim = ClosedLoop(batch, seed, prm, cfg, nominal, traffic)
+            return _simulate_parallel(batch, seed, prm, cfg, nominal, backend, chunks, traffic, blame)
+    sim = ClosedLoop(batch, seed, prm, cfg, nominal, traffic, blame=blame or None)
     n_steps = round(cfg.horizon_s / prm.dt)
     why = fused.reasons(batch, cfg, nominal, traffic, trace, record_observations)
     if not why:  # the whole run compiled
-        return SimResult(table=results_table(batch, fused.run(sim, n_steps, progress)), engine="compiled loop")
+        table = results_table(batch, fused.run(sim, n_steps, progress))
+        if blame:
+            table = _blame_again(table, ClosedLoop(batch, seed, prm, cfg, nominal, traffic, blame=True), n_steps)
+        return SimResult(table=table, engine="compiled loop")
     if os.environ.get("SAFELANE_REQUIRE_COMPILED", "") == "1":
         raise InputError(f"SAFELANE_REQUIRE_COMPILED=1 but this run is not compiled: {'; '.join(why)}",
                          "SAFELANE_REQUIRE_COMPILED")  # fmt: skip
@@ -145,13 +155,37 @@ def simulate_batch(
                      engine_reasons=tuple(why))  # fmt: skip
 
 
+def _blame_again(table: pd.DataFrame, sim: ClosedLoop, n_steps: int) -> pd.DataFrame:
+    """``table`` (the compiled loop's) with the blame columns: the rows with a collision or a ``p_m`` violation run
+    again period by period with the blame rule's followers (``sim``: the whole batch, ``blame=True``); every other
+    row has no event to blame. The rerun must reproduce the compiled loop's outcomes."""
+    rows = np.flatnonzero(table["collision"].to_numpy() | table["safety_violation"].to_numpy())
+    out = table.assign(**blame_log.no_events(len(table)))
+    if rows.size == 0:
+        return out
+    again = ClosedLoop(sim.b.take(rows), sim.seed, sim.prm, sim.cfg, sim.nominal, None, blame=sim.blame)
+    state = again.initial_state()
+    with threadpool_limits(limits=1, user_api="blas"):
+        for _ in range(n_steps):
+            state = again.step(state)[0]
+    part = results_table(again.b, again.finish(state))
+    for col in ("collision", "safety_violation"):
+        if not np.array_equal(part[col].to_numpy(), table[col].to_numpy()[rows]):
+            raise RuntimeError(f"the period-by-period rerun for the blame columns disagrees with the compiled loop on "
+                               f"{col!r}: a bug (the two engines must give the same bits)")  # fmt: skip
+    for col in blame_log.no_events(0):
+        out.loc[rows, col] = part[col].to_numpy()
+    return out
+
+
 def _simulate_chunk(args) -> pd.DataFrame:
-    batch, seed, prm, cfg, nominal, traffic = args
-    return simulate_batch(batch, seed, params=prm, config=cfg, nominal=nominal, traffic=traffic).table
+    batch, seed, prm, cfg, nominal, traffic, blame = args
+    return simulate_batch(batch, seed, params=prm, config=cfg, nominal=nominal, traffic=traffic, blame=blame).table
 
 
-def _simulate_parallel(batch, seed, prm, cfg, nominal, backend: Backend, chunks: int, traffic=None) -> SimResult:
+def _simulate_parallel(batch, seed, prm, cfg, nominal, backend: Backend, chunks: int, traffic=None,
+                       blame: bool = False) -> SimResult:  # fmt: skip
     parts = np.array_split(np.arange(len(batch)), chunks)
-    jobs = [(batch.take(rows), seed, prm, cfg, nominal, traffic) for rows in parts]
+    jobs = [(batch.take(rows), seed, prm, cfg, nominal, traffic, blame) for rows in parts]
     tables = map_chunks(_simulate_chunk, jobs, backend)
     return SimResult(table=pd.concat(tables, ignore_index=True))

@@ -10,6 +10,7 @@ import pandas as pd
 from ..planners.base import Observation
 from ..planners.variants import VARIANT_NAMES
 from ..shield.monitor import BREACH_KINDS
+from . import blame_log
 from .scenario import ScenarioBatch
 
 
@@ -37,10 +38,23 @@ class SimResult:
         from .metrics import summarize
 
         out = summarize(self.table)
+        if "collision_blame" in self.table.columns:  # recorded (simulate(..., blame=True)): beside each total
+            _ego_responsible(self.table, out)
         if self.nominal is not None:
             out.insert(0, "nominal", self.nominal)
             out.insert(0, "preset", self.preset)
         return out
+
+
+def _ego_responsible(table: pd.DataFrame, out: pd.DataFrame) -> None:
+    """Insert ``collision_ego_rate`` / ``safety_violation_ego_rate`` (the share of the cell's scenarios whose first
+    collision / ``p_m`` violation the blame rule puts on the ego, alone or with the other) after each total's
+    interval, in ``out``'s cell order."""
+    by = [c for c in ("planner", "n_leaders", "decel", "p_v") if c in table.columns]
+    for total, blamed in (("collision", "collision_blame"), ("safety_violation", "pm_blame")):
+        ego = table[blamed].isin(["ego", "both"]).groupby([table[c] for c in by], sort=False).mean()
+        rate = out.set_index(by).index.map(ego.to_dict()) if len(by) > 1 else out[by[0]].map(ego)
+        out.insert(out.columns.get_loc(f"{total}_hi") + 1, f"{total}_ego_rate", np.asarray(rate, float))
 
 
 def results_table(b: ScenarioBatch, s) -> pd.DataFrame:
@@ -78,6 +92,7 @@ def results_table(b: ScenarioBatch, s) -> pd.DataFrame:
             **{f"breach_{kind}": s.breach.flags[:, i] for i, kind in enumerate(BREACH_KINDS)},
             "initial_safe": s.initial_safe,
             **_own_lane_columns(s),
+            **({} if getattr(s, "blame", None) is None else blame_log.columns(s.blame)),
         }
     )
 

@@ -24,6 +24,7 @@ from ..shield import ABORT, HESITATE, PROCEED, ShieldState, Situation
 from ..shield import core as shield
 from ..shield.command import Command, InFlight
 from ..shield.realworld import delay_periods
+from . import blame_log
 from .behaviours import FAST_MIN_ELEMENTS, traffic_kernel
 from .checks import ego_checks, lane_checks, lane_pairs
 from .config import SimConfig
@@ -65,6 +66,7 @@ class SimState:
     min_gap_l0: np.ndarray | None = None
     in_flight: InFlight | None = None  # commands issued but not acting yet (actuation delay), oldest first
     initial_safe: np.ndarray | None = None  # the shield's initial plan is a safe evasion (inside the assumptions)
+    blame: blame_log.SimBlame | None = None  # who is responsible for the first events (None: not recorded)
 
     @property
     def belief(self):
@@ -90,6 +92,7 @@ class ClosedLoop:
         cfg: SimConfig,
         nominal: NominalPlanner,
         traffic=None,
+        blame=None,
     ):
         if cfg.own_lane:
             batch = with_own_lane(batch, seed, cfg, prm)
@@ -99,6 +102,8 @@ class ClosedLoop:
             batch, **{f.name: _columns(getattr(batch, f.name)) for f in dataclasses.fields(batch)}
         )
         self.b, self.seed, self.prm, self.cfg, self.nominal = batch, seed, prm, cfg, nominal
+        # The blame rule's followers (sim/blame_log.py): None off, True with RssParams.matched(prm), or RssParams.
+        self.blame = blame
         self.traffic_step = resolve_traffic(traffic).bind(batch, seed, prm, cfg)
         self.uses_chain = np.array([VARIANTS[name].uses_chain for name in VARIANT_NAMES])[batch.variant]
         self.shield_config = cfg.shield
@@ -159,7 +164,14 @@ class ClosedLoop:
             l0_violated=None if l0 is None else np.zeros(n, bool),
             min_gap_l0=None if l0 is None else np.full(n, np.inf),
             in_flight=in_flight,
+            blame=self._blame_start(ego, x, v, l0),
         )
+
+    def _blame_start(self, ego, x, v, l0):
+        """The blame rule's followers after the first sample (``None`` where blame is not recorded)."""
+        if not self.blame:
+            return None
+        return blame_log.begin(self.b, self.prm, None if self.blame is True else self.blame, ego, x, v, l0)
 
     def situation(self, t: float, ego, x, v, link: Link | None, f_speed_observed, l0=None) -> Situation:
         """What the ego knows: the true states with perfect V2X, else its view through the staleness fallback. A
@@ -278,6 +290,8 @@ class ClosedLoop:
         )
         if s.l0 is not None:
             new = self._own_lane(s, new, lon, lat, plan)
+        if s.blame is not None:
+            new = dataclasses.replace(new, blame=blame_log.step(s.blame, s, new, b, prm))
         _check_finite(new, b)
         return new, obs, behaviour
 
