@@ -1,9 +1,8 @@
 """Optional compiled kernel of the assumption monitor's period check (:func:`~.monitor.observe_breaches`; numba,
 extra ``fast``): loops and indexing only. Per scenario it calls the monitor's own comparisons, compiled as they are
 (:func:`~.monitor.braked_harder` for every chain vehicle at its bound and for L1 at the held plan's deceleration,
-:func:`~.monitor.pushed_harder` for F at its responsible limit, whose position ``_motion.advance`` gives through its
-compiled row ``_fast_responsible._advance``), so the flags and times are the NumPy path's
-(``tests/test_fast_monitor.py``)."""
+:func:`~.monitor.pushed_harder` for F at its responsible limit), compiled on the float backend ``SCALAR``, so the
+flags and times are the NumPy path's (``tests/test_fast_monitor.py``)."""
 
 from __future__ import annotations
 
@@ -14,7 +13,6 @@ from numba import types
 from ..safety import _compile
 from ..safety._backend import SCALAR
 from ..safety._fast_base import announce_compile, row_function
-from ..safety._fast_responsible import _advance
 from .monitor import BREACH_KINDS, TOL_M, Breach, braked_harder, pushed_harder
 
 _compile.register_rows()
@@ -43,8 +41,7 @@ def _breach_row(chain_x, chain_v, bounds, r, now_x, nr, off, n_connected, plan_l
             elif i == n_connected:
                 last = last or behind
         l1 = active and braked_harder(SCALAR, now_x[nr, off], chain_x[r, 0], chain_v[r, 0], plan_l1_decel, dt, tol)
-    highest, _ = _advance(f_x, f_v, 0.0 if f_limit == np.inf or f_limit == -np.inf else f_limit, dt)
-    return l1, leader, last, pushed_harder(SCALAR, now_f_x, highest, f_limit, tol)
+    return l1, leader, last, pushed_harder(SCALAR, now_f_x, f_x, f_v, f_limit, dt, tol)
 
 
 @numba.njit(_SIGNATURE, cache=True, nogil=True, error_model="numpy")

@@ -24,16 +24,16 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .._motion import advance, free_max
+from .._motion import advance, advance_core
 from ..params import Params
-from ..safety._backend import ARRAY
+from ..safety._backend import ARRAY, INF, jitable
 from ..safety.chain import min_follow_decel
-from ..safety.evasion import evasion_core, fast_kernel
-from ..safety.lateral import LATERAL_TOL_M, lateral_core
+from ..safety.evasion import PARTS, evasion_parts, fast_kernel
+from ..safety.lateral import LATERAL_TOL_M
 from ..safety.longitudinal import FEASIBILITY_TOL_M
 from ..safety.own_lane import own_lane_core
 from ..safety.plan import EvasionPlan, plan_from_core
-from ..safety.responsible import pair_min_gap
+from ..safety.responsible import pair_min_gap, pair_min_gap_core
 
 #: The supervisor's choice per step (the trace's ``behaviour``); ``COMPLETED``: the lane change is done.
 PROCEED, HESITATE, ABORT, COMPLETED = 0, 1, 2, -1
@@ -71,6 +71,51 @@ def own_margin(prm: Params) -> float:
     return prm.p_m + 0.5 * FEASIBILITY_TOL_M
 
 
+def lateral_max(xp, y0, vy0, a, y_end, dt):
+    """Exact maximum over ``[0, dt]`` of ``y0 + vy0 t + a t²/2`` (one free segment, ending at ``y_end``), as
+    ``_motion.free_max``: the ends, and the vertex where it lies inside the period. Backend-generic."""
+    tau = xp.where(a < 0.0, xp.div(-vy0, a, 0.0), -1.0)
+    vertex = xp.where((tau > 0.0) & (tau < dt), y0 + 0.5 * vy0 * tau, -INF)
+    return xp.maximum(xp.maximum(y0, y_end), vertex)
+
+
+def candidate_period(xp, ego_x, ego_y, ego_vx, ego_vy, a_x, a_y, l1_x, l1_v, l1_decel, f_x, f_v, f_aggressive, prm, p_m,
+                     dt, level, lat_tol, tol):  # fmt: skip
+    """The period at the candidate ``(a_x, a_y)`` with L1 and F at their worst case (L1 braking at ``l1_decel``, F at
+    ``+a_x_a`` if aggressive, else ``−a_x_d``; exact motion stopping at rest), backend-generic. Returns
+    ``(state, period_ok, completing)``: the predicted states ``(ex, ey, evx, evy, lx, lv, fx, fv)`` at the period's
+    end; whether the period keeps both worst-case gaps (ego behind L1, F behind the ego) ``>= p_m`` to ``tol`` at
+    every instant, required only where the ego is in the conflict zone at some instant (lateral maximum above
+    ``y_safe + lat_tol``); whether the step completes (``ey >= level``). ``prm``: ``Params`` or its ``Limits``."""
+    ex, evx = advance_core(xp, ego_x, ego_vx, a_x, dt)
+    ey = ego_y + ego_vy * dt + 0.5 * a_y * dt * dt
+    evy = ego_vy + a_y * dt
+    lx, lv = advance_core(xp, l1_x, l1_v, -l1_decel, dt)
+    a_f = xp.where(f_aggressive, prm.a_x_a, -prm.a_x_d)
+    fx, fv = advance_core(xp, f_x, f_v, a_f, dt)
+    conflict = lateral_max(xp, ego_y, ego_vy, a_y, ey, dt) > prm.y_safe + lat_tol
+    gap_l = pair_min_gap_core(xp, l1_x - ego_x - p_m, ego_vx, a_x, l1_v, -l1_decel, dt)
+    gap_f = pair_min_gap_core(xp, ego_x - f_x - p_m, f_v, a_f, ego_vx, a_x, dt)
+    period_ok = xp.where(conflict, (gap_l >= -tol) & (gap_f >= -tol), True)
+    return (ex, ey, evx, evy, lx, lv, fx, fv), period_ok, ey >= level
+
+
+def candidate_row(xp, ego_x, ego_y, ego_vx, ego_vy, a_x, a_y, l1_x, l1_v, l1_decel, f_x, f_v, f_aggressive, prm, p_m,
+                  dt, level, lat_tol, tol):  # fmt: skip
+    """The candidate check without an own-lane leader, backend-generic: :func:`candidate_period`, then the evasion
+    check with its plan from the predicted state (:func:`~safelane.safety.evasion.evasion_parts`, margins ``p_m``).
+    Returns ``(state, period_ok, completing, evasion)``, ``evasion`` as ``evasion_parts`` returns it. The one source
+    of the check: :func:`check_candidate` evaluates it on NumPy arrays, :mod:`._fast_decide` compiled, row by row
+    (also inside the compiled closed loop)."""
+    state, period_ok, completing = candidate_period(
+        xp, ego_x, ego_y, ego_vx, ego_vy, a_x, a_y, l1_x, l1_v, l1_decel, f_x, f_v, f_aggressive, prm, p_m, dt,
+        level, lat_tol, tol,
+    )  # fmt: skip
+    ex, ey, evx, evy, lx, lv, fx, fv = state
+    evasion = evasion_parts(xp, ex, ey, evx, evy, lx, lv, l1_decel, fx, fv, f_aggressive, p_m, p_m, prm, tol)
+    return state, period_ok, completing, evasion
+
+
 #: :func:`check_candidate` runs the compiled kernel (:mod:`._fast_decide`) for batches of at least this many rows.
 FAST_CANDIDATE_MIN = 32
 
@@ -85,6 +130,11 @@ def candidate_kernel():
     return _fast_decide
 
 
+def completion_level(completion, prm: Params) -> float:
+    """Where a step completes under the rule ``completion`` (its ``level``, else the lane boundary)."""
+    return completion.level(prm) if hasattr(completion, "level") else prm.y_boundary
+
+
 def check_candidate(
     ego_x, ego_y, ego_vx, ego_vy, a_x, a_y, l1_x, l1_v, l1_decel, f_x, f_v, f_aggressive, prm: Params,
     completion=commit_guard, own=None,
@@ -95,95 +145,91 @@ def check_candidate(
     :mod:`safelane.shield.policies`). ``own``: ``(l0_x, l0_v, l0_decel)`` of the own-lane leader ``L0`` per row
     (``+inf`` position where there is none), or ``None``: where there is one, the ego must keep ``p_m`` behind its
     worst case during the period and on the evasion (:mod:`safelane.safety.own_lane`), and the step completes
-    only at :func:`own_completion_level`. Without ``own``, batches of :data:`FAST_CANDIDATE_MIN` rows or more run
-    the compiled kernel (:mod:`._fast_decide`) where numba imports and ``SAFELANE_NO_NUMBA`` is not ``1``: the same
-    bits as the NumPy path below, the reference."""
-    if own is None and np.size(ego_x) >= FAST_CANDIDATE_MIN and (kernel := candidate_kernel()) is not None:
-        return kernel.check_candidate(
-            ego_x, ego_y, ego_vx, ego_vy, a_x, a_y, l1_x, l1_v, l1_decel, f_x, f_v, f_aggressive, prm, completion
-        )
-    dt, tol = prm.dt, FEASIBILITY_TOL_M
-    ex, evx = advance(ego_x, ego_vx, a_x, dt)
-    ey = ego_y + ego_vy * dt + 0.5 * a_y * dt * dt
-    evy = ego_vy + a_y * dt
-    lx, lv = advance(l1_x, l1_v, -l1_decel, dt)
-    a_f = np.where(f_aggressive, prm.a_x_a, -prm.a_x_d)
-    fx, fv = advance(f_x, f_v, a_f, dt)
+    only at :func:`own_completion_level`.
 
-    conflict = free_max(ego_y, ego_vy, a_y, dt) > prm.y_safe + LATERAL_TOL_M
-    # Both worst-case gaps (ego behind L1, F behind the ego) over the period, in one stacked evaluation.
-    gap_l, gap_f = pair_min_gap(
-        np.stack([l1_x - ego_x - prm.p_m, ego_x - f_x - prm.p_m]),
-        np.stack([ego_vx, f_v]),
-        np.stack([a_x, a_f]),
-        np.stack([l1_v, ego_vx]),
-        np.stack([-l1_decel, a_x]),
-        dt,
-    )
-    period_ok = ~conflict | ((gap_l >= -tol) & (gap_f >= -tol))
-    has_own = None
-    if own is not None:
-        o_x, o_v, o_decel = own
-        has_own = np.isfinite(o_x)
-        if not has_own.any():
-            has_own = None
-    base = completion.level(prm) if hasattr(completion, "level") else prm.y_boundary  # where the step completes
-    level = base
-    if has_own is not None:
-        o_slack = np.where(has_own, o_x - ego_x - prm.p_m, 0.0)
-        gap_o = pair_min_gap(o_slack, ego_vx, a_x, np.where(has_own, o_v, 0.0), -o_decel, dt)
-        # Half the tolerance for L0, here and in the evasion (OWN_MARGIN_M): a follower of L0 settles exactly at the
-        # margin, and the executor's round-off must stay inside the tolerance.
-        period_ok &= ~has_own | (gap_o >= -0.5 * tol)
-        level = np.where(has_own, max(own_completion_level(prm), base), base)
-        ox, ov = advance(np.where(has_own, o_x, 0.0), o_v, -o_decel, dt)
-
-    completing = ey >= level
-    if has_own is not None:  # with L0 a completed lane change must not drift back toward it: moving away, or still
-        completing &= ~has_own | (evy >= 0.0)
-    n = np.shape(ex)
-    ok = np.zeros(n, bool)
-    plans = []
+    The rows without ``L0`` are :func:`candidate_row`: batches of :data:`FAST_CANDIDATE_MIN` rows or more run it
+    compiled (:mod:`._fast_decide`) where numba imports and ``SAFELANE_NO_NUMBA`` is not ``1``, smaller ones and
+    every batch without numba on NumPy arrays."""
+    args = np.broadcast_arrays(*(np.asarray(a) for a in (ego_x, ego_y, ego_vx, ego_vy, a_x, a_y, l1_x, l1_v,
+                                                          l1_decel, f_x, f_v, f_aggressive)))  # fmt: skip
+    has_own = None if own is None else np.isfinite(own[0])
+    if has_own is not None and has_own.any():
+        return _with_own(args, has_own, own, prm, completion)
+    if np.size(ego_x) >= FAST_CANDIDATE_MIN and (kernel := candidate_kernel()) is not None:
+        return kernel.check_candidate(*args, prm, completion)
     with np.errstate(all="ignore"):
-        guard = np.ones(n, bool)
-        done = np.flatnonzero(completing)  # the completion guard replaces the evasion check (few rows)
+        state, period_ok, completing, (exists, *fields) = candidate_row(
+            ARRAY, *args, prm, prm.p_m, prm.dt, completion_level(completion, prm), LATERAL_TOL_M, FEASIBILITY_TOL_M
+        )
+    parts = dict(zip(PARTS, fields, strict=True))
+    return verdict_of(state, period_ok, completing, exists, parts, args[8], args[11], prm, completion)
+
+
+def verdict_of(state, period_ok, completing, exists, parts, l1_decel, f_aggressive, prm: Params, completion, own=None):
+    """The :class:`Verdict` of rows checked by :func:`candidate_row` (or, with ``own``, the own-lane check): a row is
+    accepted where its period is safe and, if its step completes, the completion rule holds (and, for a rule with
+    ``needs_evasion``, the evasion exists), else the evasion exists; its plan is built from the predicted state.
+    ``own``: ``(l0_x, l0_v, l0_decel, margin)`` at the period's end, or ``None``."""
+    ex, ey, evx, evy, lx, lv, fx, fv = state
+    n = np.shape(ex)
+    guard = np.ones(n, bool)
+    done = np.flatnonzero(completing)  # the completion rule replaces the evasion check (few rows)
+    with np.errstate(all="ignore"):
         if done.size:
             guard[done] = completion(*(a[done] for a in (ex, evx, lx, lv, l1_decel, fx, fv)), prm)
-        args = (ex, ey, evx, evy, lx, lv, l1_decel, fx, fv, f_aggressive)
-        # Rows with nothing to evade (in the own lane, not moving out: t_y_f = 0) go through the evasion core
-        # apart: with t_y_f = 0 throughout it takes its short path (same results).
-        idle = lateral_core(ARRAY, ey, evy, prm)[0] == 0.0
-        if has_own is not None:  # rows with L0 go through the own-lane check (the others as before, bit for bit)
-            idle = idle & ~has_own
-        groups = [np.arange(n[0])] if idle.all() or not idle.any() else [np.flatnonzero(idle), np.flatnonzero(~idle)]
-        if has_own is not None:
-            groups = [g[~has_own[g]] for g in groups] + [np.flatnonzero(has_own)]
-        for rows in groups:
-            if rows.size == 0:
-                continue
-            sub_args = tuple(a[rows] for a in args)
-            own_rows = has_own is not None and bool(has_own[rows[0]])
-            if own_rows:
-                own_args = (ox[rows], ov[rows], o_decel[rows])
-                exists, parts = own_lane_core(*sub_args, *own_args, prm.p_m, prm.p_m, own_margin(prm), prm)
-            else:
-                exists, parts = evasion_core(ARRAY, *sub_args, prm.p_m, prm.p_m, prm)
-            # A rule with ``needs_evasion`` (the paper's) keeps the evasion check at the crossing step as well.
-            cross_ok = guard[rows] & (exists | (not getattr(completion, "needs_evasion", False)))
-            keep = np.flatnonzero(period_ok[rows] & np.where(completing[rows], cross_ok, exists))
-            ok[rows[keep]] = True
-            plan = plan_from_core(
-                ARRAY,
-                keep.shape,
-                (*(a[keep] for a in sub_args), prm.p_m, prm.p_m),
-                exists[keep],
-                {k: np.broadcast_to(v, rows.shape)[keep] for k, v in parts.items()},
-                prm.p_m,
-                prm.p_m,
-                prm,
-                own=(*(a[keep] for a in own_args), own_margin(prm)) if own_rows else None,
-            )
-            plans.append((rows[keep], plan))
+        # A rule with ``needs_evasion`` (the paper's) keeps the evasion check at the crossing step as well.
+        cross_ok = guard & (exists | (not getattr(completion, "needs_evasion", False)))
+        keep = np.flatnonzero(period_ok & np.where(completing, cross_ok, exists))
+        plan = plan_from_core(
+            ARRAY,
+            keep.shape,
+            (*(a[keep] for a in (ex, ey, evx, evy, lx, lv, l1_decel, fx, fv, f_aggressive)), prm.p_m, prm.p_m),
+            exists[keep],
+            {k: np.broadcast_to(v, n)[keep] for k, v in parts.items()},
+            prm.p_m,
+            prm.p_m,
+            prm,
+            own=None if own is None else (*(a[keep] for a in own[:3]), own[3]),
+        )
+    ok = np.zeros(n, bool)
+    ok[keep] = True
+    return Verdict(ok=ok, completing=np.asarray(completing, bool).copy(), plans=[(keep, plan)])
+
+
+def _with_own(args, has_own, own, prm: Params, completion) -> Verdict:
+    """:func:`check_candidate` of a batch with ``L0`` in some rows: the others as without ``own``; the rows with
+    ``L0`` through the period at the candidate, ``L0``'s gap over it and the own-lane evasion check."""
+    n = has_own.shape
+    ok, completing, plans = np.zeros(n, bool), np.zeros(n, bool), []
+    plain = np.flatnonzero(~has_own)
+    if plain.size:
+        sub = check_candidate(*(a[plain] for a in args), prm, completion)
+        ok[plain], completing[plain] = sub.ok, sub.completing
+        plans.extend((plain[rows], plan) for rows, plan in sub.plans)
+    rows = np.flatnonzero(has_own)
+    ego_x, ego_y, ego_vx, ego_vy, a_x, a_y, l1_x, l1_v, l1_decel, f_x, f_v, f_aggr = (a[rows] for a in args)
+    o_x, o_v, o_decel = (np.broadcast_to(a, n)[rows] for a in own)
+    dt, tol = prm.dt, FEASIBILITY_TOL_M
+    # With L0 the lane change completes only at own_completion_level, and only moving away from L0 (or not at all
+    # laterally): the lane-keeping after completion then never brings the ego back toward it.
+    level = max(own_completion_level(prm), completion_level(completion, prm))
+    with np.errstate(all="ignore"):
+        state, period_ok, done = candidate_period(
+            ARRAY, ego_x, ego_y, ego_vx, ego_vy, a_x, a_y, l1_x, l1_v, l1_decel, f_x, f_v, f_aggr, prm, prm.p_m, dt,
+            level, LATERAL_TOL_M, tol,
+        )  # fmt: skip
+        # Half the tolerance for L0, here and in the evasion (own_margin): a follower of L0 settles exactly at the
+        # margin, and the executor's round-off must stay inside the tolerance.
+        period_ok = period_ok & (pair_min_gap(o_x - ego_x - prm.p_m, ego_vx, a_x, o_v, -o_decel, dt) >= -0.5 * tol)
+        done = done & (state[3] >= 0.0)
+        ox, ov = advance(o_x, o_v, -o_decel, dt)
+        ex, ey, evx, evy, lx, lv, fx, fv = state
+        exists, parts = own_lane_core(ex, ey, evx, evy, lx, lv, l1_decel, fx, fv, f_aggr, ox, ov, o_decel, prm.p_m,
+                                      prm.p_m, own_margin(prm), prm)  # fmt: skip
+    sub = verdict_of(state, period_ok, done, exists, parts, l1_decel, f_aggr, prm, completion,
+                  own=(ox, ov, o_decel, own_margin(prm)))  # fmt: skip
+    ok[rows], completing[rows] = sub.ok, sub.completing
+    plans.extend((rows[r], plan) for r, plan in sub.plans)
     return Verdict(ok=ok, completing=completing, plans=plans)
 
 
@@ -206,3 +252,7 @@ def plan_motion(plan: EvasionPlan, age, dt: float):
     knots = np.sort(np.stack([np.zeros_like(age), *rel, np.full_like(age, dt)], -1), -1)
     px, py, vx, vy = plan.take((..., None)).state(age[..., None] + knots)
     return knots, px, vx, py, vy
+
+
+# The candidate check compiled into the shield's kernel and the closed loop (safety/_compile.py): the same functions.
+jitable(lateral_max, candidate_period, candidate_row)

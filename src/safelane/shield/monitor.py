@@ -27,7 +27,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .._motion import advance
+from .._motion import advance, advance_core
 from ..params import Params
 from ..safety._backend import ARRAY, INF, jitable
 from ..safety.chain import braked_position
@@ -108,8 +108,8 @@ def observe_breaches(prev: Breach, last, situation, prm: Params, t_now: float) -
         slots = np.arange(behind.shape[1])[None, :]
         flags[:, 1] = (behind & (slots < last.n_connected[:, None])).any(1)
         flags[:, 2] = (behind & (slots == last.n_connected[:, None])).any(1)
-    _, f_highest = predicted_positions(last, dt)
-    flags[:, 3] = pushed_harder(ARRAY, situation.f_x, f_highest, last.f_limit, TOL_M)
+    with np.errstate(over="ignore"):  # as _motion.advance: a vanishing deceleration stops at the horizon
+        flags[:, 3] = pushed_harder(ARRAY, situation.f_x, last.f_x, last.f_v, last.f_limit, dt, TOL_M)
     new = flags & ~prev.flags
     first = np.where(np.isnan(prev.first_s) & new.any(1), t_now, prev.first_s)
     return Breach(flags=prev.flags | flags, first_s=first)
@@ -131,14 +131,13 @@ def braked_harder(xp, now, p, v, decel, dt, tol):
     return now < braked_position(xp, p, v, decel, dt) - tol
 
 
-def pushed_harder(xp, now, highest, limit, tol):
+def pushed_harder(xp, now, p, v, limit, dt, tol):
     """The breach test of F: watched (a finite ``limit``, the largest acceleration a responsible follower of the ego
-    could apply) and now (``now``) more than ``tol`` ahead of ``highest``, where that limit would have put it
-    (:func:`predicted_positions`). Backend-generic; every argument broadcasts.
-
-    The position itself is ``_motion.advance``'s, computed by the caller (NumPy here, its compiled row in
-    :mod:`._fast_monitor`) until that motion is backend-generic; then it moves in here."""
+    could apply) and now (``now``) more than ``tol`` ahead of where accelerating at that limit from ``(p, v)`` for
+    ``dt`` would have put it (exact, stopping at rest: :func:`safelane._motion.advance_core`). Backend-generic; every
+    argument broadcasts."""
     watched = (limit == limit) & (limit != INF) & (limit != -INF)
+    highest, _ = advance_core(xp, p, v, xp.where(watched, limit, 0.0), dt)
     return watched & (now > highest + tol)
 
 
