@@ -16,25 +16,31 @@ settings.register_profile("explore", derandomize=False, print_blob=True)
 settings.load_profile(os.environ.get("HYPOTHESIS_PROFILE", "ci"))
 
 
-def _mutated_closed_forms() -> list[str]:
-    """The closed forms compiled into the kernels (``safety/_backend.jitable``) that mutmut has replaced by its
-    trampoline in this process: empty outside mutation testing and for a group that mutates none of them."""
+def _mutant_in_a_closed_form() -> str | None:
+    """The mutant under test when it lies in a closed form that the kernels compile (one marked with
+    ``safety/_backend.jitable``), else ``None`` (no mutation testing, mutmut's stats run, or a mutant elsewhere)."""
+    name = os.environ.get("MUTANT_UNDER_TEST", "")
+    if "__mutmut_" not in name:
+        return None
     import safelane.shield
     import safelane.sim  # noqa: F401  (with the shield: every module that marks a closed form)
     from safelane.safety import _backend
 
-    return [f"{fn.__module__}.{fn.__name__}" for fn in _backend.ROW_FUNCTIONS if "mutmut" in fn.__code__.co_filename]
+    module, _, function = name.rpartition("__mutmut_")[0].rpartition(".x_")
+    marked = {(fn.__module__, fn.__name__) for fn in _backend.ROW_FUNCTIONS}
+    return name if (module, function) in marked else None
 
 
 def pytest_collection_modifyitems(config, items):
-    """Under mutation testing of a closed form that the kernels compile (``safety/_compile.py``), the tests marked
-    ``compiled`` skip: they compare a kernel with the uncompiled path, and both are the one source, so they cannot tell
-    a mutant from the original (and numba cannot compile mutmut's trampoline at all: every mutant would fail them,
-    a kill that proves nothing). The uncompiled path is what mutation testing mutates; the other tests judge it."""
-    if "MUTANT_UNDER_TEST" in os.environ and (mutated := _mutated_closed_forms()):
+    """While mutation testing mutates a closed form that the kernels compile (``safety/_compile.py``), the tests marked
+    ``compiled`` skip: they compare a kernel with the array path, and under mutation the kernels compile the unmutated
+    original (``_compile.source_of``: numba cannot compile mutmut's trampoline), so such a test would only restate that
+    the mutant differs from the original — a kill that proves nothing. For every other mutant (a dispatch, a wrapper,
+    the kernels' callers) they run as usual and judge it. The array path is what mutation testing mutates."""
+    if (mutant := _mutant_in_a_closed_form()) is not None:
         import pytest
 
-        skip = pytest.mark.skip(reason=f"mutation testing of closed forms the kernels compile ({mutated[0]}, …)")
+        skip = pytest.mark.skip(reason=f"{mutant} is in a closed form the kernels compile from its original")
         for item in items:
             if "compiled" in item.keywords:
                 item.add_marker(skip)

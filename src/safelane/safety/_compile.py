@@ -14,14 +14,15 @@ operations, and lowers the global ``SCALAR`` as a constant, so a kernel writes `
 from __future__ import annotations
 
 import inspect
+import sys
 
 from numba.core import cgutils, types
 from numba.core.imputils import lower_constant
 from numba.extending import (
     NativeValue,
     models,
+    overload,
     overload_method,
-    register_jitable,
     register_model,
     typeof_impl,
     unbox,
@@ -69,12 +70,32 @@ def _method(fn):
 _REGISTERED: set = set()
 
 
+def source_of(fn):
+    """The function numba compiles for the marked ``fn``: ``fn`` itself — or, while mutation testing has replaced it by
+    mutmut's trampoline (which numba cannot compile), the unmutated original that mutmut keeps beside it
+    (``x_<name>__mutmut_orig``). The kernels then stay the original code while the array path runs the mutant; where
+    the mutant under test is in a marked function, ``tests/conftest.py`` skips the tests that compare the two (they
+    would only restate that the mutant differs from the original)."""
+    if "mutmut" not in fn.__code__.co_filename:
+        return fn
+    return getattr(sys.modules[fn.__module__], f"x_{fn.__name__}__mutmut_orig")
+
+
+def _typer(implementation):
+    def typer(*args, **kwargs):
+        return implementation
+
+    return typer
+
+
 def register_rows() -> None:
     """Register every function marked so far with numba (idempotent). A kernel module imports the modules whose
-    closed forms it compiles, then calls this before it defines a kernel (an explicit signature compiles at once)."""
+    closed forms it compiles, then calls this before it defines a kernel (an explicit signature compiles at once).
+
+    This is ``numba.extending.register_jitable`` with the implementation given by :func:`source_of`."""
     for fn in _backend.ROW_FUNCTIONS:
         if fn not in _REGISTERED:
-            register_jitable(fn)
+            overload(fn, jit_options={}, inline="never", strict=False)(_typer(source_of(fn)))
             _REGISTERED.add(fn)
 
 
