@@ -206,26 +206,33 @@ class RefChain:
     full_brake_margin: np.ndarray
 
 
+def others_max(params):
+    """The others' maximum braking: ``Params.a_o_d``, or ``a_x_d`` where it is not set (read from the fields)."""
+    return params.a_x_d if params.a_o_d is None else params.a_o_d
+
+
 def ref_leader_chain(p, v, promise, params, human=None):
-    """Propagate the worst case from ``L(N+1)`` (brakes at ``a_x_d``) to ``L1``.
+    """Propagate the worst case from ``L(N+1)`` (brakes at the others' maximum ``a_o``: ``a_o_d``, else ``a_x_d``)
+    to ``L1``.
 
     ``p, v``: ``(B, N+1)`` ordered front-last; ``promise``: ``(B, N)``; ``human``: ``(B, N)`` bool (margin
-    ``p_m_human`` instead of ``p_m``). ``L_i`` brakes at ``max(promise_i, z_i)`` (capped at the mechanical
-    ``a_x_d``); the chain is unsafe when some gap is already at or below its margin or some ``z_i > a_x_d``,
-    and then ``L1``'s worst case is ``a_x_d``.
+    ``p_m_human`` instead of ``p_m``). ``L_i`` brakes at ``max(promise_i, z_i)`` (capped at ``a_o``, what any other
+    vehicle can brake); the chain is unsafe when some gap is already at or below its margin or some ``z_i > a_o``,
+    and then ``L1``'s worst case is ``a_o``.
     """
     p, v, promise = (np.asarray(x, dtype=np.float64) for x in (p, v, promise))
     b, n = promise.shape
     human = np.zeros((b, n), dtype=bool) if human is None else np.asarray(human, dtype=bool)
-    a_ahead = np.full(b, params.a_x_d)
+    a_o = others_max(params)
+    a_ahead = np.full(b, a_o)
     decel = [a_ahead]
     required, interior, full = [], [], []
     unsafe = np.zeros(b, dtype=bool)
     for i in range(n - 1, -1, -1):
         margin = np.where(human[:, i], params.p_m_human, params.p_m)
-        r = ref_min_follow_decel(p[:, i], v[:, i], p[:, i + 1], v[:, i + 1], a_ahead, margin, params.a_x_d)
-        unsafe = unsafe | ~(r.z <= params.a_x_d)
-        a_ahead = np.minimum(np.maximum(promise[:, i], r.z), params.a_x_d)
+        r = ref_min_follow_decel(p[:, i], v[:, i], p[:, i + 1], v[:, i + 1], a_ahead, margin, a_o)
+        unsafe = unsafe | ~(r.z <= a_o)
+        a_ahead = np.minimum(np.maximum(promise[:, i], r.z), a_o)
         decel.insert(0, a_ahead)
         required.insert(0, r.z)
         interior.insert(0, r.interior)
@@ -238,7 +245,7 @@ def ref_leader_chain(p, v, promise, params, human=None):
         decel=stack(decel),
         required=stack(required),
         unsafe=unsafe,
-        l1_decel=np.where(unsafe, params.a_x_d, decel[0]),
+        l1_decel=np.where(unsafe, a_o, decel[0]),
         interior=stack(interior, bool),
         full_brake_margin=stack(full),
     )
@@ -338,7 +345,8 @@ class _Profile:
 
 
 def _profile(u, v, v1, a1, params, iters=BISECT_ITERS):
-    """Find when the braking ego's speed comes down to L1's (bisection) and whether L1 still moves then."""
+    """Find when the braking ego's speed comes down to L1's (bisection) and whether L1 still moves then (and brakes
+    no harder than the ego can follow)."""
     a_a, a_d = params.a_x_a, params.a_x_d
     big_v = v + a_a * u
 
@@ -355,7 +363,9 @@ def _profile(u, v, v1, a1, params, iters=BISECT_ITERS):
         lo = np.where(down, lo, mid)
     t_meet = np.where(speed_excess(u) <= 0.0, u, hi)
     l1_moving = np.maximum(v1 - a1 * t_meet, 0.0) > 0.0
-    match = faster & l1_moving
+    # Following means braking as L1 does: the ego commits to no more than a_x_d, so an L1 braking harder (the others'
+    # maximum above the ego's) is never followed.
+    match = faster & l1_moving & (a1 <= a_d)
     return _Profile(u=u, brake_end=np.where(match, t_meet, ego_stop), match=match, l1_stop=stop_time(v1, a1))
 
 

@@ -2,8 +2,8 @@
 
 * **No evasion means none.** For random states where :func:`plan_evasion` says no evasion exists, a vectorized
   random search over ``>= 100,000`` piecewise-constant longitudinal acceleration profiles in
-  ``[-a_x_d, a_x_a]`` (10–30 pieces over ``[0, t_y_f]``, speed clipped at zero; the lateral return keeps the
-  same ``t_y_f``) finds none that keeps both gaps — to the worst-case ``L1`` and the worst-case ``F`` — at
+  ``[-a_x_d, a_x_a]`` — the ego's committed limits — (10–30 pieces over ``[0, t_y_f]``, speed clipped at zero;
+  the lateral return keeps the same ``t_y_f``) finds none that keeps both gaps — to the worst-case ``L1`` and the worst-case ``F`` — at
   least the margin on ``[0, t_y_f]``. The profiles are integrated exactly per substep and the gaps checked on
   the substep nodes, which can overestimate a gap's minimum by at most ``(a_x_a + a_x_d) h² / 8``; the states
   are therefore chosen at least ``SHORTFALL_MIN_M`` from the boundary (more than four times that bound), and
@@ -26,11 +26,14 @@ from safelane.safety import Reason, plan_evasion
 PARAMS_SETS = {
     "default": Params(),
     "sluggish": Params(a_x_a=1.5, a_x_d=6.0, a_y_m=0.8, p_m=8.0, p_m_human=11.0),
+    # Others brake up to 9.5 m/s², the ego commits to 6 (the realistic preset's split): L1 may brake harder than the
+    # ego's evasion, which then never follows it.
+    "others_harder": Params(a_x_a=2.4, a_x_d=6.0, a_o_d=9.5, a_y_m=2.9, p_m=8.9, p_m_human=10.0),
 }
 N_SUB = 360  # substeps per profile (a multiple of every piece count)
 PIECE_COUNTS = (10, 12, 15, 20, 30)
 PROFILES_PER_STATE = 2_560
-N_STATES = 24  # per parameter set: 2 × 24 × 2,560 = 122,880 profiles
+N_STATES = 24  # per parameter set: 3 × 24 × 2,560 = 184,320 profiles
 MIN_PROFILES = 100_000
 SHORTFALL_MIN_M = 0.01
 SHORTFALL_MAX_M = 1.0
@@ -57,7 +60,7 @@ def random_states(rng: np.random.Generator, params: Params, n: int) -> dict:
         ego_vy=rng.uniform(-1.0, 1.5, n),
         l1_p=ego_px + lead_margin + rng.uniform(-1.0, 40.0, n),
         l1_v=rng.uniform(0.0, 35.0, n),
-        l1_decel=rng.uniform(0.0, params.a_x_d, n),
+        l1_decel=rng.uniform(0.0, max(params.a_x_d, params.a_x_d if params.a_o_d is None else params.a_o_d), n),
         f_p=ego_px - follow_margin - rng.uniform(-1.0, 40.0, n),
         f_v=rng.uniform(0.0, 40.0, n),
         follower_aggressive=rng.random(n) < 0.5,

@@ -68,7 +68,9 @@ SETTINGS = settings(
     suppress_health_check=[HealthCheck.too_slow, HealthCheck.data_too_large],
 )
 SEEDS = st.integers(min_value=0, max_value=2**63 - 1)
-PARAM_KINDS = st.sampled_from(["default", "random"])
+#: "others_harder": the default ego with every other vehicle braking up to 10 m/s² (> a_x_d = 8: the others' maximum
+#: above the ego's committed braking); "random" draws the others' maximum below, at or above a_x_d.
+PARAM_KINDS = st.sampled_from(["default", "random", "others_harder"])
 #: Every comparison runs at the default size and, behind the ``slow`` marker, as a 10× campaign (minutes).
 SIZES = pytest.mark.parametrize(
     "n_examples", [N_EXAMPLES, pytest.param(10 * N_EXAMPLES, marks=pytest.mark.slow, id="campaign")]
@@ -117,11 +119,26 @@ def random_params(rng: np.random.Generator) -> Params:
         vehicle_length=vehicle_length,
         p_m=p_m,
         p_m_human=p_m + rng.uniform(0.0, 5.0),
+        a_o_d=others_decel(rng),
     )
 
 
+def others_decel(rng: np.random.Generator):
+    """The others' maximum braking of a random parameter set: unset (``a_x_d``) a third of the time, else uniform in
+    ``[4, 16]`` m/s² — below, near or (mostly) above the ego's ``a_x_d`` in ``[4, 10]``."""
+    u = rng.random()
+    return None if u < 1 / 3 else float(rng.uniform(4.0, 16.0))
+
+
 def params_for(kind: str, rng: np.random.Generator) -> Params:
+    if kind == "others_harder":
+        return Params(a_o_d=10.0)
     return Params() if kind == "default" else random_params(rng)
+
+
+def decel_cap(params: Params) -> float:
+    """The largest deceleration a worst case may give a vehicle: the ego's ``a_x_d`` or the others' maximum."""
+    return max(params.a_x_d, params.a_x_d if params.a_o_d is None else params.a_o_d)
 
 
 def speeds(rng, n, v_max=40.0, p_zero=0.05):
@@ -170,7 +187,8 @@ def chain_states(rng, params, n, n_links):
     p[:, n_links] = rng.uniform(-200.0, 800.0, n)
     for i in range(n_links - 1, -1, -1):
         p[:, i] = p[:, i + 1] - margin[:, i] - slack[:, i]
-    promise = np.column_stack([decels(rng, n, params.a_x_d) for _ in range(n_links)] or [np.zeros((n, 0))])
+    a_o = params.a_x_d if params.a_o_d is None else params.a_o_d
+    promise = np.column_stack([decels(rng, n, a_o) for _ in range(n_links)] or [np.zeros((n, 0))])
     return p, v, promise, human
 
 
@@ -180,7 +198,7 @@ def longitudinal_states(rng, params, n, margin=None):
     ego_px = rng.uniform(-500.0, 500.0, n)
     ego_vx = speeds(rng, n, 35.0)
     l1_v = speeds(rng, n, 35.0)
-    l1_decel = decels(rng, n, params.a_x_d)
+    l1_decel = decels(rng, n, decel_cap(params))  # up to the others' maximum, possibly beyond the ego's a_x_d
     T = np.where(rng.random(n) < 0.05, 0.0, rng.uniform(0.0, 8.0, n))
     l1_p = ego_px + margin + slacks(rng, n, neg=3.0, hi=90.0)
     return ego_px, ego_vx, l1_p, l1_v, l1_decel, T
@@ -250,7 +268,7 @@ def test_leader_position_matches_time_stepping(n_examples, request):
     def check(rng, params, stats):
         p = rng.uniform(-500.0, 500.0, BATCH)
         v = speeds(rng, BATCH)
-        decel = decels(rng, BATCH, params.a_x_d)
+        decel = decels(rng, BATCH, decel_cap(params))
         t = np.where(rng.random(BATCH) < 0.05, 0.0, rng.uniform(0.0, 20.0, BATCH))
         got = leader_position(p, v, decel, t, params)
         assert_close("leader_position", got, braked_position(p, v, decel, t), inputs=dict(p=p, v=v, a=decel, t=t))
@@ -336,12 +354,14 @@ def test_leader_chain_matches_reference(n_examples, request):
         stats["verdicts compared"] += int(np.sum(clear))
         slack = p[:, 1:] - p[:, :-1] - np.where(human, params.p_m_human, params.p_m)
         finite = np.isfinite(ref.required)
-        safe_link = finite & (ref.required <= params.a_x_d)
+        a_o = params.a_x_d if params.a_o_d is None else params.a_o_d
+        safe_link = finite & (ref.required <= a_o)
         stats["links"] += slack.size
         stats["interior (equal speeds while moving)"] += int(np.sum(safe_link & ref.interior))
         stats["both stopped"] += int(np.sum(safe_link & ~ref.interior))
         stats["unsafe: gap at/below margin"] += int(np.sum(slack <= 0.0))
-        stats["unsafe: z > a_x_d"] += int(np.sum(finite & (ref.required > params.a_x_d)))
+        stats["unsafe: z > a_o_d"] += int(np.sum(finite & (ref.required > a_o)))
+        stats["link braking beyond a_x_d"] += int(np.sum(safe_link & (ref.decel[:, :-1] > params.a_x_d)))
         stats["promise binds"] += int(np.sum(safe_link & (promise >= ref.required)))
         stats["violation (z binds)"] += int(np.sum(safe_link & (promise < ref.required)))
         stats["human-driven link"] += int(np.sum(human))
@@ -354,7 +374,8 @@ def test_leader_chain_matches_reference(n_examples, request):
         "interior (equal speeds while moving)",
         "both stopped",
         "unsafe: gap at/below margin",
-        "unsafe: z > a_x_d",
+        "unsafe: z > a_o_d",
+        "link braking beyond a_x_d",
         "promise binds",
         "violation (z binds)",
         "human-driven link",
@@ -386,11 +407,19 @@ def test_longitudinal_evasion_matches_reference(n_examples, request):
         stats["verdicts compared"] += int(np.sum(clear))
         for code in range(-1, 5):
             stats[f"case {code}"] += int(np.sum(got.case == code))
+        harder = clear & (args[4] > params.a_x_d)  # L1 may brake harder than the ego commits to: never followed
+        stats["L1 harder than the ego"] += int(np.sum(harder & got.feasible & (got.case != 0)))
+        stats["L1 harder, braking at T"] += int(np.sum(harder & (got.case == 1)))
+        stats["L1 harder, stopped"] += int(np.sum(harder & (got.case == 2)))
+        stats["L1 harder, infeasible"] += int(np.sum(harder & (got.case == -1)))
+        assert not (harder & ((got.case == 3) | (got.case == 4))).any()
 
     stats = run_campaign(request, n_examples, check)
     assert stats["verdicts compared"] >= 0.95 * stats["cases"], stats
     for code in range(-1, 5):
         assert stats[f"case {code}"] > 200, stats
+    for key in ("L1 harder, braking at T", "L1 harder, stopped", "L1 harder, infeasible"):
+        assert stats[key] > 100, stats
 
 
 # --------------------------------------------------------------------------------------------------------------

@@ -6,6 +6,17 @@ the field and the offending value.
 
 Symbols (paper → field): ``a_{x,a}`` → ``a_x_a``, ``a_{x,d}`` → ``a_x_d``, ``a_{y,m}`` → ``a_y_m``,
 ``w_l`` → ``lane_width``, ``w_v`` → ``vehicle_width``, ``p_m`` → ``p_m``.
+
+**Braking limits** (RSS's split, Shalev-Shwartz et al. 2017 §3; ad-rss's ``RssDynamics``): ``a_x_d`` is the braking
+the ego *commits to* — the deceleration of its evasion (Eqs. 6–8), the strongest braking the shield ever commands, and
+its assumption about a collaborative ``F`` (Eq. 9) — RSS's ``brakeMin`` for the ego's proper response. ``a_o_d`` is
+the strongest braking any *other* vehicle may use (RSS's ``brakeMax``): ``L(N+1)``, a non-connected ``L1``/``L0``, and
+the physical cap of a connected leader beyond its promise. ad-rss's defaults are ``brakeMin`` 4, ``brakeMax`` 8 m/s²;
+measured emergency braking of modern passenger cars on dry asphalt is about 9–10 m/s² (Greibe 2007, *Braking
+distance, friction and behaviour*, Trafitec; Kudarauskas 2007, *Analysis of emergency braking of a vehicle*,
+Transport 22(3)). The ego's own physical maximum is
+not a parameter: nothing the shield does brakes harder than ``a_x_d``, so the guarantee needs only ``a_x_d`` to be
+within it (``docs/safety.md``, "What each vehicle may do").
 """
 
 from __future__ import annotations
@@ -34,6 +45,13 @@ class Params(BaseModel):
         8.0,
         description="Max longitudinal deceleration, positive [m/s²]. Our assumption (covers the paper's "
         "sudden braking of up to 6 m/s² and the simulator tests' 8 m/s²) — calibrated in a later issue.",
+    )
+    a_o_d: float | None = Field(
+        None,
+        ge=0.0,
+        description="Others' maximum braking, positive [m/s²] (RSS's brakeMax): L(N+1), a non-connected L1 or L0, and "
+        "the physical cap of every connected leader. None: a_x_d, the paper's world (every vehicle brakes no harder "
+        "than the ego). Real cars: 9–10 m/s² (Greibe 2007; Kudarauskas 2007); ad-rss's default brakeMax is 8.",
     )
     a_y_m: _Positive = Field(
         1.5, description="Max lateral acceleration magnitude [m/s²]. Our assumption — calibrated in a later issue."
@@ -65,6 +83,11 @@ class Params(BaseModel):
         if self.p_m_human < self.p_m:
             raise ValueError(f"p_m_human={self.p_m_human} must be at least p_m={self.p_m}")
         return self
+
+    @property
+    def others_decel(self) -> float:
+        """The others' maximum braking ``a_o_d`` as a number: ``a_x_d`` where it is not set (the paper's world)."""
+        return self.a_x_d if self.a_o_d is None else self.a_o_d
 
     @property
     def y_safe(self) -> float:

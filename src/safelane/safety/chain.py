@@ -1,8 +1,9 @@
 """Worst-case deceleration propagated down the connected leader chain (paper Eqs. 1–4).
 
 Symbols: ``L_i`` is the i-th leader ahead of the ego in the target lane (``L1`` nearest); ``L1..LN`` are
-connected and promise to brake no harder than ``a_m_d`` unless their own safety requires more;
-``L(N+1)`` is not connected and is assumed to brake at the mechanical limit ``a_x_d``.
+connected and promise to brake no harder than ``a_m_d`` unless their own safety requires more (never beyond the
+others' maximum ``a_o_d``, ``Params.others_decel``); ``L(N+1)`` is not connected and is assumed to brake at
+``a_o_d`` (``a_x_d`` in the paper's world, where ``a_o_d`` is not set).
 
 Correction to the paper (see ``docs/safety.md``): the first case of Eq. 2 reads
 ``z = 3 (v_{i-1} − v_i)² / (2 (p_i − p_{i-1} − p_m)) + a_{x,i,d}``. Setting the gap at the equal-speed instant
@@ -75,11 +76,12 @@ class ChainResult:
     """Worst-case decelerations of a leader chain.
 
     Attributes:
-        decel: ``(..., N+1)`` worst-case deceleration of ``L1..L(N+1)`` (the last is ``a_x_d``).
+        decel: ``(..., N+1)`` worst-case deceleration of ``L1..L(N+1)`` (the last is ``a_o_d``).
         required: ``(..., N)`` minimum deceleration ``z`` that ``L1..LN`` need to stay clear of the vehicle
             ahead (``inf`` where the gap is already at or below the margin).
         unsafe: ``(...)`` True where some ``L_i`` cannot be shown to stay clear of ``L(i+1)`` (gap at or
-            below its margin, or ``z > a_x_d``); ``l1_decel`` is then ``a_x_d``.
+            below its margin, or ``z > a_o_d``: beyond what any other vehicle can brake); ``l1_decel`` is then
+            ``a_o_d``.
         l1_decel: ``(...)`` worst-case deceleration of ``L1`` for the ego's analysis.
     """
 
@@ -95,12 +97,13 @@ def leader_chain(p, v, promise_decel, params: Params, *, human_driven=None) -> C
     Args:
         p, v: ``(..., N+1)`` positions [m] and speeds [m/s] of ``L1..L(N+1)``, ordered front-last
             (``p[..., i+1] > p[..., i]`` in normal traffic).
-        promise_decel: ``(..., N)`` promised maximum deceleration ``a_m_d`` of ``L1..LN`` (``<= a_x_d``).
+        promise_decel: ``(..., N)`` promised maximum deceleration ``a_m_d`` of ``L1..LN`` (``<= a_o_d``).
         params: physical limits.
         human_driven: optional ``(..., N)`` bool; a connected human-driven ``L_i`` keeps ``p_m_human``
             (paper footnote 1) to the vehicle ahead instead of ``p_m``.
 
-    ``L_i`` brakes at ``max(a_m_d_i, z_i)``: its promise, or the least it needs (an expected violation).
+    ``L_i`` brakes at ``min(max(a_m_d_i, z_i), a_o_d)``: its promise, or the least it needs (an expected
+    violation), never beyond the others' maximum ``a_o_d`` (``params.others_decel``: ``a_x_d`` unless set).
     The loop runs over the chain, not the batch: each link depends on the one ahead (a scan).
     """
     check_params(params)
@@ -119,9 +122,10 @@ def leader_chain(p, v, promise_decel, params: Params, *, human_driven=None) -> C
         )
     if (v < 0).any():
         raise ValueError(f"v must be >= 0; got {v[v < 0].flat[0]!r}")
-    if (promise < 0).any() or (promise > params.a_x_d).any():
-        bad = promise[(promise < 0) | (promise > params.a_x_d)].flat[0]
-        raise ValueError(f"promise_decel must lie in [0, a_x_d={params.a_x_d}]; got {bad!r}")
+    a_o = params.others_decel
+    if (promise < 0).any() or (promise > a_o).any():
+        bad = promise[(promise < 0) | (promise > a_o)].flat[0]
+        raise ValueError(f"promise_decel must lie in [0, a_o_d={a_o}] (Params.others_decel); got {bad!r}")
     if human_driven is None:
         human = np.zeros(promise.shape, dtype=bool)
     else:
@@ -143,7 +147,7 @@ def leader_chain(p, v, promise_decel, params: Params, *, human_driven=None) -> C
         cols = tuple(np.moveaxis(np.broadcast_to(a, (*batch, a.shape[-1])), -1, 0) for a in (p, v, promise, margin))
     with np.errstate(all="ignore"):
         decel, required, unsafe = propagate_chain(xp, *cols, params, n_links)
-    l1 = xp.where(unsafe, params.a_x_d, decel[0])
+    l1 = xp.where(unsafe, params.others_decel, decel[0])
     if xp is SCALAR:
         stack = lambda xs: np.asarray(xs, dtype=np.float64)  # noqa: E731
     else:
@@ -160,16 +164,18 @@ def leader_chain(p, v, promise_decel, params: Params, *, human_driven=None) -> C
 def propagate_chain(xp, p, v, promise, margin, params: Params, n_links: int):
     """Unchecked scan of :func:`leader_chain` over per-vehicle rows ``p[i]``, ``v[i]`` (``L1`` first; ``promise``
     and ``margin`` — ``p_m``, or ``p_m_human`` for a human-driven link — for ``L1..LN``). Returns
-    ``(decel, required, unsafe)``: lists front-last and a flag."""
-    decel = [params.a_x_d]  # L(N+1), not connected: mechanical worst case
+    ``(decel, required, unsafe)``: lists front-last and a flag. Every other vehicle brakes at most
+    ``params.others_decel`` (``a_o_d``; ``a_x_d`` in the paper's world)."""
+    a_o = params.others_decel
+    decel = [a_o]  # L(N+1), not connected: the others' maximum braking
     required = []
     unsafe = False
-    a_ahead = params.a_x_d
+    a_ahead = a_o
     slacks = [p[i + 1] - p[i] - margin[i] for i in range(n_links)] if xp is not ARRAY else p[1:] - p[:-1] - margin
     for i in range(n_links - 1, -1, -1):
         z = min_follow_decel(xp, slacks[i], v[i], v[i + 1], a_ahead)
-        unsafe = unsafe | (z > params.a_x_d)
-        a_ahead = xp.minimum(xp.maximum(promise[i], z), params.a_x_d)
+        unsafe = unsafe | (z > a_o)
+        a_ahead = xp.minimum(xp.maximum(promise[i], z), a_o)
         decel.insert(0, a_ahead)
         required.insert(0, z)
     return decel, required, unsafe
@@ -178,7 +184,8 @@ def propagate_chain(xp, p, v, promise, margin, params: Params, n_links: int):
 def worst_case_leader_decel(p, v, promise_decel, params: Params, *, human_driven=None):
     """Worst-case deceleration of ``L1`` (paper Eqs. 1–3, corrected). See :func:`leader_chain`.
 
-    Returns ``(...)`` float64; ``a_x_d`` when ``N = 0`` or when a collision ahead cannot be ruled out.
+    Returns ``(...)`` float64; the others' maximum ``a_o_d`` when ``N = 0`` or when a collision ahead cannot be ruled
+    out.
     """
     return leader_chain(p, v, promise_decel, params, human_driven=human_driven).l1_decel
 
@@ -186,17 +193,23 @@ def worst_case_leader_decel(p, v, promise_decel, params: Params, *, human_driven
 def leader_position(p, v, decel, t, params: Params):
     """Position of a leader braking at ``decel`` from ``(p, v)`` after ``t`` seconds, stopping at rest (Eq. 4).
 
-    All arguments broadcast; ``decel`` in ``[0, a_x_d]``, ``v >= 0``, ``t >= 0``.
+    All arguments broadcast; ``decel`` in ``[0, max(a_x_d, a_o_d)]``, ``v >= 0``, ``t >= 0``.
     """
     check_params(params)
     xp, a, shape = prepare(
         {"p": p, "v": v, "decel": decel, "t": t},
         nonneg=("v", "decel", "t"),
-        upper={"decel": params.a_x_d},
+        upper={"decel": decel_cap(params)},
     )
     with np.errstate(all="ignore"):
         out = braked_position(xp, a["p"], a["v"], a["decel"], a["t"])
     return finish(xp, shape, out)
+
+
+def decel_cap(params: Params) -> float:
+    """The largest worst-case deceleration an input may give a vehicle: ``max(a_x_d, a_o_d)`` (the ego's committed
+    braking, or any other vehicle's maximum)."""
+    return max(params.a_x_d, params.others_decel)
 
 
 def braked_position(xp, p, v, decel, t, t_stop=None):

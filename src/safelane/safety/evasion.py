@@ -23,7 +23,7 @@ import numpy as np
 from ..params import Params
 from ._backend import ARRAY, jitable
 from ._checks import bool_array, check_params, finish, prepare
-from .chain import braked_position
+from .chain import braked_position, decel_cap
 from .lateral import lateral_core
 from .longitudinal import FEASIBILITY_TOL_M, ego_position, longitudinal_core
 from .plan import EvasionPlan, check_broadcasts, plan_from_core
@@ -170,7 +170,7 @@ def _prepare_evasion(
         values,
         nonneg=("ego_vx", "l1_v", "l1_decel", "f_v"),
         bools=("follower_aggressive", "leader_human", "follower_human"),
-        upper={"l1_decel": params.a_x_d},
+        upper={"l1_decel": decel_cap(params)},
     )
     lead_margin = xp.where(a["leader_human"], params.p_m_human, params.p_m)
     follow_margin = xp.where(a["follower_human"], params.p_m_human, params.p_m)
@@ -198,8 +198,8 @@ def evasion_exists(
 
     Args (all broadcast to one batch shape):
         ego_px, ego_py, ego_vx, ego_vy: ego state (``ego_vx >= 0``; ``ego_vy`` positive toward the target lane).
-        l1_p, l1_v, l1_decel: ``L1``'s position, speed and worst-case deceleration (``[0, a_x_d]``, e.g. from
-            :func:`worst_case_leader_decel`).
+        l1_p, l1_v, l1_decel: ``L1``'s position, speed and worst-case deceleration (``[0, max(a_x_d, a_o_d)]``,
+            e.g. from :func:`worst_case_leader_decel`; above ``a_x_d`` the ego never follows ``L1``).
         f_p, f_v: follower position and speed.
         follower_aggressive: bool; the follower's assumed worst case (Eq. 9).
         leader_human, follower_human: keep ``p_m_human`` instead of ``p_m`` to that vehicle (footnote 1).

@@ -23,6 +23,19 @@ The paper selects the case by conditions that involve the unknown ``t_x1`` (and 
 ``t_x1``); here each candidate is clipped to ``[0, T]``, its minimum gap evaluated exactly, and the largest
 feasible one kept — which by monotonicity is the exact optimum. ``T`` itself (accelerate throughout) is a
 candidate too, and full braking from ``t = 0`` (``t_x1 = 0``) failing means no evasion exists.
+
+**``L1`` braking harder than the ego** (``a1 > a_x_d``: the others' maximum ``a_o_d`` above the ego's committed
+braking). The ego cannot follow ``L1`` (that would mean braking at ``a1``), so the profile is accelerate → brake at
+``a_x_d`` to rest (:func:`profile`: ``match`` needs ``a1 <= a_x_d``). The gap is then concave while both move (its
+second derivative is ``−a_x_a − a1`` while the ego accelerates, ``a_x_d − a1 < 0`` while it brakes) and
+non-increasing once ``L1`` has stopped, so its minimum is still at ``0``, ``u``, ``min(t2, T)`` or ``T``. At the
+largest feasible ``u`` the gap binds at ``T`` with the ego still braking (case a's closed form, which reads ``L1``
+only through ``p_1(T)``) or at the ego's stop after ``L1``'s (case b's): it cannot bind at the ego's stop while
+``L1`` still moves (the gap grows there, at ``L1``'s speed) nor at ``u`` alone (concave there). So the candidates
+``u_a``, ``u_b`` and ``T`` contain the optimum and the selection stays exact; ``u_c`` is an extra, harmless candidate.
+The profile is still the position-maximal one at every instant: a motion ahead of it at some ``t0 > u`` is ahead
+from ``t0`` on (it brakes no harder), hence past ``L1``'s margin at the binding instant if that is later, or at
+``t0`` itself if not (then both have stopped: the margin no longer moves).
 """
 
 from __future__ import annotations
@@ -34,13 +47,17 @@ import numpy as np
 from ..params import Params
 from ._backend import FEASIBILITY_TOL_M, INF, jitable
 from ._checks import check_params, finish, prepare
-from .chain import braked_position
+from .chain import braked_position, decel_cap
 
 __all__ = ["FEASIBILITY_TOL_M"]  # defined in _backend (chain.py needs it too); re-exported here as before
 
 
 def profile(xp, u, p, v, p1, v1, a1, prm: Params, l1_stop=None):
     """Switch state of the profile with acceleration phase ``[0, u]``: ``(V, t2, match)``.
+
+    ``match``: the braking ego reaches ``L1``'s speed while ``L1`` moves and follows it from ``t2`` on — possible only
+    where ``L1`` brakes no harder than the ego's committed ``a_x_d`` (``a1 <= a_x_d``); otherwise the ego brakes at
+    ``a_x_d`` to rest (``t2`` its stop).
 
     ``l1_stop`` is ``L1``'s stop time ``xp.stop_time(v1, a1)``, computed here unless given.
     """
@@ -51,7 +68,9 @@ def profile(xp, u, p, v, p1, v1, a1, prm: Params, l1_stop=None):
     rel = V - xp.maximum(v1 - a1 * u, 0.0)  # ego minus L1 speed at u
     m = a_d - a1
     t_match = u + xp.where(rel == 0.0, 0.0, xp.div(rel, m, INF))
-    match = (rel >= 0.0) & (t_match <= l1_stop)
+    # Following L1 means braking at a1: only within the ego's committed a_x_d (m >= 0). An L1 braking harder
+    # (a1 > a_x_d: the others' maximum beyond the ego's) is never followed; the ego brakes at a_x_d to rest.
+    match = (rel >= 0.0) & (t_match <= l1_stop) & (m >= 0.0)
     t2 = xp.where(match, t_match, u + V / a_d)
     return V, t2, match
 
@@ -156,7 +175,7 @@ def longitudinal_evasion(ego_px, ego_vx, l1_p, l1_v, l1_decel, t_y_f, params: Pa
     """Optimal accelerate–brake–follow evasion profile behind ``L1`` on ``[0, t_y_f]`` (Eqs. 6–8).
 
     Args (all broadcast): ego position/speed, ``L1`` position/speed and worst-case deceleration
-    (``[0, a_x_d]``), evasion horizon ``t_y_f >= 0``.
+    (``[0, max(a_x_d, a_o_d)]``: ``L1`` may brake harder than the ego commits to), evasion horizon ``t_y_f >= 0``.
 
     Returns :class:`LongitudinalEvasion`; ``min_gap`` is the smallest ``p_1 − p`` over ``[0, t_y_f]``.
     """
@@ -164,7 +183,7 @@ def longitudinal_evasion(ego_px, ego_vx, l1_p, l1_v, l1_decel, t_y_f, params: Pa
     xp, a, shape = prepare(
         {"ego_px": ego_px, "ego_vx": ego_vx, "l1_p": l1_p, "l1_v": l1_v, "l1_decel": l1_decel, "t_y_f": t_y_f},
         nonneg=("ego_vx", "l1_v", "l1_decel", "t_y_f"),
-        upper={"l1_decel": params.a_x_d},
+        upper={"l1_decel": decel_cap(params)},
     )
     p, v, p1, v1, a1, T = (a[k] for k in ("ego_px", "ego_vx", "l1_p", "l1_v", "l1_decel", "t_y_f"))
     with np.errstate(all="ignore"):
