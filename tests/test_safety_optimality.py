@@ -1,13 +1,14 @@
 """Optimality of the engine's "no evasion" verdict and soundness of its evasion plans (paper §3.3, Eq. 9).
 
 * **No evasion means none.** For random states where :func:`plan_evasion` says no evasion exists, a vectorized
-  random search over ``>= 100,000`` piecewise-constant longitudinal acceleration profiles in
-  ``[-a_x_d, a_x_a]`` — the ego's committed limits — (10–30 pieces over ``[0, t_y_f]``, speed clipped at zero;
-  the lateral return keeps the same ``t_y_f``) finds none that keeps both gaps — to the worst-case ``L1`` and the worst-case ``F`` — at
-  least the margin on ``[0, t_y_f]``. The profiles are integrated exactly per substep and the gaps checked on
-  the substep nodes, which can overestimate a gap's minimum by at most ``(a_x_a + a_x_d) h² / 8``; the states
-  are therefore chosen at least ``SHORTFALL_MIN_M`` from the boundary (more than four times that bound), and
-  as close to it as that allows (at most ``SHORTFALL_MAX_M``), where a search has the best chance.
+  random search over ``>= 100,000`` piecewise-constant longitudinal acceleration profiles in ``[-a_x_d, a_x_a]`` —
+  the ego's committed limits — (10–30 pieces over ``[0, t_y_f]``, speed clipped at zero; the lateral return keeps
+  the same ``t_y_f``) finds none that keeps both gaps — to the worst-case ``L1`` (which may brake harder than the
+  ego: ``others_harder``) and the worst-case ``F`` — at least the margin on ``[0, t_y_f]``. The profiles are
+  integrated exactly per substep and the gaps checked on the substep nodes, which can overestimate a gap's minimum
+  by at most ``(a_x_a + a_x_d) h² / 8``; the states are therefore chosen at least ``SHORTFALL_MIN_M`` from the
+  boundary (more than four times that bound), and as close to it as that allows (at most ``SHORTFALL_MAX_M``),
+  where a search has the best chance.
 * **The search has power.** The same search, on states the engine calls feasible with a little room, does find
   valid profiles for nearly every state — so finding none above means something.
 * **Plans are sound.** Where an evasion exists, the engine's own plan (``plan.state(t)`` on a fine grid) keeps
