@@ -11,6 +11,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from safelane import Params
 from safelane.errors import InputError
 from safelane.planners.base import ExpertPlanner
 from safelane.sim import ScenarioConfig, SimConfig, _fused, concat, paper_scenarios, simulate_batch
@@ -115,3 +116,16 @@ def test_the_reasons_name_every_cause_outside_the_config(monkeypatch):
         assert cause in text, cause
     monkeypatch.setenv("SAFELANE_NO_FUSED", "1")
     assert "SAFELANE_NO_FUSED=1" in _fused.reasons(_batch(), SimConfig(), ExpertPlanner(), None, False, False)
+
+
+def test_the_others_maximum_braking_apart_from_a_x_d_runs_period_by_period_and_says_why(monkeypatch):
+    """The compiled loop has one braking limit for every vehicle: ``Params.a_o_d`` set apart from ``a_x_d`` is
+    refused by name (and the loop itself refuses it if called); set equal to it, the run stays compiled."""
+    for env in ("SAFELANE_NO_NUMBA", "SAFELANE_NO_FUSED"):
+        monkeypatch.delenv(env, raising=False)
+    harder = simulate_batch(_batch(), seed=3, params=Params(a_o_d=9.5))
+    assert harder.engine == "period by period"
+    assert any(reason.startswith("params.a_o_d=9.5") for reason in harder.engine_reasons), harder.engine_reasons
+    same = simulate_batch(_batch(), seed=3, params=Params(a_o_d=Params().a_x_d))
+    assert same.engine == "compiled loop", same.engine_reasons
+    assert same.table.equals(simulate_batch(_batch(), seed=3).table)

@@ -196,10 +196,11 @@ def responsible_accel_core(xp, a_wanted, bound, a_x_d):
     return xp.where(bound > a_wanted, a_wanted, xp.maximum(bound - ROOT_EPS_MPS2, -a_x_d))
 
 
-def responsible_accel(a_wanted, slack, v_f, v_l, lead_decel, prm: Params):
-    """Largest ``a`` in ``[−a_x_d, a_wanted]`` passing :func:`responsible_ok`; ``−a_x_d`` when none does.
+def responsible_accel(a_wanted, slack, v_f, v_l, lead_decel, prm: Params, brake=None):
+    """Largest ``a`` in ``[−B, a_wanted]`` passing :func:`responsible_ok`; ``−B`` when none does. ``B = brake``: the
+    follower's own braking (default ``a_x_d``; another vehicle following brakes up to the others' maximum ``a_o_d``).
 
-    The safe ``a`` form an interval ``[−a_x_d, a*]`` (a larger ``a`` puts the follower further ahead at every
+    The safe ``a`` form an interval ``[−B, a*]`` (a larger ``a`` puts the follower further ahead at every
     instant), and ``a*`` is :func:`responsible_bound`, applied ``1e-9`` m/s² on the safe side (rounding at the
     boundary). Closed form throughout; the tests hold it to the full check, safe and maximal to ``1e-7``, on random
     and adversarial (Hypothesis) rows, and to an independent time-sampled reference.
@@ -207,8 +208,9 @@ def responsible_accel(a_wanted, slack, v_f, v_l, lead_decel, prm: Params):
     a_wanted, slack, v_f, v_l, lead_decel = np.broadcast_arrays(
         *(np.asarray(a, dtype=float) for a in (a_wanted, slack, v_f, v_l, lead_decel))
     )
-    bound = responsible_bound(slack, v_f, v_l, lead_decel, prm)
-    return responsible_accel_core(ARRAY, a_wanted, bound, prm.a_x_d)
+    brake = prm.a_x_d if brake is None else brake
+    bound = responsible_bound(slack, v_f, v_l, lead_decel, prm, brake=brake)
+    return responsible_accel_core(ARRAY, a_wanted, bound, brake)
 
 
 # The closed forms compiled into the kernels (safety/_compile.py, through _fast_responsible): the same functions,

@@ -61,7 +61,7 @@ class ShieldState:
 
 def init(situation: Situation, params: Params, config: ShieldConfig | None = None, variant="CV_all") -> ShieldState:
     """The shield's state for a lane change starting at ``situation``: the plan held at the start is computed under
-    the most conservative assumptions (L1 at ``a_x_d``, F aggressive)."""
+    the most conservative assumptions (L1 at the others' maximum ``a_o_d``, F aggressive)."""
     cfg = config or ShieldConfig()
     n = len(situation)
     delay = delay_periods(cfg, params) * params.dt
@@ -72,16 +72,16 @@ def init(situation: Situation, params: Params, config: ShieldConfig | None = Non
     l1x, l1v, fx, fv = s.chain_x[:, 0], s.chain_v[:, 0], s.f_x, s.f_v
     if pending is not None:  # the plan starts once the commands in flight have acted
         ex, ey, evx, evy = pending.carry(ex, ey, evx, evy, params.dt)
-        l1x, l1v = carry_worst(l1x, l1v, params.a_x_d, delay)
+        l1x, l1v = carry_worst(l1x, l1v, params.others_decel, delay)
         fx, fv = carry_worst(fx, fv, -params.a_x_a, delay)
     own = own_now = own_leader(s, cfg, params, np.zeros(n, bool), np.ones(n, bool))
     if own is not None and pending is not None:
         own = (*carry_worst(own[0], own[1], own[2], delay), own[2])
     # The plan held at the start: one candidate check of "cruise laterally as now" would also verify the period;
     # the plan alone is what init needs (the first step verifies every proposal).
-    plan = plan_evasion(ex, ey, evx, evy, l1x, l1v, params.a_x_d, fx, fv, True, params)
+    plan = plan_evasion(ex, ey, evx, evy, l1x, l1v, params.others_decel, fx, fv, True, params)
     if own is not None and np.isfinite(own[0]).any():
-        plan = own_plan(plan, (ex, ey, evx, evy, l1x, l1v, np.full(n, params.a_x_d), fx, fv, np.ones(n, bool)),
+        plan = own_plan(plan, (ex, ey, evx, evy, l1x, l1v, np.full(n, params.others_decel), fx, fv, np.ones(n, bool)),
                          own, params)  # fmt: skip
     if pending is not None:  # nothing verified the commands acting at the start: check their window now
         plan = in_flight_checked(plan, s, own_now, delay, params)

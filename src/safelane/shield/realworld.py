@@ -67,10 +67,11 @@ def chain_bounds(x, v, promise, n_connected, human, err, prm: Params):
     leave the links ahead of them free."""
     b, m = x.shape
     in_chain = np.arange(m - 1)[None, :] < n_connected[:, None]
-    promise = np.where(in_chain, promise, prm.a_x_d)
+    a_o = prm.others_decel  # what any other vehicle may brake (a_x_d in the paper's world)
+    promise = np.where(in_chain, promise, a_o)
     margin = np.where(human & in_chain, prm.p_m_human, prm.p_m)
     e = np.zeros((b, m, 2)) if err is None else err
-    decel = [np.full(b, prm.a_x_d)]
+    decel = [np.full(b, a_o)]
     unsafe = np.zeros(b, bool)
     a_ahead = decel[0]
     with np.errstate(all="ignore"):
@@ -80,18 +81,18 @@ def chain_bounds(x, v, promise, n_connected, human, err, prm: Params):
             v_f = v[:, i] + e[:, i, 1]
             v_l = np.maximum(v[:, i + 1] - e[:, i + 1, 1], 0.0)
             z = min_follow_decel(ARRAY, slack, v_f, v_l, a_ahead)
-            unsafe |= z > prm.a_x_d
-            a_ahead = np.minimum(np.maximum(promise[:, i], z), prm.a_x_d)
+            unsafe |= z > a_o
+            a_ahead = np.minimum(np.maximum(promise[:, i], z), a_o)
             decel.insert(0, a_ahead)
     return np.column_stack(decel), unsafe
 
 
 def own_lane_decel(s: Situation, prm: Params, informed, broken) -> np.ndarray:
     """``(B,)`` ``L0``'s worst-case deceleration: its own chain's bound where the variant uses chain information
-    (``informed``) and no assumption broke (``broken``), else ``a_x_d``."""
+    (``informed``) and no assumption broke (``broken``), else the others' maximum ``a_o_d``."""
     bounds, unsafe = chain_bounds(s.own_x, s.own_v, s.own_promise, s.own_n_connected,
                                   np.zeros(s.own_promise.shape, bool), s.err_own, prm)  # fmt: skip
-    return np.where(informed & ~unsafe & ~broken, bounds[:, 0], prm.a_x_d)
+    return np.where(informed & ~unsafe & ~broken, bounds[:, 0], prm.others_decel)
 
 
 def carry_worst(x, v, decel, horizon: float):
@@ -117,7 +118,7 @@ def in_flight_checked(plan: EvasionPlan, s: Situation, own, delay: float, prm: P
     ex, evx = s.ego_x, s.ego_vx
     zero = np.zeros(len(s))
     conflict = free_max(s.ego_y, s.ego_vy, zero, delay) > prm.y_safe + LATERAL_TOL_M
-    gap_l = pair_min_gap(s.chain_x[:, 0] - ex - prm.p_m, evx, zero, s.chain_v[:, 0], -prm.a_x_d + zero, delay)
+    gap_l = pair_min_gap(s.chain_x[:, 0] - ex - prm.p_m, evx, zero, s.chain_v[:, 0], -prm.others_decel + zero, delay)
     gap_f = pair_min_gap(ex - s.f_x - prm.p_m, s.f_v, prm.a_x_a + zero, evx, zero, delay)
     ok = ~conflict | ((gap_l >= -tol) & (gap_f >= -tol))
     if own is not None:

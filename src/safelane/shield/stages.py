@@ -29,10 +29,10 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..params import Params
-from ..safety._backend import ARRAY
+from ..safety._backend import ARRAY, FEASIBILITY_TOL_M
 from ..safety.chain import propagate_chain
 from ..safety.plan import set_rows
-from ..safety.responsible import responsible_accel, responsible_bound
+from ..safety.responsible import responsible_accel, responsible_bound, responsible_ok
 from .assessment import AssessmentState
 from .config import ShieldConfig
 from .decide import ABORT, COMPLETED, HESITATE, PROCEED, check_candidate, hesitate_lateral, plan_motion
@@ -116,7 +116,7 @@ def chain_analysis(situation: Situation, prm: Params):
         s = situation
         return chain_bounds(s.chain_x, s.chain_v, s.chain_promise, s.n_connected, s.chain_human, s.err_chain, prm)
     in_chain = np.arange(m - 1)[None, :] < situation.n_connected[:, None]
-    promise = np.where(in_chain, situation.chain_promise, prm.a_x_d)
+    promise = np.where(in_chain, situation.chain_promise, prm.others_decel)
     margin = np.where(situation.chain_human & in_chain, prm.p_m_human, prm.p_m)
     with np.errstate(all="ignore"):  # the situation was validated where it was built: the scan alone
         decel, _, unsafe = propagate_chain(
@@ -156,13 +156,14 @@ def worst_case(obs: Observed, flags, prm: Params, cfg: ShieldConfig) -> WorstCas
     uses_chain, uses_f_v2x, uses_assessment = flags
     s = obs.situation
     n = len(s)
-    l1_decel = np.where(uses_chain & ~obs.unsafe, obs.bounds[:, 0], prm.a_x_d)
+    a_o = prm.others_decel  # an L1 the chain does not bound brakes at the others' maximum
+    l1_decel = np.where(uses_chain & ~obs.unsafe, obs.bounds[:, 0], a_o)
     assessed = ASSESSMENTS[cfg.assessment].aggressive(obs.belief, s)
     trusted = uses_f_v2x & s.f_connected & s.f_collaborative
     f_aggr = np.where(trusted, False, np.where(uses_assessment, assessed, True))
     broken = obs.breach.any if cfg.monitor else np.zeros(n, bool)
     if cfg.monitor:
-        l1_decel = np.where(broken, prm.a_x_d, l1_decel)
+        l1_decel = np.where(broken, a_o, l1_decel)
         f_aggr = f_aggr | broken
     own = own_leader(s, cfg, prm, uses_chain, broken)
     if own is not None:
@@ -252,9 +253,14 @@ def command(state, obs: Observed, worst: WorstCase, prop: Proposal, fr: Frame, v
     ay_cmd = np.where(behaviour == HESITATE, verdicts.a_yh, prop.a_y)
     done = np.flatnonzero(state.completed & paper_rule)
     if done.size:
-        ax_cmd[done] = responsible_accel(
-            prop.a_x[done], (l1x - ex - prm.p_m)[done], evx[done], l1v[done], worst.l1_decel[done], prm
-        )
+        slack, l1d = (l1x - ex - prm.p_m)[done], worst.l1_decel[done]
+        ax_cmd[done] = responsible_accel(prop.a_x[done], slack, evx[done], l1v[done], l1d, prm)
+        soft = l1d > prm.a_x_d  # L1 may brake harder than the ego: the closed form is confirmed by the exact check
+        if soft.any():
+            r = done[soft]
+            with np.errstate(all="ignore"):
+                ok = responsible_ok(ax_cmd[r], slack[soft], evx[r], l1v[r], l1d[soft], prm, tol=FEASIBILITY_TOL_M)
+            ax_cmd[r] = np.where(ok, ax_cmd[r], -prm.a_x_d)
         ay_cmd[done] = np.clip(0.8 * (prm.lane_width - ey[done]) - 1.6 * evy[done], -prm.a_y_m, prm.a_y_m)
     abort_rows = np.flatnonzero((behaviour == ABORT) & paper_rule)
     abort = (abort_rows, None, None, None, None, None)
@@ -294,8 +300,10 @@ def remember(state, obs: Observed, worst: WorstCase, fr: Frame, verdicts: Verdic
     if watch.size:
         with np.errstate(all="ignore"):
             gap = (sex - sfx - prm.p_m)[watch]
-            limit = responsible_bound(gap, sfv[watch], s.ego_vx[watch], np.full(watch.size, prm.a_x_d), prm)
-        f_limit[watch] = np.maximum(limit, -prm.a_x_d)
+            # The most a responsible F may accelerate: the ego brakes at most a_x_d, F itself up to a_o_d.
+            limit = responsible_bound(gap, sfv[watch], s.ego_vx[watch], np.full(watch.size, prm.a_x_d), prm,
+                                      brake=prm.others_decel)  # fmt: skip
+        f_limit[watch] = np.maximum(limit, -prm.others_decel)
     snapshot = Snapshot(
         chain_x=e.chain_x, chain_v=e.chain_v, bounds=obs.bounds, n_connected=s.n_connected, f_x=sfx, f_v=sfv,
         f_limit=f_limit, plan_l1_decel=new_plan.l1_decel, plan_f_aggr=plan_f_aggr, active=active,

@@ -95,7 +95,7 @@ def leader_accels(x, v, margin, roles, bounds, task, a_last, decel_last, violati
     acc = np.zeros((bsz, k), order="F")
     leader_kernel(
         *args, any_violation, np.asarray(violating, dtype=np.bool_),
-        np.asarray(violate_pick, dtype=np.float64), prm.a_x_d, prm.dt, ROOT_EPS_MPS2, FEASIBILITY_TOL_M,
+        np.asarray(violate_pick, dtype=np.float64), prm.others_decel, prm.dt, ROOT_EPS_MPS2, FEASIBILITY_TOL_M,
         0.5 * FEASIBILITY_TOL_M, acc,
     )  # fmt: skip
     return acc
@@ -157,8 +157,8 @@ def follower_accel(f_x, f_v, l1_x, l1_v, ego_x, ego_vx, aggressive, completed, g
     out = np.empty(n)
     follower_kernel(
         *(r(a) for a in floats), r(aggressive, np.bool_), r(completed, np.bool_), r(gap0), wanted is not None,
-        r(0.0 if wanted is None else wanted), bool(ignores_ego), prm.p_m, prm.a_x_a, prm.a_x_d, float(open_decel),
-        float(open_gap_m), prm.dt, ROOT_EPS_MPS2, out,
+        r(0.0 if wanted is None else wanted), bool(ignores_ego), prm.p_m, prm.a_x_a, prm.others_decel,
+        float(open_decel), float(open_gap_m), prm.dt, ROOT_EPS_MPS2, out,
     )  # fmt: skip
     return out
 
@@ -200,6 +200,6 @@ def chain_bounds(x, v, promise, margin, prm: Params):
     bsz, k = x.shape
     bounds = np.empty((bsz, k), order="F")
     unsafe = np.empty(bsz, dtype=np.bool_)
-    chain_kernel(x, v, promise.reshape(k - 2, bsz), margin.reshape(k - 2, bsz), prm.a_x_d, 0.5 * FEASIBILITY_TOL_M,
-                 FEASIBILITY_TOL_M, bounds, unsafe)  # fmt: skip
+    chain_kernel(x, v, promise.reshape(k - 2, bsz), margin.reshape(k - 2, bsz), prm.others_decel,
+                 0.5 * FEASIBILITY_TOL_M, FEASIBILITY_TOL_M, bounds, unsafe)  # fmt: skip
     return bounds, unsafe

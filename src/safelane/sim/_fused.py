@@ -84,8 +84,10 @@ def unclassified(config_cls) -> list[str]:
     return sorted({f for f in fields if named.count(f) != 1} | (set(named) - fields))
 
 
-def reasons(batch, cfg, nominal, traffic, trace: bool, record_observations: bool) -> list[str]:
-    """Why the compiled loop does not run this simulation (empty: it runs it); see the module docstring."""
+def reasons(batch, cfg, nominal, traffic, trace: bool, record_observations: bool, prm=None) -> list[str]:
+    """Why the compiled loop does not run this simulation (empty: it runs it); see the module docstring. ``prm``:
+    the run's :class:`~safelane.Params` — the loop takes every vehicle to brake at most ``a_x_d`` (one float), so
+    the others' maximum ``a_o_d`` set apart from it runs period by period."""
     missing = unclassified(type(cfg))
     if missing:
         raise RuntimeError(
@@ -109,6 +111,8 @@ def reasons(batch, cfg, nominal, traffic, trace: bool, record_observations: bool
         out.append(f"the nominal planner {type(nominal).__name__} (the loop runs ExpertPlanner only)")
     out.extend(f"config.{name}={setting(cfg, name)!r} (compiled: {value!r})" for name, value in FIXED.items()
                if setting(cfg, name) != value)  # fmt: skip
+    if prm is not None and prm.others_decel != prm.a_x_d:
+        out.append(f"params.a_o_d={prm.a_o_d} (compiled: unset, the others braking at most a_x_d)")
     if batch.l0_x is not None:
         out.append("own-lane leaders in the batch")
     if batch.last_profile_t is not None:
@@ -149,6 +153,8 @@ def run_chunk(sim, n_steps: int) -> dict:
     from ._fast_loop import OUT_B, OUT_F, PLAN, PRM, loop_kernel
 
     b, prm, cfg, nominal = sim.b, sim.prm, sim.cfg, sim.nominal
+    if prm.others_decel != prm.a_x_d:  # reasons() refuses it: the loop's one a_x_d stands for every vehicle
+        raise ValueError(f"the compiled loop takes the others' maximum braking as a_x_d; got a_o_d={prm.a_o_d}")
     start = sim.initial_state()
     traffic = sim.traffic_step  # the paper's, bound to the batch (covers() admits no other)
     n = len(b)

@@ -96,7 +96,7 @@ def leader_accels(x, v, margin, roles, bounds, task, a_last, decel_last, violati
                                           brake=own[soft], tol=FEASIBILITY_TOL_M)  # fmt: skip
             a_conn = np.maximum(np.where(ok, want, -own), -own)
             if violating is not None:
-                z = np.minimum(min_follow_decel(ARRAY, slack, v_f, v_l, d), prm.a_x_d)
+                z = np.minimum(min_follow_decel(ARRAY, slack, v_f, v_l, d), prm.others_decel)
                 lo, hi = np.minimum(z, decel_last[:, None]), np.maximum(z, decel_last[:, None])
                 a_conn = np.where(violating[:, 1:-1], -(lo + violate_pick[:, 1:-1] * (hi - lo)), a_conn)
         acc[:, 1:-1] = np.where(acts[:, 1:-1], a_conn, 0.0)
@@ -123,7 +123,9 @@ def reactive_leader_accels(x, v, margin, roles, task, a_last, decel_last, violat
         for i in range(k - 1, 0, -1):  # front to back: each link reacts to the one ahead (a scan over vehicles)
             if i + 1 < k:
                 ahead_decel = np.maximum(-acc[:, i + 1], 0.0)
-                z = np.minimum(min_follow_decel(ARRAY, slack[:, i], v[:, i], v[:, i + 1], ahead_decel), prm.a_x_d)
+                z = np.minimum(
+                    min_follow_decel(ARRAY, slack[:, i], v[:, i], v[:, i + 1], ahead_decel), prm.others_decel
+                )
             else:
                 z = np.zeros(bsz)
             a_conn = np.minimum(task[:, i], -z)
@@ -165,7 +167,8 @@ def follower_accel(
       ego responsibly (brakes as needed, up to ``a_x_d``) whenever the ego is ahead of it;
     * aggressive: until the lane change completes, closes the gap to L1 (PD law on the gap to ``p_m``,
       up to ``a_x_a``), ignoring the ego; afterwards it follows the ego responsibly.
-    Both always follow L1 responsibly (L1's worst case: ``a_x_d``). ``wanted``: a traffic hook's wish
+    Both always follow L1 responsibly (L1's worst case, and F's own braking: the others' maximum ``a_o_d``).
+    ``wanted``: a traffic hook's wish
     (:class:`safelane.sim.traffic.TrafficHooks`) replacing both nominal laws, inside ``[−a_x_d, a_x_a]``; the
     responsible filters still apply. ``ignores_ego`` (outside the assumptions): F never follows the ego. From
     :data:`FAST_MIN_ELEMENTS` scenarios on it runs the compiled kernel (:mod:`._fast_traffic`), the same bits.
@@ -176,10 +179,13 @@ def follower_accel(
     gap_ego = ego_x - f_x
     collab_nominal = np.where(gap_ego < gap0 + open_gap_m, -open_decel, np.clip(ego_vx - f_v, -open_decel, open_decel))
     gap_l1 = l1_x - f_x
-    aggr_nominal = np.clip(0.5 * (gap_l1 - prm.p_m - 1.0) + 1.5 * (l1_v - f_v), -prm.a_x_d, prm.a_x_a)
+    # F is one of the others: it brakes up to a_o = a_o_d and, as RSS's rear vehicle, takes the vehicle ahead (L1 or
+    # the ego) to brake up to a_o as well (a_x_d, and the paper's F, where a_o_d is not set).
+    a_o = prm.others_decel
+    aggr_nominal = np.clip(0.5 * (gap_l1 - prm.p_m - 1.0) + 1.5 * (l1_v - f_v), -a_o, prm.a_x_a)
     if wanted is None:
         wanted = np.where(aggressive, aggr_nominal, collab_nominal)
-    a = responsible_accel(wanted, gap_l1 - prm.p_m, f_v, l1_v, prm.a_x_d, prm)
+    a = responsible_accel(wanted, gap_l1 - prm.p_m, f_v, l1_v, a_o, prm, brake=a_o)
     follows_ego = (gap_ego > 0.0) & (~aggressive | completed) & (not ignores_ego)
-    a_ego = responsible_accel(a, gap_ego - prm.p_m, f_v, ego_vx, prm.a_x_d, prm)
+    a_ego = responsible_accel(a, gap_ego - prm.p_m, f_v, ego_vx, a_o, prm, brake=a_o)
     return np.where(follows_ego, a_ego, a)

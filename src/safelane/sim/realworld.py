@@ -32,7 +32,8 @@ _SLOT_L0, _SLOT_NOISE = 7001, 7100
 def with_own_lane(batch, seed: int, cfg, prm: Params):
     """``batch`` with an ``L0`` per scenario from the configured distribution (where it has none yet): gap to the
     ego uniform in ``[l0_gap_min_m, l0_gap_max_m]``, speed the ego's ``± l0_speed_spread_mps``, braking at
-    ``l0_decel_mps2`` (default ``a_x_d``) from an instant uniform in ``[0, l0_brake_window_s]``."""
+    ``l0_decel_mps2`` (default: the others' maximum ``a_o_d``, ``a_x_d`` unless set) from an instant uniform in
+    ``[0, l0_brake_window_s]``."""
     if batch.l0_x is not None:
         return batch
     sid = _key(batch)
@@ -40,7 +41,7 @@ def with_own_lane(batch, seed: int, cfg, prm: Params):
     gap = cfg.l0_gap_min_m + (cfg.l0_gap_max_m - cfg.l0_gap_min_m) * u[0]
     speed = batch.ego_vx + cfg.l0_speed_spread_mps * u[1]  # not slower than the ego: a start it can evade
     t_brake = cfg.l0_brake_window_s * u[2]
-    decel = prm.a_x_d if cfg.l0_decel_mps2 is None else cfg.l0_decel_mps2
+    decel = prm.others_decel if cfg.l0_decel_mps2 is None else cfg.l0_decel_mps2
     times = np.stack([np.zeros_like(t_brake), t_brake], 1)
     accels = np.stack([np.zeros_like(t_brake), np.full_like(t_brake, -decel)], 1)
     return dataclasses.replace(batch, l0_x=batch.ego_x + gap, l0_v=speed, l0_profile_t=times, l0_profile_a=accels)

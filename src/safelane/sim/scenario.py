@@ -246,11 +246,12 @@ def check_batch(batch: ScenarioBatch, prm: Params) -> None:
         raise ValueError("the scenario batch is empty")
     if batch.x.shape[1] < 2:
         raise ValueError("each scenario needs a follower and at least one leader (K >= 2)")
-    if (batch.decel_last > prm.a_x_d + 1e-12).any():
+    if (batch.decel_last > prm.others_decel + 1e-12).any():
         worst = float(batch.decel_last.max())
         # Allowed, but outside the paper's assumptions: say so rather than silently promising safety.
         warnings.warn(
-            f"a_x_N+1_d={worst} exceeds params.a_x_d={prm.a_x_d}: L(N+1) brakes harder than the worst case the "
+            f"a_x_N+1_d={worst} exceeds the others' maximum braking params.a_o_d={prm.others_decel} (a_x_d unless "
+            "set): L(N+1) brakes harder than the worst case the "
             "safety analysis assumes, so collisions are possible",
             stacklevel=3,
         )

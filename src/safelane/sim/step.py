@@ -114,7 +114,7 @@ class ClosedLoop:
         slots = np.arange(1, k)
         in_chain = slots[None, :] <= batch.n_connected[:, None]
         # The chain's inputs as contiguous rows (vehicle-major), for the unchecked scan of the chain.
-        self.chain_promise = np.where(in_chain, batch.promise_decel[:, 1:], prm.a_x_d)[:, :-1].T.copy()
+        self.chain_promise = np.where(in_chain, batch.promise_decel[:, 1:], prm.others_decel)[:, :-1].T.copy()
         self.chain_margin = np.where((batch.human[:, 1:] & in_chain)[:, :-1].T, prm.p_m_human, prm.p_m)
         self.lane_pairs = lane_pairs(batch, prm)
         self.last_slot = batch.n_connected + 1
@@ -224,7 +224,8 @@ class ClosedLoop:
 
     def chain(self, s: SimState):
         """The chain analysis on the current states: ``(bounds (B, K), unsafe (B,))``, ``bounds[:, i]`` the worst-case
-        deceleration of slot ``i`` (``a_x_d`` for F's slot, ``L(N+1)`` and anything not connected)."""
+        deceleration of slot ``i`` (the others' maximum ``a_o_d`` for F's slot, ``L(N+1)`` and anything not
+        connected)."""
         prm = self.prm
         if len(s.x) >= FAST_MIN_ELEMENTS and (kernel := traffic_kernel()) is not None:  # the same bits, compiled
             return kernel.chain_bounds(s.x, s.v, self.chain_promise, self.chain_margin, prm)
@@ -233,7 +234,8 @@ class ClosedLoop:
             decel, _, unsafe = propagate_chain(
                 ARRAY, s.x.T[1:], s.v.T[1:], self.chain_promise, self.chain_margin, prm, n_links
             )
-        bounds = np.column_stack([np.full(len(s.x), prm.a_x_d), *(np.broadcast_to(d, (len(s.x),)) for d in decel)])
+        others = np.full(len(s.x), prm.others_decel)  # F's slot: one of the others
+        bounds = np.column_stack([others, *(np.broadcast_to(d, (len(s.x),)) for d in decel)])
         return bounds, np.broadcast_to(np.asarray(unsafe, bool), (len(s.x),))
 
     def step(self, s: SimState):
