@@ -19,6 +19,7 @@ from hypothesis import strategies as st
 from safelane import Params
 from safelane._motion import advance
 from safelane.safety import plan_evasion
+from safelane.safety._backend import ARRAY
 from safelane.shield.decide import plan_motion
 from safelane.sim.checks import ego_checks, lane_checks, stop_pair_extrema
 from safelane.sim.kinematics import (
@@ -221,7 +222,7 @@ def test_stop_pair_extrema_equal_the_general_extrema_and_dense_sampling():
     cols = [(rng.uniform(-10, 10, n), rng.uniform(0, 6, n), rng.uniform(-8, 2.5, n)) for _ in range(2)]
     cols[0][1][::3] = 0.0  # some already at rest
     one, two = (Fleet.constant(x, v, a, dt) for x, v, a in cols)
-    lo, hi = stop_pair_extrema(one.x, one.v, one.acc, one.t_stop, two.x, two.v, two.acc, two.t_stop, dt)
+    lo, hi = stop_pair_extrema(ARRAY, one.x, one.v, one.acc, one.t_stop, two.x, two.v, two.acc, two.t_stop, dt)
     m1, m2 = one.motion(slice(None)), two.motion(slice(None))
     ref_lo, ref_hi = gap_extrema(m1, m2)
     assert ((one.t_stop < dt) & (two.t_stop < dt)).sum() > 50  # both stop inside the period, often

@@ -1,15 +1,16 @@
-"""Optional compiled kernel of the ego's collision checks (:func:`~.checks.ego_checks`; numba, extra ``fast``).
+"""Optional compiled kernel of the ego's collision checks (:func:`~.checks.ego_checks`; numba, extra ``fast``) and of
+the lane checks (:func:`~.checks.lane_checks`): loops and indexing only.
 
-:func:`ego_kernel` is ``ego_checks`` per scenario and target-lane vehicle: the near-pair filter, the running minimum
-gaps of the pairs that stayed far, and the exact gap extrema of the near pairs of the two common kinds — one
-quadratic over the whole period, windowed by the ego's lateral crossings of the conflict and overlap levels
-(``_windowed_quadratic``), and a vehicle stopping inside the period while the ego stays beyond both levels
-(``stop_pair_extrema``). The remaining near pairs — an ego executing an evasion plan (several segments), or stopping
-while it crosses a level — are marked, and the wrapper runs the general path (``windowed_gap_extrema``) on those
-pairs alone, as ``ego_checks`` does, through :mod:`._fast_general`'s kernel. Every expression is in the NumPy path's
-evaluation order, so collisions, violations and minimum gaps are its bits (``tests/test_fast_checks.py``); the NumPy
-function stays the reference and the fallback (a fleet with switches inside the period, ``SAFELANE_NO_NUMBA=1``,
-numba missing, small batches).
+Per scenario and target-lane vehicle, :func:`_ego_row` calls the checks' own rules, compiled as they are
+(:mod:`.checks`: :func:`~.checks.near_pair`, :func:`~.checks.far_gap`, :func:`~.checks.ego_pair_kind`,
+:func:`~.checks.windowed_quadratic`, :func:`~.checks.stop_pair_extrema`, :func:`~.checks.ego_verdict`), and
+:func:`_lane_row` per consecutive pair (:func:`~.checks.lane_near`, :func:`~.checks.quadratic_extrema`, …). The near
+pairs of neither common kind — an ego executing an evasion plan (several segments), or stopping while it crosses a
+level — are marked, and the wrapper runs them through :mod:`._fast_general`'s kernel, as ``ego_checks`` runs its
+general path (:func:`~.checks.general_pairs`). Each rule evaluates every expression as on NumPy arrays, so
+collisions, violations and minimum gaps are the NumPy path's bits (``tests/test_fast_checks.py``); the NumPy
+function stays the fallback (a fleet with switches inside the period, ``SAFELANE_NO_NUMBA=1``, numba missing, small
+batches).
 """
 
 from __future__ import annotations
@@ -19,19 +20,31 @@ import numpy as np
 from numba import types
 
 from ..params import Params
-from ..safety._fast_base import (
-    _max,
-    _min,
-    announce_compile,
-    row_function,
-)
+from ..safety import _compile
+from ..safety._backend import INF, SCALAR
+from ..safety._fast_base import _min, announce_compile, row_function
 from ._fast_general import _general
-from .checks import _rows
+from .checks import (
+    apply_pairs,
+    ego_pair_kind,
+    ego_verdict,
+    far_gap,
+    general_pairs,
+    lane_far_ratio,
+    lane_near,
+    lane_verdict,
+    lateral_extent,
+    near_pair,
+    near_threshold,
+    quadratic_extrema,
+    stop_pair_extrema,
+    windowed_quadratic,
+)
 from .kinematics import extrema
 
+_compile.register_rows()
 announce_compile(__file__)
 
-_INF = np.inf
 _M = types.Array(types.float64, 2, "A", readonly=True)
 _MB = types.Array(types.bool_, 2, "A", readonly=True)
 _V = types.Array(types.float64, 1, "A", readonly=True)
@@ -47,108 +60,6 @@ _SIGNATURE = types.void(
     *(types.float64,) * 7,  # dt, p_m, max(a_x_a, a_x_d), conflict level, overlap level, vehicle length, max level
     _OUT_B, _OUT_B, _OUT_V, _OUT_V, types.Array(types.bool_, 2, "F"),
 )  # fmt: skip
-
-
-@numba.njit(inline="always")
-def _free_max(y0, vy0, a, dt):  # _motion.free_max
-    end = y0 + vy0 * dt + 0.5 * a * dt * dt
-    tau = -vy0 / a if a < 0.0 else -1.0
-    vertex = y0 + 0.5 * vy0 * tau if (tau > 0.0 and tau < dt) else -_INF
-    return _max(_max(y0, end), vertex)
-
-
-@numba.njit(inline="always")
-def _quadratic_extrema(d0, dv0, ra, dt):  # checks._quadratic_extrema
-    end = d0 + dv0 * dt + 0.5 * ra * dt * dt
-    tau = -dv0 / ra if ra != 0.0 else -1.0
-    inside = tau > 0.0 and tau < dt
-    vertex = d0 + dv0 * tau + 0.5 * ra * tau * tau
-    lo = _min(_min(d0, end), vertex if (inside and ra > 0.0) else _INF)
-    hi = _max(_max(d0, end), vertex if (inside and ra < 0.0) else -_INF)
-    return lo, hi
-
-
-@numba.njit(error_model="numpy", nogil=True)
-def _quadratic(d0, dv0, ra, y0, vy0, ay, level, dt):  # checks._windowed_quadratic
-    lo, hi = _quadratic_extrema(d0, dv0, ra, dt)
-    if not -_free_max(-y0, -vy0, -ay, dt) <= level:
-        return lo, hi
-    # checks._window_crossings: the window cut by the lateral crossings of the level (kinematics.crossing_knots)
-    yy = y0 - level
-    disc = vy0 * vy0 - 2.0 * ay * yy
-    root = np.sqrt(_max(disc, 0.0))
-    quad = ay != 0.0 and disc >= 0.0
-    safe_a = ay if ay != 0.0 else 1.0
-    if quad:
-        r1 = (-vy0 - root) / safe_a
-        r2 = (-vy0 + root) / safe_a
-    else:
-        r1 = -yy / (vy0 if vy0 != 0.0 else 1.0) if (ay == 0.0 and vy0 != 0.0) else -1.0
-        r2 = -1.0
-    e1 = 0.0 + r1 if (r1 > 0.0 and r1 < dt) else 0.0
-    e2 = 0.0 + r2 if (r2 > 0.0 and r2 < dt) else 0.0
-    # sort the knots 0, dt, e1, e2 (no NaN): a sorting network
-    k0, k1, k2, k3 = 0.0, dt, e1, e2
-    if k1 > k2:
-        k1, k2 = k2, k1
-    if k0 > k1:
-        k0, k1 = k1, k0
-    if k2 > k3:
-        k2, k3 = k3, k2
-    if k1 > k2:
-        k1, k2 = k2, k1
-    if k0 > k1:
-        k0, k1 = k1, k0
-    if k2 > k3:
-        k2, k3 = k3, k2
-    vertex_t = -dv0 / ra if ra != 0.0 else -1.0
-    lo_all, hi_all = _INF, -_INF
-    for j in range(3):
-        tau0 = k0 if j == 0 else (k1 if j == 1 else k2)
-        tau1 = k1 if j == 0 else (k2 if j == 1 else k3)
-        mid = 0.5 * (tau0 + tau1)
-        if not y0 + vy0 * mid + 0.5 * ay * mid * mid > level:
-            continue
-        da = d0 + dv0 * tau0 + 0.5 * ra * tau0 * tau0
-        db = d0 + dv0 * tau1 + 0.5 * ra * tau1 * tau1
-        lo, hi = _min(da, db), _max(da, db)
-        if vertex_t > tau0 and vertex_t < tau1:
-            vertex = d0 + dv0 * vertex_t + 0.5 * ra * vertex_t * vertex_t
-            if ra > 0.0:
-                lo = _min(lo, vertex)
-            if ra < 0.0:
-                hi = _max(hi, vertex)
-        lo_all, hi_all = _min(lo_all, lo), _max(hi_all, hi)
-    return lo_all, hi_all
-
-
-@numba.njit(inline="always")
-def _gap_at(t, x1, v1, a1, t1, x2, v2, a2, t2):  # stop_pair_extrema's gap(t)
-    m1, m2 = _min(t, t1), _min(t, t2)
-    return (x2 + v2 * m2 + 0.5 * a2 * m2 * m2) - (x1 + v1 * m1 + 0.5 * a1 * m1 * m1)
-
-
-@numba.njit(error_model="numpy", nogil=True)
-def _stop_pair(x1, v1, a1, t1, x2, v2, a2, t2, dt):  # checks.stop_pair_extrema: (min, max) of x2(t) - x1(t)
-    knots = (0.0, _min(t1, t2), _max(t1, t2), dt)
-    d = (
-        _gap_at(knots[0], x1, v1, a1, t1, x2, v2, a2, t2),
-        _gap_at(knots[1], x1, v1, a1, t1, x2, v2, a2, t2),
-        _gap_at(knots[2], x1, v1, a1, t1, x2, v2, a2, t2),
-        _gap_at(knots[3], x1, v1, a1, t1, x2, v2, a2, t2),
-    )
-    lo, hi = _min(d[0], d[3]), _max(d[0], d[3])
-    for j in range(3):  # the three pieces between the knots, one quadratic each
-        start, end = knots[j], knots[j + 1]
-        moving1, moving2 = start < t1, start < t2
-        dv = (v2 + a2 * start if moving2 else 0.0) - (v1 + a1 * start if moving1 else 0.0)
-        acc = (a2 if moving2 else 0.0) - (a1 if moving1 else 0.0)
-        tau = -dv / acc
-        inside = tau > 0.0 and tau < end - start
-        vertex = d[j] + dv * tau + 0.5 * acc * tau * tau
-        lo = _min(_min(lo, d[j + 1]), vertex if (inside and acc > 0.0) else _INF)
-        hi = _max(_max(hi, d[j + 1]), vertex if (inside and acc < 0.0) else -_INF)
-    return lo, hi
 
 
 @row_function
@@ -167,39 +78,33 @@ def _ego_row(valid, vb, sx, sv, r, ego, lon, lat, plan, fleet, row_acc, consts, 
     ox, ov, oacc, ots, ox_end = fleet
     dt, p_m, a_lim, conflict, overlap, length, max_level = consts
     gap_f, gap_l1 = gaps
+    y_min, y_max = lateral_extent(SCALAR, y0, vy0, ay0, dt)
+    xe, ye = x_end, y_end
     if on_plan:
         y_max, xe, ye = plan_y_max, plan_x_end, plan_y_end
-    else:
-        y_max, xe, ye = _free_max(y0, vy0, ay0, dt), x_end, y_end
-    settled = (not on_plan) and -_free_max(-y0, -vy0, -ay0, dt) > max_level
-    threshold = p_m + 0.5 * (a_lim + row_acc) * dt * dt + 1e-6
-    in_zone = y_max > conflict
+    threshold = near_threshold(SCALAR, p_m, a_lim + row_acc, dt)
     hit, close = False, False
     for c in range(sx.shape[1]):
         d0 = sx[r, c] - ego_x
-        near = valid[vb, c] and (abs(d0) - abs(sv[r, c] - ego_vx) * dt < threshold) and in_zone
-        if not near:
-            if c < 2 and valid[vb, c]:  # checks._far_gaps: sampled at the period's ends in the conflict zone
-                sign = -1.0 if c == 0 else 1.0
-                g0 = sign * d0 if y0 > conflict else _INF
-                g1 = sign * (ox_end[r, c] - xe) if ye > conflict else _INF
-                if c == 0:
-                    gap_f = _min(gap_f, _min(g0, g1))
-                else:
-                    gap_l1 = _min(gap_l1, _min(g0, g1))
+        if not near_pair(SCALAR, valid[vb, c], d0, sv[r, c] - ego_vx, threshold, y_max, conflict, dt):
+            if c == 0:
+                gap_f = far_gap(SCALAR, gap_f, valid[vb, c], -1.0, d0, y0, ox_end[r, c] - xe, ye, conflict)
+            elif c == 1:
+                gap_l1 = far_gap(SCALAR, gap_l1, valid[vb, c], 1.0, d0, y0, ox_end[r, c] - xe, ye, conflict)
             continue
-        if (not on_plan) and t1 >= dt and ots[r, c] >= dt:  # one quadratic over the period
+        simple, stops = ego_pair_kind(SCALAR, on_plan, t1, ots[r, c], y_min, max_level, dt)
+        if simple:
             dd, dv, ra = ox[r, c] - x0, ov[r, c] - v0, oacc[r, c] - acc0
-            c_min, c_max = _quadratic(dd, dv, ra, y0, vy0, ay0, conflict, dt)
-            o_min, o_max = _quadratic(dd, dv, ra, y0, vy0, ay0, overlap, dt)
-        elif settled:  # someone stops inside the period, the ego beyond both levels all period
-            c_min, c_max = _stop_pair(x0, v0, acc0, t1, ox[r, c], ov[r, c], oacc[r, c], ots[r, c], dt)
+            c_min, c_max = windowed_quadratic(SCALAR, dd, dv, ra, y0, vy0, ay0, y_min, conflict, dt)
+            o_min, o_max = windowed_quadratic(SCALAR, dd, dv, ra, y0, vy0, ay0, y_min, overlap, dt)
+        elif stops:
+            c_min, c_max = stop_pair_extrema(SCALAR, x0, v0, acc0, t1, ox[r, c], ov[r, c], oacc[r, c], ots[r, c], dt)
             o_min, o_max = c_min, c_max
         else:
             general[r, c] = True
             continue
-        hit = hit or (o_min < length and o_max > -length)
-        close = close or (c_min < p_m - 1e-9 and c_max > -p_m + 1e-9)
+        pair_hit, pair_close = ego_verdict(SCALAR, c_min, c_max, o_min, o_max, length, p_m)
+        hit, close = hit or pair_hit, close or pair_close
         if c == 0:
             gap_f = _min(gap_f, -c_max)
         elif c == 1:
@@ -232,12 +137,9 @@ def ego_checks(b, prm: Params, s, lon, lat, others, conflict_level: float, overl
     bsz = len(lon.x)
     planned = np.zeros(bsz, bool)
     plan_y_max, plan_x_end, plan_y_end = (np.zeros(bsz) for _ in range(3))
-    at = None
     if plan is not None and plan[0].size:
         rows, plan_lon, plan_lat = plan
         planned[rows] = True
-        at = np.zeros(bsz, np.intp)
-        at[rows] = np.arange(rows.size)
         plan_y_max[rows] = extrema(plan_lat)[1]
         plan_x_end[rows], plan_y_end[rows] = plan_lon.x[:, -1], plan_lat.x[:, -1]
     collided, violated = np.empty(bsz, bool), np.empty(bsz, bool)
@@ -252,23 +154,11 @@ def ego_checks(b, prm: Params, s, lon, lat, others, conflict_level: float, overl
         max(conflict_level, overlap_level), collided, violated, min_gap_f, min_gap_l1, general,
     )  # fmt: skip
     c, r = np.nonzero(general.T)
-    if r.size:  # the exact general path (ego_checks' own) on the pairs the kernel left
-        c_min, c_max, o_min, o_max = (np.empty(r.size) for _ in range(4))
-        on_plan = planned[r]
-        groups = [(np.flatnonzero(~on_plan), lon, lat, None)]
-        if planned.any():
-            groups.append((np.flatnonzero(on_plan), plan_lon, plan_lat, at))
-        for level, lo, hi in ((conflict_level, c_min, c_max), (overlap_level, o_min, o_max)):
-            for pg, m_lon, m_lat, index in groups:
-                if pg.size:
-                    idx = r[pg] if index is None else index[r[pg]]
-                    lo[pg], hi[pg] = _general(_rows(m_lon, idx), others.motion(r[pg], c[pg]), _rows(m_lat, idx), level)
-        length = prm.vehicle_length
-        collided[r[(o_min < length) & (o_max > -length)]] = True
-        violated[r[(c_min < prm.p_m - 1e-9) & (c_max > -prm.p_m + 1e-9)]] = True
-        f0, l1 = c == 0, c == 1
-        min_gap_f[r[f0]] = np.minimum(min_gap_f[r[f0]], -c_max[f0])
-        min_gap_l1[r[l1]] = np.minimum(min_gap_l1[r[l1]], c_min[l1])
+    if r.size:  # the exact general path (ego_checks' own) on the pairs the kernel left, through _fast_general
+        out = tuple(np.empty(r.size) for _ in range(4))
+        general_pairs(r, c, np.ones(r.size, bool), planned, lon, lat, plan, others, (conflict_level, overlap_level),
+                      out, _general)  # fmt: skip
+        apply_pairs(r, c, out, prm, (collided, violated, min_gap_f, min_gap_l1))
     return collided, violated, min_gap_f, min_gap_l1
 
 
@@ -279,30 +169,25 @@ _LANE_SIGNATURE = types.void(_MB, _M, _M, _M, _M, _M, _M, _M, _V, types.float64,
 def _lane_row(valid, margin, pb, x, v, acc, t_stop, x_end, v_end, r, row_acc, dt, length):
     """One scenario of :func:`lane_kernel`: row ``pb`` of the pairs' ``valid``/``margin`` (``(., K-1)``), row ``r``
     of the vehicles' arrays (indexed in place, as :func:`_ego_row`). Returns ``(collided, violated, min_ratio)``."""
-    slack = row_acc * dt * dt + 1e-6
-    ratio = _INF
+    ratio = INF
     hit, close = False, False
     for c in range(x.shape[1] - 1):
         if not valid[pb, c]:
             continue
         m = margin[pb, c]
-        gap0 = x[r, c + 1] - x[r, c]
-        near = gap0 - abs(v[r, c + 1] - v[r, c]) * dt < m + slack
-        if near and gap0 >= m:  # both at rest all period keep their gap: no exact check needed
-            rest0 = v_end[r, c] == 0.0 and v[r, c] == 0.0 and x_end[r, c] == x[r, c]
-            rest1 = v_end[r, c + 1] == 0.0 and v[r, c + 1] == 0.0 and x_end[r, c + 1] == x[r, c + 1]
-            near = not (rest0 and rest1)
-        if not near:
-            ratio = _min(ratio, _min(gap0, x_end[r, c + 1] - x_end[r, c]) / m)
+        if not lane_near(SCALAR, True, x[r, c], v[r, c], x_end[r, c], v_end[r, c], x[r, c + 1], v[r, c + 1],
+                         x_end[r, c + 1], v_end[r, c + 1], m, row_acc, dt):  # fmt: skip
+            ratio = _min(ratio, lane_far_ratio(SCALAR, True, x[r, c + 1] - x[r, c], x_end[r, c + 1] - x_end[r, c], m))
             continue
-        if t_stop[r, c] >= dt and t_stop[r, c + 1] >= dt:
-            low = _quadratic_extrema(gap0, v[r, c + 1] - v[r, c], acc[r, c + 1] - acc[r, c], dt)[0]
-        else:
-            low = _stop_pair(x[r, c], v[r, c], acc[r, c], t_stop[r, c], x[r, c + 1], v[r, c + 1], acc[r, c + 1],
-                             t_stop[r, c + 1], dt)[0]  # fmt: skip
-        hit = hit or low < length
-        close = close or low < m - 1e-9
-        ratio = _min(ratio, low / m)
+        if t_stop[r, c] >= dt and t_stop[r, c + 1] >= dt:  # one quadratic over the period
+            low = quadratic_extrema(SCALAR, x[r, c + 1] - x[r, c], v[r, c + 1] - v[r, c], acc[r, c + 1] - acc[r, c],
+                                    dt)[0]  # fmt: skip
+        else:  # someone stops inside the period
+            low = stop_pair_extrema(SCALAR, x[r, c], v[r, c], acc[r, c], t_stop[r, c], x[r, c + 1], v[r, c + 1],
+                                    acc[r, c + 1], t_stop[r, c + 1], dt)[0]  # fmt: skip
+        pair_hit, pair_close, pair_ratio = lane_verdict(SCALAR, low, m, length)
+        hit, close = hit or pair_hit, close or pair_close
+        ratio = _min(ratio, pair_ratio)
     return hit, close, ratio
 
 

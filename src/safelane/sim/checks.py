@@ -3,6 +3,14 @@
 Collisions are physical overlap of footprints (longitudinal ``|dx| < vehicle_length`` at an instant when the
 ego overlaps the target lane laterally); violations are ``|dx| < p_m`` at an instant when the ego is in the
 conflict zone. Both are evaluated in continuous time within the period.
+
+**One source.** Each rule per pair is written once against the backend ``xp`` (:mod:`safelane.safety._backend`) and
+marked ``jitable``: which pairs are near (:func:`near_threshold`, :func:`near_pair`, :func:`lane_near`), the sampled
+gaps of the far ones (:func:`far_gap`, :func:`lane_far_ratio`), which closed form a near pair takes
+(:func:`ego_pair_kind`), the closed forms (:func:`quadratic_extrema`, :func:`windowed_quadratic` with
+:func:`window_crossings`, :func:`stop_pair_extrema`) and the verdicts (:func:`ego_verdict`, :func:`lane_verdict`).
+:func:`ego_checks` and :func:`lane_checks` evaluate them on NumPy arrays, pair by pair through masks; the compiled
+kernels (:mod:`._fast_checks`) and the compiled closed loop call them per row.
 """
 
 from __future__ import annotations
@@ -10,8 +18,21 @@ from __future__ import annotations
 import numpy as np
 
 from ..params import Params
+from ..safety._backend import ARRAY, INF, jitable
 from ..safety.evasion import fast_kernel
-from .kinematics import Fleet, Motion, crossing_knots, extrema, free_max, gap_extrema, windowed_gap_extrema
+from ..shield.decide import lateral_max
+from .kinematics import (
+    Fleet,
+    Motion,
+    crossing_knots,
+    extrema,
+    gap_extrema,
+    piece_extrema,
+    segment_crossings,
+    state_at,
+    vertex_extrema,
+    windowed_gap_extrema,
+)
 
 
 def _rows(m: Motion, rows) -> Motion:
@@ -60,158 +81,222 @@ def ego_checks(
         return kernel.ego_checks(b, prm, s, lon, lat, others, conflict_level, overlap_level, plan)
     dt = prm.dt
     bsz = len(lon.x)
-    max_level = max(conflict_level, overlap_level)
     planned = np.zeros(bsz, bool)
-    y_max = free_max(lat.x[:, 0], lat.v[:, 0], lat.acc[:, 0], dt)
+    y_min, y_max = lateral_extent(ARRAY, lat.x[:, 0], lat.v[:, 0], lat.acc[:, 0], dt)
     x_end, y_end = lon.x[:, -1], lat.x[:, -1]
     if plan is not None and plan[0].size:
         rows, plan_lon, plan_lat = plan
         planned[rows] = True
-        at = np.zeros(bsz, np.intp)
-        at[rows] = np.arange(rows.size)
         y_max[rows] = extrema(plan_lat)[1]
         x_end, y_end = x_end.copy(), y_end.copy()
         x_end[rows], y_end[rows] = plan_lon.x[:, -1], plan_lat.x[:, -1]
-    d0 = s.x - s.ego[0][:, None]
     # Per scenario (not batch-wide), so that which pairs count as near — exact minimum gaps — does not depend on
     # the other scenarios of the batch: a cell gives the same table alone and inside a grid.
-    a_bound = (max(prm.a_x_a, prm.a_x_d) + others.row_max_abs_acc())[:, None]
-    reach = np.abs(s.v - s.ego[2][:, None]) * dt
-    near = b.valid & (np.abs(d0) - reach < prm.p_m + 0.5 * a_bound * dt * dt + 1e-6) & (y_max > conflict_level)[:, None]
+    threshold = near_threshold(ARRAY, prm.p_m, max(prm.a_x_a, prm.a_x_d) + others.row_max_abs_acc(), dt)
+    d0 = s.x - s.ego[0][:, None]
+    near = near_pair(ARRAY, b.valid, d0, s.v - s.ego[2][:, None], threshold[:, None], y_max[:, None], conflict_level,
+                     dt)  # fmt: skip
     c, r = np.nonzero(near.T)  # the (B, K) masks are column-major: scan them vehicle by vehicle
     collided, violated = np.zeros(bsz, bool), np.zeros(bsz, bool)
-    min_gap_f, min_gap_l1 = _far_gaps(b, s, lat.x[:, 0], x_end, y_end, others, near, conflict_level)
+    min_gap_f, min_gap_l1 = (
+        far_gap(ARRAY, running, b.valid[:, col] & ~near[:, col], sign, d0[:, col], lat.x[:, 0],
+                others.x_end[:, col] - x_end, y_end, conflict_level)
+        for col, sign, running in ((0, -1.0, s.min_gap_f), (1, 1.0, s.min_gap_l1))
+    )  # fmt: skip
     if r.size == 0:
         return collided, violated, min_gap_f, min_gap_l1
     # Pair by pair (the near ones only): (min, max) of the gap over the windows of both lateral levels.
     c_min, c_max, o_min, o_max = (np.empty(r.size) for _ in range(4))
-    # Most pairs are one quadratic over the whole period (nobody stops or switches inside it): closed form.
-    on_plan = planned[r]
-    simple = ~on_plan & (lon.t[r, 1] >= dt) & (others.t_stop[r, c] >= dt)
-    # Next most: someone stops inside the period while the ego, on a constant command, stays laterally beyond
-    # both levels all period (the windows are the whole period): closed form over the stop knots.
-    settled = ~planned & (-free_max(-lat.x[:, 0], -lat.v[:, 0], -lat.acc[:, 0], dt) > max_level)
-    stops = ~simple & settled[r]
+    max_level = max(conflict_level, overlap_level)
+    simple, stops = ego_pair_kind(ARRAY, planned[r], lon.t[r, 1], others.t_stop[r, c], y_min[r], max_level, dt)
     if others.switch is not None:  # a switch inside the period: two segments, the general path
         stops &= ~others.switch.mask[r, c]
     ps, pk = np.flatnonzero(simple), np.flatnonzero(stops)
-    rest = ~simple & ~stops
-    general = [(np.flatnonzero(rest & ~on_plan), lon, lat, None)]
-    if planned.any():
-        general.append((np.flatnonzero(rest & on_plan), plan_lon, plan_lat, at))
     if pk.size:
         rk, ck = r[pk], c[pk]
         ego = (lon.x[rk, 0], lon.v[rk, 0], lon.acc[rk, 0], lon.t[rk, 1])
         other = (others.x[rk, ck], others.v[rk, ck], others.acc[rk, ck], others.t_stop[rk, ck])
-        c_min[pk], c_max[pk] = stop_pair_extrema(*ego, *other, dt)
+        c_min[pk], c_max[pk] = stop_pair_extrema(ARRAY, *ego, *other, dt)
         o_min[pk], o_max[pk] = c_min[pk], c_max[pk]
     rs, cs = r[ps], c[ps]
     d0 = others.x[rs, cs] - lon.x[rs, 0]
     dv0 = others.v[rs, cs] - lon.v[rs, 0]
     rel_acc = others.acc[rs, cs] - lon.acc[rs, 0]
-    lateral = (lat.x[rs, 0], lat.v[rs, 0], lat.acc[rs, 0])
+    lateral = (lat.x[rs, 0], lat.v[rs, 0], lat.acc[rs, 0], y_min[rs])
     for level, lo, hi in ((conflict_level, c_min, c_max), (overlap_level, o_min, o_max)):
-        lo[ps], hi[ps] = _windowed_quadratic(d0, dv0, rel_acc, *lateral, level, dt)
-        for pg, m_lon, m_lat, index in general:
-            if pg.size:
-                idx = r[pg] if index is None else index[r[pg]]
-                ego_lon, ego_lat = _rows(m_lon, idx), _rows(m_lat, idx)
-                knots = crossing_knots(ego_lat, level)
-                lo[pg], hi[pg] = windowed_gap_extrema(ego_lon, others.motion(r[pg], c[pg]), ego_lat, knots, level)
-    length = prm.vehicle_length
-    collided[r[(o_min < length) & (o_max > -length)]] = True
-    violated[r[(c_min < prm.p_m - 1e-9) & (c_max > -prm.p_m + 1e-9)]] = True
-    f, l1 = c == 0, c == 1  # each (row, vehicle) pair occurs once
-    min_gap_f[r[f]] = np.minimum(min_gap_f[r[f]], -c_max[f])
-    min_gap_l1[r[l1]] = np.minimum(min_gap_l1[r[l1]], c_min[l1])
+        lo[ps], hi[ps] = windowed_quadratic(ARRAY, d0, dv0, rel_acc, *lateral, level, dt)
+    general_pairs(r, c, ~simple & ~stops, planned, lon, lat, plan, others, (conflict_level, overlap_level),
+                  (c_min, c_max, o_min, o_max), _windowed_general)  # fmt: skip
+    apply_pairs(r, c, (c_min, c_max, o_min, o_max), prm, (collided, violated, min_gap_f, min_gap_l1))
     return collided, violated, min_gap_f, min_gap_l1
 
 
-def _far_gaps(b, s, y_start, x_end, y_end, others: Fleet, near, level: float):
-    """The running minimum gaps to F and L1 updated with the pairs that stayed far this period, sampled at the
-    period's ends where the ego is in the conflict zone (the near pairs are added exactly afterwards)."""
-    out = []
-    for col, sign, running in ((0, -1.0, s.min_gap_f), (1, 1.0, s.min_gap_l1)):
-        far = b.valid[:, col] & ~near[:, col]
-        g0 = np.where(far & (y_start > level), sign * (s.x[:, col] - s.ego[0]), np.inf)
-        g1 = np.where(far & (y_end > level), sign * (others.x_end[:, col] - x_end), np.inf)
-        out.append(np.minimum(running, np.minimum(g0, g1)))
-    return out
+def _windowed_general(ego_lon: Motion, other: Motion, ego_lat: Motion, level: float):
+    """The general path's exact ``(min, max)`` on NumPy: :func:`~.kinematics.windowed_gap_extrema` over the crossings
+    of ``level`` (:func:`~.kinematics.crossing_knots`)."""
+    return windowed_gap_extrema(ego_lon, other, ego_lat, crossing_knots(ego_lat, level), level)
 
 
-def stop_pair_extrema(x1, v1, a1, t1, x2, v2, a2, t2, dt: float):
+def general_pairs(r, c, mask, planned, lon, lat, plan, others: Fleet, levels, out, pair_extrema) -> None:
+    """The near pairs ``(r, c)[mask]`` left to the general path — an ego on its evasion plan (``plan``'s multi-segment
+    motions), or stopping while it crosses a level — their ``(min, max)`` at both ``levels`` written into ``out``
+    (``c_min, c_max, o_min, o_max``) by ``pair_extrema(ego_lon, other, ego_lat, level)``: :func:`_windowed_general`
+    on NumPy, ``_fast_general``'s kernel from the compiled checks."""
+    on_plan = planned[r]
+    groups = [(np.flatnonzero(mask & ~on_plan), lon, lat, None)]
+    if planned.any():
+        rows, plan_lon, plan_lat = plan
+        at = np.zeros(len(planned), np.intp)
+        at[rows] = np.arange(rows.size)
+        groups.append((np.flatnonzero(mask & on_plan), plan_lon, plan_lat, at))
+    for level, lo, hi in zip(levels, out[::2], out[1::2], strict=True):
+        for pg, m_lon, m_lat, index in groups:
+            if pg.size:
+                idx = r[pg] if index is None else index[r[pg]]
+                lo[pg], hi[pg] = pair_extrema(_rows(m_lon, idx), others.motion(r[pg], c[pg]), _rows(m_lat, idx), level)
+
+
+def apply_pairs(r, c, extrema_, prm: Params, out) -> None:
+    """The near pairs' verdicts (:func:`ego_verdict`) and minimum gaps to F (``c == 0``) and L1 (``c == 1``) folded
+    into ``out`` = ``(collided, violated, min_gap_f, min_gap_l1)`` in place; ``extrema_``: the pairs' ``(c_min, c_max,
+    o_min, o_max)``."""
+    c_min, c_max, o_min, o_max = extrema_
+    collided, violated, min_gap_f, min_gap_l1 = out
+    hit, close = ego_verdict(ARRAY, c_min, c_max, o_min, o_max, prm.vehicle_length, prm.p_m)
+    collided[r[hit]] = True
+    violated[r[close]] = True
+    f, l1 = c == 0, c == 1  # each (row, vehicle) pair occurs once
+    min_gap_f[r[f]] = np.minimum(min_gap_f[r[f]], -c_max[f])
+    min_gap_l1[r[l1]] = np.minimum(min_gap_l1[r[l1]], c_min[l1])
+
+
+def lateral_extent(xp, y0, vy0, ay, dt):
+    """Exact ``(min, max)`` over the period of the ego's free lateral motion ``y0 + vy0 t + ay t²/2``
+    (:func:`~safelane.shield.decide.lateral_max`, the minimum as the maximum of its mirror). Backend-generic."""
+    y_end = y0 + vy0 * dt + 0.5 * ay * dt * dt
+    ny0, nvy0, nay = -y0, -vy0, -ay
+    return -lateral_max(xp, ny0, nvy0, nay, ny0 + nvy0 * dt + 0.5 * nay * dt * dt, dt), lateral_max(
+        xp, y0, vy0, ay, y_end, dt
+    )
+
+
+def near_threshold(xp, p_m, a_bound, dt):
+    """How near a pair must start (``|gap|`` less what ``|Δv|`` moves it in a period) to be checked exactly: within
+    ``p_m`` plus the most ``a_bound`` (the ego's and the others' largest ``|acceleration|`` together) can move it in
+    one period, plus 1 µm. Backend-generic."""
+    return p_m + 0.5 * a_bound * dt * dt + 1e-6
+
+
+def near_pair(xp, valid, d0, dv, threshold, y_max, conflict_level, dt):
+    """Whether the ego and a target-lane vehicle (gap ``d0``, speed difference ``dv`` at the period's start) could
+    come within ``p_m`` during the period while the ego is in the conflict zone (its lateral maximum ``y_max`` above
+    ``conflict_level``): the pairs :func:`ego_checks` evaluates exactly. Backend-generic."""
+    return valid & (abs(d0) - abs(dv) * dt < threshold) & (y_max > conflict_level)
+
+
+def far_gap(xp, running, far, sign, d_start, y_start, d_end, y_end, level):
+    """The running minimum gap to F (``sign = −1``) or L1 (``+1``) updated with a pair that stayed far (``far``):
+    its gaps ``d_start``/``d_end`` (the vehicle's position less the ego's) sampled at the period's ends where the
+    ego is then in the conflict zone (lateral position above ``level``). Backend-generic."""
+    g0 = xp.where(y_start > level, sign * d_start, INF)
+    g1 = xp.where(y_end > level, sign * d_end, INF)
+    return xp.minimum(running, xp.where(far, xp.minimum(g0, g1), INF))
+
+
+def ego_pair_kind(xp, on_plan, t1, t_stop, y_min, max_level, dt):
+    """Which closed form a near pair takes: ``(simple, stops)``. Simple — one quadratic over the period (an ego on a
+    constant command that does not stop inside it, ``t1 >= dt``, nor does the other, ``t_stop >= dt``):
+    :func:`windowed_quadratic`. Stops — someone stops inside the period while the ego, on a constant command, stays
+    laterally beyond both levels all period (``y_min > max_level``: the windows are the whole period):
+    :func:`stop_pair_extrema`. Neither — the general path (:func:`general_pairs`). Backend-generic."""
+    simple = xp.where(on_plan, False, (t1 >= dt) & (t_stop >= dt))
+    return simple, xp.where(on_plan | simple, False, y_min > max_level)
+
+
+def ego_verdict(xp, c_min, c_max, o_min, o_max, length, p_m):
+    """``(collided, violated)`` of a pair from its gap's ``(min, max)`` over the instants the ego overlaps the target
+    lane (``o_*``) and is in the conflict zone (``c_*``): footprints overlap, ``|gap| < length``; the margin is
+    broken, ``|gap| < p_m`` (to ``1e-9``). Backend-generic."""
+    return (o_min < length) & (o_max > -length), (c_min < p_m - 1e-9) & (c_max > -p_m + 1e-9)
+
+
+def _stop_gap(xp, t, x1, v1, a1, t1, x2, v2, a2, t2):
+    """``x2(t) − x1(t)`` of two motions each at constant acceleration until its knot ``t_i``, at rest after it."""
+    return state_at(xp, x2, v2, a2, xp.minimum(t, t2))[0] - state_at(xp, x1, v1, a1, xp.minimum(t, t1))[0]
+
+
+def _stop_piece(xp, lo, hi, start, end, d_start, d_end, v1, a1, t1, v2, a2, t2):
+    """``(lo, hi)`` widened by one piece ``[start, end]`` of :func:`stop_pair_extrema` (one quadratic: who still
+    moves is who has not reached its knot at ``start``)."""
+    moving1, moving2 = start < t1, start < t2
+    dv = xp.where(moving2, v2 + a2 * start, 0.0) - xp.where(moving1, v1 + a1 * start, 0.0)
+    acc = xp.where(moving2, a2, 0.0) - xp.where(moving1, a1, 0.0)
+    vertex_lo, vertex_hi = vertex_extrema(xp, d_start, dv, acc, end - start)
+    return xp.minimum(xp.minimum(lo, d_end), vertex_lo), xp.maximum(xp.maximum(hi, d_end), vertex_hi)
+
+
+def stop_pair_extrema(xp, x1, v1, a1, t1, x2, v2, a2, t2, dt):
     """Exact ``(min, max)`` over ``[0, dt]`` of ``x2(t) − x1(t)`` for two :meth:`Motion.constant`-type motions:
     each at constant acceleration until its knot ``t_i <= dt`` (a stop inside the period, or ``dt``), at rest
-    after it. On the three pieces between ``0``, the two knots and ``dt`` the gap is one quadratic each."""
-    knots = (np.zeros_like(t1), np.minimum(t1, t2), np.maximum(t1, t2), np.full_like(t1, dt))
-
-    def gap(t):
-        m1, m2 = np.minimum(t, t1), np.minimum(t, t2)
-        return (x2 + v2 * m2 + 0.5 * a2 * m2 * m2) - (x1 + v1 * m1 + 0.5 * a1 * m1 * m1)
-
-    d = [gap(k) for k in knots]
-    lo, hi = np.minimum(d[0], d[3]), np.maximum(d[0], d[3])
-    with np.errstate(all="ignore"):
-        for start, end, d_start, d_end in zip(knots[:-1], knots[1:], d[:-1], d[1:], strict=True):
-            moving1, moving2 = start < t1, start < t2
-            dv = np.where(moving2, v2 + a2 * start, 0.0) - np.where(moving1, v1 + a1 * start, 0.0)
-            acc = np.where(moving2, a2, 0.0) - np.where(moving1, a1, 0.0)
-            tau = -dv / acc
-            inside = (tau > 0.0) & (tau < end - start)
-            vertex = d_start + dv * tau + 0.5 * acc * tau * tau
-            lo = np.minimum(np.minimum(lo, d_end), np.where(inside & (acc > 0.0), vertex, np.inf))
-            hi = np.maximum(np.maximum(hi, d_end), np.where(inside & (acc < 0.0), vertex, -np.inf))
-    return lo, hi
+    after it. On the three pieces between ``0``, the two knots and ``dt`` the gap is one quadratic each.
+    Backend-generic."""
+    k1, k2 = xp.minimum(t1, t2), xp.maximum(t1, t2)
+    d0 = _stop_gap(xp, 0.0, x1, v1, a1, t1, x2, v2, a2, t2)
+    d1 = _stop_gap(xp, k1, x1, v1, a1, t1, x2, v2, a2, t2)
+    d2 = _stop_gap(xp, k2, x1, v1, a1, t1, x2, v2, a2, t2)
+    d3 = _stop_gap(xp, dt, x1, v1, a1, t1, x2, v2, a2, t2)
+    lo, hi = _stop_piece(xp, xp.minimum(d0, d3), xp.maximum(d0, d3), 0.0, k1, d0, d1, v1, a1, t1, v2, a2, t2)
+    lo, hi = _stop_piece(xp, lo, hi, k1, k2, d1, d2, v1, a1, t1, v2, a2, t2)
+    return _stop_piece(xp, lo, hi, k2, dt, d2, d3, v1, a1, t1, v2, a2, t2)
 
 
-def _quadratic_extrema(d0, dv0, rel_acc, dt: float):
-    """``(min, max)`` over ``[0, dt]`` of ``d0 + dv0 t + rel_acc t²/2``."""
-    end = d0 + dv0 * dt + 0.5 * rel_acc * dt * dt
-    tau = np.where(rel_acc != 0.0, -dv0 / np.where(rel_acc != 0.0, rel_acc, 1.0), -1.0)
-    inside = (tau > 0.0) & (tau < dt)
-    vertex = d0 + dv0 * tau + 0.5 * rel_acc * tau * tau
-    lo = np.minimum(np.minimum(d0, end), np.where(inside & (rel_acc > 0.0), vertex, np.inf))
-    hi = np.maximum(np.maximum(d0, end), np.where(inside & (rel_acc < 0.0), vertex, -np.inf))
-    return lo, hi
+def quadratic_extrema(xp, d0, dv0, rel_acc, dt):
+    """``(min, max)`` over ``[0, dt]`` of ``d0 + dv0 t + rel_acc t²/2``. Backend-generic."""
+    return piece_extrema(xp, d0, dv0, d0 + dv0 * dt + 0.5 * rel_acc * dt * dt, rel_acc, dt)
 
 
-def _windowed_quadratic(d0, dv0, rel_acc, y0, vy0, ay, level: float, dt: float):
+def windowed_quadratic(xp, d0, dv0, rel_acc, y0, vy0, ay, y_min, level, dt):
     """``(min, max)`` of ``d0 + dv0 t + rel_acc t²/2`` over the instants of ``[0, dt]`` where
-    ``y0 + vy0 t + ay t²/2 > level`` — the one-segment case of :func:`windowed_gap_extrema`, in closed form.
-    Where the lateral position stays above ``level`` all period (the ego settled in the target lane) the window
-    is the whole period."""
-    lo, hi = _quadratic_extrema(d0, dv0, rel_acc, dt)
-    part = np.flatnonzero(-free_max(-y0, -vy0, -ay, dt) <= level)
-    if part.size:
-        sub = (a[part] for a in (d0, dv0, rel_acc, y0, vy0, ay))
-        lo[part], hi[part] = _window_crossings(*sub, level, dt)
-    return lo, hi
+    ``y0 + vy0 t + ay t²/2 > level`` — the one-segment case of :func:`~.kinematics.windowed_gap_extrema`, in closed
+    form. Where the lateral position stays above ``level`` all period (its minimum ``y_min``, the ego settled in the
+    target lane) the window is the whole period; else it is cut by the crossings (:func:`window_crossings`).
+    Backend-generic."""
+    lo, hi = quadratic_extrema(xp, d0, dv0, rel_acc, dt)
+    cut = y_min <= level
+    window_lo, window_hi = window_crossings(xp, d0, dv0, rel_acc, y0, vy0, ay, level, dt)
+    return xp.where(cut, window_lo, lo), xp.where(cut, window_hi, hi)
 
 
-def _window_crossings(d0, dv0, rel_acc, y0, vy0, ay, level: float, dt: float):
-    """:func:`_windowed_quadratic` where the window is cut by crossings of ``level`` (or empty)."""
-    one = Motion(
-        t=np.stack([np.zeros_like(y0), np.full_like(y0, dt)], -1),
-        x=np.stack([y0, y0 + vy0 * dt + 0.5 * ay * dt * dt], -1),
-        v=np.stack([vy0, vy0 + ay * dt], -1),
-        acc=ay[:, None],
-    )
-    knots = crossing_knots(one, level)  # (P, 4): 0, up to two crossings, dt
-    tau0, tau1 = knots[:, :-1], knots[:, 1:]
+def window_crossings(xp, d0, dv0, rel_acc, y0, vy0, ay, level, dt):
+    """:func:`windowed_quadratic` where the window is cut by crossings of ``level`` (or empty): the period split at
+    the crossings (:func:`~.kinematics.segment_crossings`, sorted by a sorting network: four knots, no NaN), each
+    interval counted where the lateral position at its midpoint is above ``level``. Backend-generic."""
+    e1, e2 = segment_crossings(xp, 0.0, dt, y0, vy0, ay, level)
+    k0, k1, k2, k3 = 0.0, dt, e1, e2
+    k1, k2 = xp.minimum(k1, k2), xp.maximum(k1, k2)
+    k0, k1 = xp.minimum(k0, k1), xp.maximum(k0, k1)
+    k2, k3 = xp.minimum(k2, k3), xp.maximum(k2, k3)
+    k1, k2 = xp.minimum(k1, k2), xp.maximum(k1, k2)
+    k0, k1 = xp.minimum(k0, k1), xp.maximum(k0, k1)
+    k2, k3 = xp.minimum(k2, k3), xp.maximum(k2, k3)
+    vertex_t = xp.div(-dv0, rel_acc, -1.0)
+    lo0, hi0 = _window_interval(xp, d0, dv0, rel_acc, y0, vy0, ay, level, k0, k1, vertex_t)
+    lo1, hi1 = _window_interval(xp, d0, dv0, rel_acc, y0, vy0, ay, level, k1, k2, vertex_t)
+    lo2, hi2 = _window_interval(xp, d0, dv0, rel_acc, y0, vy0, ay, level, k2, k3, vertex_t)
+    return xp.minimum(xp.minimum(lo0, lo1), lo2), xp.maximum(xp.maximum(hi0, hi1), hi2)
+
+
+def _window_interval(xp, d0, dv0, rel_acc, y0, vy0, ay, level, tau0, tau1, vertex_t):
+    """One interval ``[tau0, tau1]`` of :func:`window_crossings`: the gap's ``(min, max)`` there (its ends, and its
+    vertex at ``vertex_t`` where that lies strictly inside), ``(inf, −inf)`` where the ego is not above ``level``."""
     mid = 0.5 * (tau0 + tau1)
-    active = y0[:, None] + vy0[:, None] * mid + 0.5 * ay[:, None] * mid * mid > level
-
-    def d(t):
-        return d0[:, None] + dv0[:, None] * t + 0.5 * rel_acc[:, None] * t * t
-
-    lo, hi = np.minimum(d(tau0), d(tau1)), np.maximum(d(tau0), d(tau1))
-    safe = np.where(rel_acc != 0.0, rel_acc, 1.0)
-    vertex_t = np.where(rel_acc != 0.0, -dv0 / safe, -1.0)[:, None]
+    active = state_at(xp, y0, vy0, ay, mid)[0] > level
+    d_a, d_b = state_at(xp, d0, dv0, rel_acc, tau0)[0], state_at(xp, d0, dv0, rel_acc, tau1)[0]
+    vertex = state_at(xp, d0, dv0, rel_acc, vertex_t)[0]
     inside = (vertex_t > tau0) & (vertex_t < tau1)
-    vertex = d(vertex_t)
-    lo = np.where(inside & (rel_acc[:, None] > 0.0), np.minimum(lo, vertex), lo)
-    hi = np.where(inside & (rel_acc[:, None] < 0.0), np.maximum(hi, vertex), hi)
-    return np.where(active, lo, np.inf).min(-1), np.where(active, hi, -np.inf).max(-1)
+    lo = xp.where(inside & (rel_acc > 0.0), xp.minimum(xp.minimum(d_a, d_b), vertex), xp.minimum(d_a, d_b))
+    hi = xp.where(inside & (rel_acc < 0.0), xp.maximum(xp.maximum(d_a, d_b), vertex), xp.maximum(d_a, d_b))
+    return xp.where(active, lo, INF), xp.where(active, hi, -INF)
 
 
 def lane_pairs(b, prm: Params):
@@ -233,16 +318,10 @@ def lane_checks(b, prm: Params, others: Fleet, pairs=None):
     valid, margin = pairs if pairs is not None else lane_pairs(b, prm)
     if others.switch is None and len(others.x) >= FAST_MIN_ROWS and (kernel := checks_kernel()) is not None:
         return kernel.lane_checks(prm, others, (valid, margin))  # compiled, the same bits (_fast_checks)
-    x0, v0 = others.x, others.v
-    gap0 = x0[:, 1:] - x0[:, :-1]
-    gap1 = others.x_end[:, 1:] - others.x_end[:, :-1]
-    slack = (others.row_max_abs_acc() * dt * dt + 1e-6)[:, None]
-    near = valid & (gap0 - np.abs(v0[:, 1:] - v0[:, :-1]) * dt < margin + slack)
-    # Vehicles at rest all period keep their gap: such a pair at or beyond its margin needs no exact check (its gap
-    # at the period's ends is exact). At rest at both ends is not enough: a switch can start and stop it in between.
-    resting = (others.v_end == 0.0) & (v0 == 0.0) & (others.x_end == x0)
-    near &= ~(resting[:, 1:] & resting[:, :-1] & (gap0 >= margin))
-    sampled = np.where(valid & ~near, np.minimum(gap0, gap1) / margin, np.inf)
+    x0, v0, xe, ve = others.x, others.v, others.x_end, others.v_end
+    near = lane_near(ARRAY, valid, x0[:, :-1], v0[:, :-1], xe[:, :-1], ve[:, :-1], x0[:, 1:], v0[:, 1:], xe[:, 1:],
+                     ve[:, 1:], margin, others.row_max_abs_acc()[:, None], dt)  # fmt: skip
+    sampled = lane_far_ratio(ARRAY, valid & ~near, x0[:, 1:] - x0[:, :-1], xe[:, 1:] - xe[:, :-1], margin)
     c, r = np.nonzero(near.T)  # the (B, K) masks are column-major: scan them vehicle by vehicle
     bsz = len(x0)
     collided, violated = np.zeros(bsz, bool), np.zeros(bsz, bool)
@@ -263,12 +342,41 @@ def lane_checks(b, prm: Params, others: Fleet, pairs=None):
     d0 = x0[rs, cs + 1] - x0[rs, cs]
     dv0 = v0[rs, cs + 1] - v0[rs, cs]
     rel_acc = others.acc[rs, cs + 1] - others.acc[rs, cs]
-    pair_min[ps] = _quadratic_extrema(d0, dv0, rel_acc, dt)[0]
+    pair_min[ps] = quadratic_extrema(ARRAY, d0, dv0, rel_acc, dt)[0]
     if pg.size:  # someone stops inside the period: closed form over the stop knots
         behind = (others.x[rg, cg], others.v[rg, cg], others.acc[rg, cg], others.t_stop[rg, cg])
         ahead = (others.x[rg, cg + 1], others.v[rg, cg + 1], others.acc[rg, cg + 1], others.t_stop[rg, cg + 1])
-        pair_min[pg], _ = stop_pair_extrema(*behind, *ahead, dt)
-    collided[r[pair_min < prm.vehicle_length]] = True
-    violated[r[pair_min < margin[r, c] - 1e-9]] = True
-    np.minimum.at(min_ratio, r, pair_min / margin[r, c])
+        pair_min[pg], _ = stop_pair_extrema(ARRAY, *behind, *ahead, dt)
+    hit, close, ratio = lane_verdict(ARRAY, pair_min, margin[r, c], prm.vehicle_length)
+    collided[r[hit]] = True
+    violated[r[close]] = True
+    np.minimum.at(min_ratio, r, ratio)
     return collided, violated, min_ratio
+
+
+def lane_near(xp, valid, x0, v0, xe0, ve0, x1, v1, xe1, ve1, margin, a_max, dt):
+    """Whether a consecutive target-lane pair (behind: ``x0, v0`` at the start, ``xe0, ve0`` at the end; ahead: the
+    same with 1) is checked exactly: its gap less what ``|Δv|`` moves it in a period could come within ``margin``
+    plus ``a_max dt²`` (``a_max``: the scenario's largest ``|acceleration|``) and 1 µm — unless both rest all period
+    (the gap stays, exact at the period's ends) at or beyond the margin. At rest at both ends is not enough: a switch
+    can start and stop a vehicle in between. Backend-generic."""
+    gap0 = x1 - x0
+    near = valid & (gap0 - abs(v1 - v0) * dt < margin + (a_max * dt * dt + 1e-6))
+    resting = (ve0 == 0.0) & (v0 == 0.0) & (xe0 == x0) & (ve1 == 0.0) & (v1 == 0.0) & (xe1 == x1)
+    return near & xp.where(resting & (gap0 >= margin), False, True)
+
+
+def lane_far_ratio(xp, far, gap0, gap1, margin):
+    """A far pair's ``gap / margin``, sampled at the period's ends (``inf`` for the others). Backend-generic."""
+    return xp.where(far, xp.minimum(gap0, gap1) / margin, INF)
+
+
+def lane_verdict(xp, low, margin, length):
+    """``(collided, violated, ratio)`` of a near pair from its gap's exact minimum ``low``. Backend-generic."""
+    return low < length, low < margin - 1e-9, low / margin
+
+
+# The rules per pair, compiled into the checks' kernels and the compiled closed loop (safety/_compile.py).
+jitable(lateral_extent, near_threshold, near_pair, far_gap, ego_pair_kind, ego_verdict, _stop_gap, _stop_piece,
+        stop_pair_extrema, quadratic_extrema, windowed_quadratic, window_crossings, _window_interval, lane_near,
+        lane_far_ratio, lane_verdict)  # fmt: skip

@@ -5,6 +5,16 @@ Every vehicle's longitudinal acceleration is piecewise constant; a braking vehic
 ``t (..., K+1)`` from 0 to ``dt``, positions/speeds at the knots and one acceleration per segment. Gap
 extrema between two motions are exact: on each interval of the merged knots the gap is one quadratic, so
 its extrema lie at the knots or at the vertex.
+
+**One source.** The arithmetic per instant, per segment and per interval — the state at a time
+(:func:`state_at`), a segment's acceleration from its end speeds (:func:`piece_acc`), the extrema of one quadratic
+piece (:func:`vertex_extrema`, :func:`piece_extrema`), the instants a segment crosses a level
+(:func:`segment_crossings`) and one interval of a windowed gap (:func:`windowed_piece`) — is written once against
+the backend ``xp`` (:mod:`safelane.safety._backend`) and marked ``jitable``: the functions below evaluate it on
+NumPy arrays (every knot, segment and interval of a batch at once), the compiled checks (:mod:`._fast_general`,
+:mod:`._fast_checks`, the compiled closed loop) per row. What stays apart is structure: here the knots of a batch are
+merged with ``np.sort`` and a time's segment found by counting knots; a compiled row merges its knots into scratch
+and walks them.
 """
 
 from __future__ import annotations
@@ -14,8 +24,23 @@ from dataclasses import dataclass
 import numpy as np
 
 from .._motion import free_max, stop_time
+from ..safety._backend import ARRAY, INF, jitable
 
-__all__ = ["Fleet", "Motion", "crossing_knots", "extrema", "free_max", "gap_extrema", "windowed_gap_extrema"]
+__all__ = [
+    "Fleet",
+    "Motion",
+    "crossing_knots",
+    "extrema",
+    "free_max",
+    "gap_extrema",
+    "piece_acc",
+    "piece_extrema",
+    "segment_crossings",
+    "state_at",
+    "vertex_extrema",
+    "windowed_gap_extrema",
+    "windowed_piece",
+]
 
 
 @dataclass(frozen=True)
@@ -45,9 +70,7 @@ class Motion:
     @classmethod
     def from_samples(cls, t, x, v) -> Motion:
         """Knots from exact samples of a piecewise-constant-acceleration motion whose switches are knots."""
-        span = np.diff(t, axis=-1)
-        acc = np.where(span > 0.0, np.diff(v, axis=-1) / np.where(span > 0.0, span, 1.0), 0.0)
-        return cls(t=t, x=x, v=v, acc=acc)
+        return cls(t=t, x=x, v=v, acc=piece_acc(ARRAY, v[..., :-1], v[..., 1:], np.diff(t, axis=-1)))
 
     def at(self, tq):
         """Exact ``(x, v)`` at query times ``tq (..., Q)`` (broadcast against the motion's batch)."""
@@ -59,9 +82,7 @@ class Motion:
         def pick(arr):
             return np.take_along_axis(np.broadcast_to(arr, (*batch, arr.shape[-1])), seg, -1)
 
-        tau = t - pick(self.t)
-        a = pick(self.acc)
-        return pick(self.x) + pick(self.v) * tau + 0.5 * a * tau * tau, pick(self.v) + a * tau
+        return state_at(ARRAY, pick(self.x), pick(self.v), pick(self.acc), t - pick(self.t))
 
     @property
     def end(self):
@@ -206,14 +227,9 @@ def extrema(m: Motion):
 
 def _extrema(knots, d, dv):
     span = np.diff(knots, axis=-1)
-    rel_acc = np.where(span > 0.0, np.diff(dv, axis=-1) / np.where(span > 0.0, span, 1.0), 0.0)
-    d0, dv0 = d[..., :-1], dv[..., :-1]
-    tau = np.where(rel_acc != 0.0, -dv0 / np.where(rel_acc != 0.0, rel_acc, 1.0), -1.0)
-    inside = (tau > 0.0) & (tau < span)
-    vertex = d0 + dv0 * tau + 0.5 * rel_acc * tau * tau
-    lo = np.minimum(d.min(-1), np.where(inside & (rel_acc > 0.0), vertex, np.inf).min(-1))
-    hi = np.maximum(d.max(-1), np.where(inside & (rel_acc < 0.0), vertex, -np.inf).max(-1))
-    return lo, hi
+    rel_acc = piece_acc(ARRAY, dv[..., :-1], dv[..., 1:], span)
+    vertex_lo, vertex_hi = vertex_extrema(ARRAY, d[..., :-1], dv[..., :-1], rel_acc, span)
+    return np.minimum(d.min(-1), vertex_lo.min(-1)), np.maximum(d.max(-1), vertex_hi.max(-1))
 
 
 def crossing_knots(m: Motion, level: float) -> np.ndarray:
@@ -221,16 +237,7 @@ def crossing_knots(m: Motion, level: float) -> np.ndarray:
 
     Between consecutive returned knots ``m.x − level`` has a constant sign.
     """
-    t0, span = m.t[..., :-1], np.diff(m.t, axis=-1)
-    y0, v0, a = m.x[..., :-1] - level, m.v[..., :-1], m.acc
-    disc = v0 * v0 - 2.0 * a * y0
-    root = np.sqrt(np.maximum(disc, 0.0))
-    quad = (a != 0.0) & (disc >= 0.0)
-    safe_a = np.where(a != 0.0, a, 1.0)
-    lin = (a == 0.0) & (v0 != 0.0)
-    r1 = np.where(quad, (-v0 - root) / safe_a, np.where(lin, -y0 / np.where(v0 != 0.0, v0, 1.0), -1.0))
-    r2 = np.where(quad, (-v0 + root) / safe_a, -1.0)
-    extra = [np.where((r > 0.0) & (r < span), t0 + r, t0) for r in (r1, r2)]
+    extra = segment_crossings(ARRAY, m.t[..., :-1], np.diff(m.t, axis=-1), m.x[..., :-1], m.v[..., :-1], m.acc, level)
     return np.sort(np.concatenate([m.t, *extra], -1), -1)
 
 
@@ -240,17 +247,66 @@ def windowed_gap_extrema(behind: Motion, ahead: Motion, lateral: Motion, lateral
     batch = np.broadcast_shapes(behind.t.shape[:-1], ahead.t.shape[:-1], lateral_knots.shape[:-1])
     parts = [np.broadcast_to(k, (*batch, k.shape[-1])) for k in (behind.t, ahead.t, lateral_knots)]
     knots = np.sort(np.concatenate(parts, -1), -1)
-    mid = 0.5 * (knots[..., :-1] + knots[..., 1:])
-    active = lateral.at(mid)[0] > level
+    y_mid = lateral.at(0.5 * (knots[..., :-1] + knots[..., 1:]))[0]
     xa, va = ahead.at(knots)
     xb, vb = behind.at(knots)
     d, dv = xa - xb, va - vb
-    span = np.diff(knots, axis=-1)
-    rel_acc = np.where(span > 0.0, np.diff(dv, axis=-1) / np.where(span > 0.0, span, 1.0), 0.0)
-    d0, dv0, d1 = d[..., :-1], dv[..., :-1], d[..., 1:]
-    tau = np.where(rel_acc != 0.0, -dv0 / np.where(rel_acc != 0.0, rel_acc, 1.0), -1.0)
+    lo, hi = windowed_piece(ARRAY, d[..., :-1], dv[..., :-1], d[..., 1:], dv[..., 1:], np.diff(knots, axis=-1),
+                            y_mid, level)  # fmt: skip
+    return lo.min(-1), hi.max(-1)
+
+
+def state_at(xp, x, v, a, tau):
+    """``(x, v)`` a time ``tau`` into a segment at constant acceleration ``a`` that starts at ``(x, v)``.
+    Backend-generic; every argument broadcasts."""
+    return x + v * tau + 0.5 * a * tau * tau, v + a * tau
+
+
+def piece_acc(xp, v0, v1, span):
+    """The constant acceleration of a segment of length ``span`` from its end speeds ``v0``, ``v1`` (0 on a
+    zero-length segment: a repeated knot). Backend-generic."""
+    return xp.where(span > 0.0, (v1 - v0) / xp.where(span > 0.0, span, 1.0), 0.0)
+
+
+def vertex_extrema(xp, d0, dv0, acc, span):
+    """The vertex of ``d0 + dv0 t + acc t²/2`` as a candidate ``(min, max)`` over ``0 < t < span``: the vertex where
+    it lies strictly inside and is a minimum (``acc > 0``), else ``inf``; where it is a maximum (``acc < 0``), else
+    ``−inf``. Backend-generic."""
+    tau = xp.div(-dv0, acc, -1.0)
     inside = (tau > 0.0) & (tau < span)
-    vertex = d0 + dv0 * tau + 0.5 * rel_acc * tau * tau
-    seg_min = np.minimum(np.minimum(d0, d1), np.where(inside & (rel_acc > 0.0), vertex, np.inf))
-    seg_max = np.maximum(np.maximum(d0, d1), np.where(inside & (rel_acc < 0.0), vertex, -np.inf))
-    return np.where(active, seg_min, np.inf).min(-1), np.where(active, seg_max, -np.inf).max(-1)
+    vertex = d0 + dv0 * tau + 0.5 * acc * tau * tau
+    return xp.where(inside & (acc > 0.0), vertex, INF), xp.where(inside & (acc < 0.0), vertex, -INF)
+
+
+def piece_extrema(xp, d0, dv0, d1, acc, span):
+    """Exact ``(min, max)`` over ``[0, span]`` of one quadratic piece ``d0 + dv0 t + acc t²/2`` that ends at ``d1``:
+    its ends and its vertex. Backend-generic."""
+    vertex_lo, vertex_hi = vertex_extrema(xp, d0, dv0, acc, span)
+    return xp.minimum(xp.minimum(d0, d1), vertex_lo), xp.maximum(xp.maximum(d0, d1), vertex_hi)
+
+
+def windowed_piece(xp, d0, dv0, d1, dv1, span, y_mid, level):
+    """One interval of :func:`windowed_gap_extrema` (between consecutive merged knots, the gap ``d`` with rate ``dv``
+    at its ends): its :func:`piece_extrema` where the lateral position at its midpoint ``y_mid`` is above ``level``
+    (the whole interval is then: no crossing lies inside it), else ``(inf, −inf)``. Backend-generic."""
+    lo, hi = piece_extrema(xp, d0, dv0, d1, piece_acc(xp, dv0, dv1, span), span)
+    active = y_mid > level
+    return xp.where(active, lo, INF), xp.where(active, hi, -INF)
+
+
+def segment_crossings(xp, t0, span, x0, v0, a, level):
+    """The two instants at which a segment starting at time ``t0`` in state ``(x0, v0)`` with acceleration ``a``
+    crosses ``level`` strictly inside it (``0 < t − t0 < span``), each replaced by ``t0`` where there is no such
+    root: the extra knots of :func:`crossing_knots`. Backend-generic."""
+    y0 = x0 - level
+    disc = v0 * v0 - 2.0 * a * y0
+    root = xp.sqrt(disc)
+    quad = (a != 0.0) & (disc >= 0.0)
+    lin = (a == 0.0) & (v0 != 0.0)
+    r1 = xp.where(quad, xp.div(-v0 - root, a, -1.0), xp.where(lin, xp.div(-y0, v0, -1.0), -1.0))
+    r2 = xp.where(quad, xp.div(-v0 + root, a, -1.0), -1.0)
+    return xp.where((r1 > 0.0) & (r1 < span), t0 + r1, t0), xp.where((r2 > 0.0) & (r2 < span), t0 + r2, t0)
+
+
+# The per-instant, per-segment and per-interval arithmetic, compiled into the checks' kernels (safety/_compile.py).
+jitable(state_at, piece_acc, vertex_extrema, piece_extrema, windowed_piece, segment_crossings)
