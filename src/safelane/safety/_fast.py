@@ -3,8 +3,8 @@
 No formula lives here. :func:`exists_kernel` and :func:`plan_kernel` are loops over the rows of a batch that call
 the backend-generic closed form :func:`~.evasion.evasion_parts` (Eq. 5 ``lateral_core``, Eqs. 6–8
 ``longitudinal_core``, Eq. 9) on ``SCALAR``, the Python-float backend, which :mod:`._compile` teaches numba; the row
-functions :func:`_plan_parts` and :func:`_ego_position` are what the compiled shield and closed loop call
-(``shield/_fast_decide.py``, ``sim/_fast_held.py``). The uncompiled path evaluates the same function on NumPy arrays.
+functions :func:`_plan_parts` (``plan_kernel``'s row) and :func:`_ego_position`, :func:`_ego_speed`,
+:func:`_lateral_state` (the held plan's motion in ``sim/_fast_held.py``) are rows of the same closed forms. The uncompiled path evaluates the same function on NumPy arrays.
 
 **Same bits.** numba compiles without ``fastmath`` (LLVM neither contracts ``a * b + c`` into a fused multiply-add
 nor reassociates), ``sqrt`` and ``/`` are correctly rounded in both, ``SCALAR``'s ``maximum``/``minimum`` propagate
