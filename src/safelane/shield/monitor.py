@@ -7,7 +7,8 @@ conservative assumptions from then on (``L1`` at ``a_x_d``, ``F`` aggressive). K
 
 * ``l1_decel`` — ``L1`` braked harder than the deceleration the held plan assumed for it;
 * ``leader_bound`` — a connected leader braked harder than its chain bound (an *unexpected* promise violation);
-* ``last_decel`` — ``L(N+1)`` braked beyond ``a_x_d``;
+* ``last_decel`` — a non-connected leader braked beyond the others' maximum ``a_o_d`` (``a_x_d`` unless set):
+  ``L(N+1)`` in the target lane or, in the cumulative comparison, ``L0`` in the ego's own lane;
 * ``follower`` — an ``F`` the held plan took for collaborative did not yield: with the ego ahead of it, it
   accelerated beyond what a responsible follower of the ego may (a wrong assessment, or an ``F`` that ignores
   the ego);
@@ -16,7 +17,19 @@ conservative assumptions from then on (``L1`` at ``a_x_d``, ``F`` aggressive). K
   assumes the worst of everyone.
 
 Everything compared is what the ego observes: consecutive situations (positions of the chain and F) against the
-positions the assumptions allow; exact up to ``TOL_M``. The comparison per vehicle is written once
+positions the assumptions allow; exact up to ``TOL_M``.
+
+**Cumulative comparison** (where the situation carries a sensing-error box): the per-period comparison widens each
+period's prediction by the box, so an excess smaller than the box per period — a leader braking 1 m/s² beyond its
+assumed maximum for seconds — is never seen. So each period the monitor also compares every watched vehicle with the
+worst case the *held plan* assumed, from the :class:`Anchor` taken when that plan was made: the chain at its bounds
+then (``L1`` at the plan's deceleration), ``L0`` at its worst case then, an ``F`` the plan took for aggressive at
+``+a_x_a``; each must stay at or ahead of (leaders) / at or behind (F) where that worst case puts it at the time since
+the anchor, the sensing box counted once (the anchor at the analysis' corner, the observation at its far corner), not
+once per period. Kinds as above (``L0``: ``last_decel``). A new plan re-anchors its row; a chain that changed length
+is not compared; a collaborative ``F`` keeps the per-period check (its responsible limit changes every period).
+
+The comparison per vehicle is written once
 (:func:`braked_harder`, :func:`pushed_harder`, backend-generic and marked ``jitable``): :func:`observe_breaches`
 evaluates it on NumPy arrays, the compiled monitor (:mod:`._fast_monitor`) and the compiled closed loop row by row.
 """
@@ -70,6 +83,34 @@ class Snapshot:
     plan_l1_decel: np.ndarray
     plan_f_aggr: np.ndarray
     active: np.ndarray
+    anchor: Anchor | None = None  # the cumulative comparison's (with a sensing box), else None
+
+
+@dataclass(frozen=True)
+class Anchor:
+    """The worst case the held plan assumed, at the moment it was made (the cumulative comparison; ``(B,)`` or
+    ``(B, M)``): states at the analysis' corner of the sensing box, each vehicle's assumed maximum deceleration."""
+
+    t: np.ndarray  # when the plan was made [s]
+    chain_x: np.ndarray
+    chain_v: np.ndarray
+    bounds: np.ndarray  # the chain's bounds then
+    l1_decel: np.ndarray  # the plan's worst case for L1
+    n_connected: np.ndarray
+    f_x: np.ndarray
+    f_v: np.ndarray
+    f_accel: np.ndarray  # a_x_a where the plan took F for aggressive, +inf (not compared) where not
+    own_x: np.ndarray  # L0, +inf where none
+    own_v: np.ndarray
+    own_decel: np.ndarray
+
+    def renewed(self, rows: np.ndarray, now: Anchor) -> Anchor:
+        """This anchor with ``rows`` (bool ``(B,)``) taken from ``now`` (a new plan there); all of ``now`` where the
+        chain changed length."""
+        if self.chain_x.shape != now.chain_x.shape:
+            return now
+        pick = lambda a, b: np.where(rows.reshape(rows.shape + (1,) * (np.ndim(a) - 1)), b, a)  # noqa: E731
+        return Anchor(*(pick(getattr(self, f), getattr(now, f)) for f in self.__dataclass_fields__))
 
 
 #: :func:`observe_breaches` runs the compiled kernel (:mod:`._fast_monitor`) from this many scenarios on.
@@ -96,7 +137,10 @@ def observe_breaches(prev: Breach, last, situation, prm: Params, t_now: float) -
     scenarios on it runs the compiled kernel (:mod:`._fast_monitor`) where numba imports and ``SAFELANE_NO_NUMBA`` is
     not ``1``: the same flags, the NumPy path below is the reference."""
     bsz = len(prev.first_s)
-    if bsz >= FAST_MIN_ROWS and (kernel := monitor_kernel()) is not None:
+    kernel = monitor_kernel() if bsz >= FAST_MIN_ROWS else None
+    if last.anchor is not None:  # the cumulative comparison first: its flags join the period's
+        prev = _with_flags(prev, anchor_flags(last.anchor, last.active, situation, prm, t_now, kernel), t_now)
+    if kernel is not None:
         return kernel.observe_breaches(prev, last, situation, prm, t_now)
     flags = np.zeros((bsz, len(BREACH_KINDS)), bool)
     dt = prm.dt
@@ -113,6 +157,41 @@ def observe_breaches(prev: Breach, last, situation, prm: Params, t_now: float) -
     new = flags & ~prev.flags
     first = np.where(np.isnan(prev.first_s) & new.any(1), t_now, prev.first_s)
     return Breach(flags=prev.flags | flags, first_s=first)
+
+
+def _with_flags(prev: Breach, flags: np.ndarray, t_now: float) -> Breach:
+    new = flags & ~prev.flags
+    first = np.where(np.isnan(prev.first_s) & new.any(1), t_now, prev.first_s)
+    return Breach(flags=prev.flags | flags, first_s=first)
+
+
+def anchor_flags(anchor: Anchor, active, situation, prm: Params, t_now: float, kernel=None) -> np.ndarray:
+    """``(B, len(BREACH_KINDS))`` the cumulative comparison (module docstring) of ``situation`` (the observation's
+    far corner) with ``anchor``, for the ``active`` rows: the same comparisons as the period's
+    (:func:`braked_harder`, :func:`pushed_harder`) over the time since the anchor. ``kernel``: the compiled
+    monitor's module (:func:`anchor_kernel` there), else NumPy."""
+    bsz = len(anchor.t)
+    age = np.maximum(t_now - anchor.t, 0.0)
+    same = situation.chain_x.shape == anchor.chain_x.shape
+    own = getattr(situation, "own_x", None)
+    own_now = np.full(bsz, np.inf) if own is None else own[:, 0]
+    if kernel is not None:
+        return kernel.anchor_flags(anchor, active, situation.chain_x if same else None, situation.f_x, own_now, age)
+    flags = np.zeros((bsz, len(BREACH_KINDS)), bool)
+    with np.errstate(all="ignore"):
+        if same:
+            now = situation.chain_x
+            behind = braked_harder(ARRAY, now, anchor.chain_x, anchor.chain_v, anchor.bounds, age[:, None], TOL_M)
+            slots = np.arange(behind.shape[1])[None, :]
+            flags[:, 0] = braked_harder(ARRAY, now[:, 0], anchor.chain_x[:, 0], anchor.chain_v[:, 0],
+                                        anchor.l1_decel, age, TOL_M)  # fmt: skip
+            flags[:, 1] = (behind & (slots < anchor.n_connected[:, None])).any(1)
+            flags[:, 2] = (behind & (slots == anchor.n_connected[:, None])).any(1)
+        has_own = np.isfinite(anchor.own_x) & np.isfinite(own_now)
+        flags[:, 2] |= has_own & braked_harder(ARRAY, np.where(has_own, own_now, 0.0), np.where(has_own, anchor.own_x,
+                                               0.0), anchor.own_v, anchor.own_decel, age, TOL_M)  # fmt: skip
+        flags[:, 3] = pushed_harder(ARRAY, situation.f_x, anchor.f_x, anchor.f_v, anchor.f_accel, age, TOL_M)
+    return flags & np.asarray(active, bool)[:, None]
 
 
 def predicted_positions(snapshot: Snapshot, dt: float):

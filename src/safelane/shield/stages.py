@@ -36,7 +36,7 @@ from ..safety.responsible import responsible_accel, responsible_bound, responsib
 from .assessment import AssessmentState
 from .config import ShieldConfig
 from .decide import ABORT, COMPLETED, HESITATE, PROCEED, check_candidate, hesitate_lateral, plan_motion
-from .monitor import BREACH_KINDS, Breach, Snapshot, observe_breaches
+from .monitor import BREACH_KINDS, Anchor, Breach, Snapshot, observe_breaches
 from .policies import ASSESSMENTS, COMPLETION_RULES
 from .proposals import check_proposal
 from .realworld import carry_worst, chain_bounds, delay_periods, own_lane_decel, worst_corners
@@ -304,9 +304,24 @@ def remember(state, obs: Observed, worst: WorstCase, fr: Frame, verdicts: Verdic
             limit = responsible_bound(gap, sfv[watch], s.ego_vx[watch], np.full(watch.size, prm.a_x_d), prm,
                                       brake=prm.others_decel)  # fmt: skip
         f_limit[watch] = np.maximum(limit, -prm.others_decel)
+    anchor = None
+    if s.err_chain is not None or s.err_f is not None:  # a sensing box: the cumulative comparison (monitor.py)
+        now = Anchor(
+            t=np.full(n, float(s.t)), chain_x=e.chain_x, chain_v=e.chain_v, bounds=obs.bounds,
+            l1_decel=np.asarray(new_plan.l1_decel, float), n_connected=s.n_connected, f_x=sfx, f_v=sfv,
+            f_accel=np.where(plan_f_aggr, prm.a_x_a, np.inf),
+            own_x=np.full(n, np.inf) if worst.own is None else np.asarray(worst.own[0], float),
+            own_v=np.zeros(n) if worst.own is None else np.asarray(worst.own[1], float),
+            own_decel=np.zeros(n) if worst.own is None else np.asarray(worst.own[2], float),
+        )  # fmt: skip
+        held = None if state.last is None else state.last.anchor
+        planned = np.zeros(n, bool)
+        for rows_acc, _ in verdicts.accepted:
+            planned[rows_acc] = True
+        anchor = now if held is None else held.renewed(planned, now)
     snapshot = Snapshot(
         chain_x=e.chain_x, chain_v=e.chain_v, bounds=obs.bounds, n_connected=s.n_connected, f_x=sfx, f_v=sfv,
-        f_limit=f_limit, plan_l1_decel=new_plan.l1_decel, plan_f_aggr=plan_f_aggr, active=active,
+        f_limit=f_limit, plan_l1_decel=new_plan.l1_decel, plan_f_aggr=plan_f_aggr, active=active, anchor=anchor,
     )  # fmt: skip
     breach = obs.breach
     if s.v2x_stale is not None:
