@@ -45,7 +45,8 @@ def _run(decels, err_x, err_v, anchored: bool, f_accel=None, own=None):
     o_low, o_vlow, _ = corners(0, ox, ov)
     a_o = np.full(b, PRM.others_decel)
     anchor = Anchor(
-        t=np.zeros(b), chain_x=low_x[:, None], chain_v=low_v[:, None], bounds=a_o[:, None], l1_decel=a_o,
+        t=np.zeros(b), f_t=np.zeros(b), own_t=np.zeros(b),
+        chain_x=low_x[:, None], chain_v=low_v[:, None], bounds=a_o[:, None], l1_decel=a_o,
         n_connected=np.zeros(b, np.int64), f_x=fx + POS_BOX, f_v=fv + SPEED_BOX,
         f_accel=np.full(b, np.inf) if f_accel is None else np.full(b, PRM.a_x_a), own_x=o_low, own_v=o_vlow,
         own_decel=a_o,

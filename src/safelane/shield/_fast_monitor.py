@@ -80,19 +80,19 @@ def observe_breaches(prev: Breach, last, situation, prm, t_now: float) -> Breach
 
 
 _ANCHOR_SIGNATURE = types.void(
-    _M, _M, _M, _M, _V, types.Array(types.int64, 1, "A", readonly=True), _V, _V, _V, _V, _V, _V, _V, _V, _V, _VB,
-    types.boolean, types.float64, types.Array(types.bool_, 2, "A"),
+    _M, _M, _M, _M, _V, types.Array(types.int64, 1, "A", readonly=True), _V, _V, _V, _V, _V, _V, _V, _V, _V, _V, _V,
+    _VB, types.boolean, types.float64, types.Array(types.bool_, 2, "A"),
 )  # fmt: skip
 
 
 @numba.njit(_ANCHOR_SIGNATURE, cache=True, nogil=True, error_model="numpy")
 def anchor_kernel(
     chain_x, chain_v, bounds, now_x, l1_decel, n_connected, f_x, f_v, f_accel, now_f_x, own_x, own_v, own_decel,
-    now_own_x, age, active, same_chain, tol, flags,
+    now_own_x, age, age_f, age_own, active, same_chain, tol, flags,
 ):  # fmt: skip
     """The cumulative comparison (:func:`~.monitor.anchor_flags`) per scenario into ``flags`` (``(B, 4)``): the
-    monitor's own comparisons over each row's time since its anchor ``age``; ``now_x`` read only where
-    ``same_chain``."""
+    monitor's own comparisons over each row's time since its anchors (``age``: the chain's, ``age_f``: F's,
+    ``age_own``: L0's); ``now_x`` read only where ``same_chain``."""
     for b in range(chain_x.shape[0]):
         if not active[b]:
             continue
@@ -106,12 +106,12 @@ def anchor_kernel(
                     last = last or behind
             l1 = braked_harder(SCALAR, now_x[b, 0], chain_x[b, 0], chain_v[b, 0], l1_decel[b], age[b], tol)
         if own_x[b] < np.inf and now_own_x[b] < np.inf:
-            last = last or braked_harder(SCALAR, now_own_x[b], own_x[b], own_v[b], own_decel[b], age[b], tol)
+            last = last or braked_harder(SCALAR, now_own_x[b], own_x[b], own_v[b], own_decel[b], age_own[b], tol)
         flags[b, 0], flags[b, 1], flags[b, 2] = l1, leader, last
-        flags[b, 3] = pushed_harder(SCALAR, now_f_x[b], f_x[b], f_v[b], f_accel[b], age[b], tol)
+        flags[b, 3] = pushed_harder(SCALAR, now_f_x[b], f_x[b], f_v[b], f_accel[b], age_f[b], tol)
 
 
-def anchor_flags(anchor, active, now_chain_x, now_f_x, now_own_x, age):
+def anchor_flags(anchor, active, now_chain_x, now_f_x, now_own_x, age, age_f, age_own):
     """:func:`~.monitor.anchor_flags` through :func:`anchor_kernel` (``now_chain_x`` ``None``: the chain changed
     length)."""
     bsz, m = np.shape(anchor.chain_x)
@@ -124,6 +124,7 @@ def anchor_flags(anchor, active, now_chain_x, now_f_x, now_own_x, age):
         np.broadcast_to(np.asarray(anchor.n_connected, dtype=np.int64), (bsz,)), f64(anchor.f_x, (bsz,)),
         f64(anchor.f_v, (bsz,)), f64(anchor.f_accel, (bsz,)), f64(now_f_x, (bsz,)), f64(anchor.own_x, (bsz,)),
         f64(anchor.own_v, (bsz,)), f64(anchor.own_decel, (bsz,)), f64(now_own_x, (bsz,)), f64(age, (bsz,)),
-        np.broadcast_to(np.asarray(active, dtype=np.bool_), (bsz,)), same, TOL_M, flags[:, :4],
+        f64(age_f, (bsz,)), f64(age_own, (bsz,)), np.broadcast_to(np.asarray(active, dtype=np.bool_), (bsz,)), same,
+        TOL_M, flags[:, :4],
     )  # fmt: skip
     return flags

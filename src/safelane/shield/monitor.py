@@ -22,12 +22,14 @@ positions the assumptions allow; exact up to ``TOL_M``.
 **Cumulative comparison** (where the situation carries a sensing-error box): the per-period comparison widens each
 period's prediction by the box, so an excess smaller than the box per period — a leader braking 1 m/s² beyond its
 assumed maximum for seconds — is never seen. So each period the monitor also compares every watched vehicle with the
-worst case the *held plan* assumed, from the :class:`Anchor` taken when that plan was made: the chain at its bounds
-then (``L1`` at the plan's deceleration), ``L0`` at its worst case then, an ``F`` the plan took for aggressive at
-``+a_x_a``; each must stay at or ahead of (leaders) / at or behind (F) where that worst case puts it at the time since
-the anchor, the sensing box counted once (the anchor at the analysis' corner, the observation at its far corner), not
-once per period. Kinds as above (``L0``: ``last_decel``). A new plan re-anchors its row; a chain that changed length
-is not compared; a collaborative ``F`` keeps the per-period check (its responsible limit changes every period).
+worst case the plans held since the :class:`Anchor` (taken with the first plan) assumed: the chain at its bounds
+(``L1`` at the plans' deceleration), ``L0`` at its worst case, an ``F`` the plan takes for aggressive at ``+a_x_a``,
+each at the largest deceleration any plan held since the anchor assumed; each must stay at or ahead of (leaders) / at
+or behind (F) where that worst case puts it at the time since the anchor, the sensing box counted once (the anchor at
+the analysis' corner, the observation at its far corner), not once per period. Kinds as above (``L0``:
+``last_decel``). A chain that changed (length or connected count) re-anchors its row, F re-anchors where the plan's
+assumption about it changed, a new L0 where there was none; a collaborative ``F`` keeps the per-period check (its
+responsible limit changes every period).
 
 The comparison per vehicle is written once
 (:func:`braked_harder`, :func:`pushed_harder`, backend-generic and marked ``jitable``): :func:`observe_breaches`
@@ -91,7 +93,7 @@ class Anchor:
     """The worst case the held plan assumed, at the moment it was made (the cumulative comparison; ``(B,)`` or
     ``(B, M)``): states at the analysis' corner of the sensing box, each vehicle's assumed maximum deceleration."""
 
-    t: np.ndarray  # when the plan was made [s]
+    t: np.ndarray  # when the chain was anchored [s]
     chain_x: np.ndarray
     chain_v: np.ndarray
     bounds: np.ndarray  # the chain's bounds then
@@ -100,17 +102,36 @@ class Anchor:
     f_x: np.ndarray
     f_v: np.ndarray
     f_accel: np.ndarray  # a_x_a where the plan took F for aggressive, +inf (not compared) where not
+    f_t: np.ndarray  # when F was anchored
     own_x: np.ndarray  # L0, +inf where none
     own_v: np.ndarray
     own_decel: np.ndarray
+    own_t: np.ndarray  # when L0 was anchored
 
-    def renewed(self, rows: np.ndarray, now: Anchor) -> Anchor:
-        """This anchor with ``rows`` (bool ``(B,)``) taken from ``now`` (a new plan there); all of ``now`` where the
-        chain changed length."""
+    def carried(self, now: Anchor) -> Anchor:
+        """The anchor for the next period: the states stay those of the anchor, each assumed deceleration is raised
+        to the largest any plan held since then assumed (``now``'s: a vehicle that never braked harder than that is
+        at or ahead of braking at it from the anchor — sound over any number of plans, so a new plan does not reset
+        the history). Taken from ``now``: every row whose chain changed (length or number connected), F where the
+        plan's assumption about it changed, L0 where there was none."""
         if self.chain_x.shape != now.chain_x.shape:
             return now
-        pick = lambda a, b: np.where(rows.reshape(rows.shape + (1,) * (np.ndim(a) - 1)), b, a)  # noqa: E731
-        return Anchor(*(pick(getattr(self, f), getattr(now, f)) for f in self.__dataclass_fields__))
+        renew = np.asarray(self.n_connected != now.n_connected)
+        renew_f = renew | (self.f_accel != now.f_accel)
+        renew_own = renew | ~np.isfinite(self.own_x)
+        pick = lambda rows, a, b: np.where(rows.reshape(rows.shape + (1,) * (np.ndim(a) - 1)), b, a)  # noqa: E731
+        raise_ = lambda a, b: pick(renew, np.maximum(a, b), b)  # noqa: E731
+        return Anchor(
+            t=pick(renew, self.t, now.t), chain_x=pick(renew, self.chain_x, now.chain_x),
+            chain_v=pick(renew, self.chain_v, now.chain_v), bounds=raise_(self.bounds, now.bounds),
+            l1_decel=raise_(self.l1_decel, now.l1_decel), n_connected=now.n_connected,
+            f_x=pick(renew_f, self.f_x, now.f_x), f_v=pick(renew_f, self.f_v, now.f_v), f_accel=now.f_accel,
+            f_t=pick(renew_f, self.f_t, now.f_t), own_x=pick(renew_own, self.own_x, now.own_x),
+            own_v=pick(renew_own, self.own_v, now.own_v), own_decel=pick(renew_own, np.maximum(self.own_decel,
+                                                                                            now.own_decel),
+                                                                       now.own_decel),
+            own_t=pick(renew_own, self.own_t, now.own_t),
+        )  # fmt: skip
 
 
 #: :func:`observe_breaches` runs the compiled kernel (:mod:`._fast_monitor`) from this many scenarios on.
@@ -171,12 +192,13 @@ def anchor_flags(anchor: Anchor, active, situation, prm: Params, t_now: float, k
     (:func:`braked_harder`, :func:`pushed_harder`) over the time since the anchor. ``kernel``: the compiled
     monitor's module (:func:`anchor_kernel` there), else NumPy."""
     bsz = len(anchor.t)
-    age = np.maximum(t_now - anchor.t, 0.0)
+    age, age_f, age_own = (np.maximum(t_now - t0, 0.0) for t0 in (anchor.t, anchor.f_t, anchor.own_t))
     same = situation.chain_x.shape == anchor.chain_x.shape
     own = getattr(situation, "own_x", None)
     own_now = np.full(bsz, np.inf) if own is None else own[:, 0]
     if kernel is not None:
-        return kernel.anchor_flags(anchor, active, situation.chain_x if same else None, situation.f_x, own_now, age)
+        return kernel.anchor_flags(anchor, active, situation.chain_x if same else None, situation.f_x, own_now, age,
+                                   age_f, age_own)  # fmt: skip
     flags = np.zeros((bsz, len(BREACH_KINDS)), bool)
     with np.errstate(all="ignore"):
         if same:
@@ -189,8 +211,8 @@ def anchor_flags(anchor: Anchor, active, situation, prm: Params, t_now: float, k
             flags[:, 2] = (behind & (slots == anchor.n_connected[:, None])).any(1)
         has_own = np.isfinite(anchor.own_x) & np.isfinite(own_now)
         flags[:, 2] |= has_own & braked_harder(ARRAY, np.where(has_own, own_now, 0.0), np.where(has_own, anchor.own_x,
-                                               0.0), anchor.own_v, anchor.own_decel, age, TOL_M)  # fmt: skip
-        flags[:, 3] = pushed_harder(ARRAY, situation.f_x, anchor.f_x, anchor.f_v, anchor.f_accel, age, TOL_M)
+                                               0.0), anchor.own_v, anchor.own_decel, age_own, TOL_M)  # fmt: skip
+        flags[:, 3] = pushed_harder(ARRAY, situation.f_x, anchor.f_x, anchor.f_v, anchor.f_accel, age_f, TOL_M)
     return flags & np.asarray(active, bool)[:, None]
 
 

@@ -307,7 +307,8 @@ def remember(state, obs: Observed, worst: WorstCase, fr: Frame, verdicts: Verdic
     anchor = None
     if s.err_chain is not None or s.err_f is not None:  # a sensing box: the cumulative comparison (monitor.py)
         now = Anchor(
-            t=np.full(n, float(s.t)), chain_x=e.chain_x, chain_v=e.chain_v, bounds=obs.bounds,
+            t=np.full(n, float(s.t)), f_t=np.full(n, float(s.t)), own_t=np.full(n, float(s.t)),
+            chain_x=e.chain_x, chain_v=e.chain_v, bounds=obs.bounds,
             l1_decel=np.asarray(new_plan.l1_decel, float), n_connected=s.n_connected, f_x=sfx, f_v=sfv,
             f_accel=np.where(plan_f_aggr, prm.a_x_a, np.inf),
             own_x=np.full(n, np.inf) if worst.own is None else np.asarray(worst.own[0], float),
@@ -315,10 +316,7 @@ def remember(state, obs: Observed, worst: WorstCase, fr: Frame, verdicts: Verdic
             own_decel=np.zeros(n) if worst.own is None else np.asarray(worst.own[2], float),
         )  # fmt: skip
         held = None if state.last is None else state.last.anchor
-        planned = np.zeros(n, bool)
-        for rows_acc, _ in verdicts.accepted:
-            planned[rows_acc] = True
-        anchor = now if held is None else held.renewed(planned, now)
+        anchor = now if held is None else held.carried(now)
     snapshot = Snapshot(
         chain_x=e.chain_x, chain_v=e.chain_v, bounds=obs.bounds, n_connected=s.n_connected, f_x=sfx, f_v=sfv,
         f_limit=f_limit, plan_l1_decel=new_plan.l1_decel, plan_f_aggr=plan_f_aggr, active=active, anchor=anchor,
