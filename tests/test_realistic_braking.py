@@ -6,8 +6,11 @@ from __future__ import annotations
 
 import warnings
 
+import numpy as np
 import pytest
 
+from safelane import Params
+from safelane.safety import leader_chain
 from safelane.sim import simulate
 from safelane.sim.preset import load_preset
 
@@ -38,3 +41,18 @@ def test_last_leader_braking_at_nine_keeps_every_gap_in_the_realistic_world(plan
         assert len(inside) >= 0.3 * len(tb), (planner, len(inside))
         for col in ("collision", "safety_violation", "own_lane_collision", "own_lane_violation"):
             assert not inside[col].any(), (planner, col, int(inside[col].sum()))
+
+
+@pytest.mark.parametrize("bad", [-1.0, float("nan"), float("inf"), "hard"])
+def test_params_refuse_an_others_maximum_that_is_not_a_finite_non_negative_number(bad):
+    with pytest.raises(ValueError, match="a_o_d"):
+        Params(a_o_d=bad)
+
+
+def test_the_others_maximum_defaults_to_the_egos_and_bounds_the_chain():
+    assert Params().a_o_d is None and Params().others_decel == Params().a_x_d
+    prm = Params(a_x_d=6.0, a_o_d=9.5)
+    chain = leader_chain([[0.0]], [[20.0]], np.zeros((1, 0)), prm)  # N = 0: L1 is not connected
+    assert chain.l1_decel[0] == 9.5
+    with pytest.raises(ValueError, match=r"a_o_d=9\.5"):
+        leader_chain([[0.0, 30.0]], [[20.0, 20.0]], [[9.6]], prm)
