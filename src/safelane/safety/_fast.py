@@ -4,7 +4,8 @@ No formula lives here. :func:`exists_kernel` and :func:`plan_kernel` are loops o
 the backend-generic closed form :func:`~.evasion.evasion_parts` (Eq. 5 ``lateral_core``, Eqs. 6–8
 ``longitudinal_core``, Eq. 9) on ``SCALAR``, the Python-float backend, which :mod:`._compile` teaches numba; the row
 functions :func:`_plan_parts` (``plan_kernel``'s row) and :func:`_ego_position`, :func:`_ego_speed`,
-:func:`_lateral_state` (the held plan's motion in ``sim/_fast_held.py``) are rows of the same closed forms. The uncompiled path evaluates the same function on NumPy arrays.
+:func:`_lateral_state` (the held plan's motion in ``sim/_fast_held.py``) are rows of the same closed forms. The
+uncompiled path evaluates the same functions on NumPy arrays.
 
 **Same bits.** numba compiles without ``fastmath`` (LLVM neither contracts ``a * b + c`` into a fused multiply-add
 nor reassociates), ``sqrt`` and ``/`` are correctly rounded in both, ``SCALAR``'s ``maximum``/``minimum`` propagate
