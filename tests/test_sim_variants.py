@@ -104,4 +104,4 @@ def test_braking_beyond_the_assumed_worst_case_warns():
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
         simulate("CV_all", 1, 9.0, 2, config=SHORT, params=Params())
-    assert any("exceeds params.a_x_d" in str(w.message) for w in caught)
+    assert any("exceeds the others' maximum braking params.a_o_d" in str(w.message) for w in caught)
