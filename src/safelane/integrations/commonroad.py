@@ -109,10 +109,12 @@ class EpisodeTrajectories:
         present = self.present
         if not present[0].all():
             raise ValueError("the ego must be present at every step")
-        for i in range(n_vehicles):
-            steps = np.flatnonzero(present[i])
-            if steps.size and steps[-1] - steps[0] + 1 != steps.size:
-                raise ValueError(f"vehicle {self.names[i]!r} leaves and comes back: present steps must be contiguous")
+        # contiguous presence: a vehicle's present steps fill the span from its first to its last
+        first = present.argmax(1)
+        last = present.shape[1] - 1 - present[:, ::-1].argmax(1)
+        gaps = np.flatnonzero(present.any(1) & (last - first + 1 != present.sum(1)))
+        if gaps.size:
+            raise ValueError(f"vehicle {self.names[gaps[0]]!r} leaves and comes back: present steps must be contiguous")
         if not 0 <= self.target_lane < len(self.lanes_y):
             raise ValueError(f"target_lane {self.target_lane} is not an index of lanes_y {self.lanes_y}")
         if not -1 <= self.collision_step < shape[1]:
