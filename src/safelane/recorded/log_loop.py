@@ -13,11 +13,11 @@ its own lane), so the gap choice never hides a vehicle from it. All events run a
 
 **Mapping into the shield's frame**, per event: ``x`` is the recording's; the lateral position ``y`` [m] is measured
 from the original lane's centre toward the target lane (:func:`~.log_batch.lane_frame`) and scaled so that the
-target lane's centre sits at ``Params.lane_width`` (the recorded lanes are 3.4-3.7 m wide; the shield's lane is
-3.5 m). The shield's vehicles are all ``Params.vehicle_length`` long, the recorded ones are not, so each other vehicle is shown
-to the shield shifted along the road so that its bumper-to-bumper gap to the ego is the true one. States are exact
-(the recording); the preset's sensing-error bounds and actuation delay still act in the shield (and the delay in the
-ego's motion).
+target lane's centre sits at ``Params.lane_width`` (the recorded lanes are 3.4-3.7 m wide; the shield's lane is 3.5
+m). The shield's vehicles are all ``Params.vehicle_length`` long, the recorded ones are not, so each other vehicle
+is shown to the shield shifted along the road so that its bumper-to-bumper gap to the ego is the true one. States
+are exact (the recording); the preset's sensing-error bounds and actuation delay still act in the shield (and the
+delay in the ego's motion).
 
 **Connectivity**: ``"none"`` (default; the recorded drivers of 2005 send nothing: ``L1`` may brake at ``a_x_d`` and
 ``F`` is assessed from its speed), or ``"chain"`` — a what-if in which the target lane's leaders broadcast and
