@@ -147,7 +147,3 @@ class Limits(NamedTuple):
     a_y_m: float
     y_safe: float
 
-
-def limits(params) -> Limits:
-    """The :class:`Limits` of ``params``."""
-    return Limits(float(params.a_x_a), float(params.a_x_d), float(params.a_y_m), float(params.y_safe))
