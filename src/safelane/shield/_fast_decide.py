@@ -68,13 +68,19 @@ def candidate_kernel(
             flags[2 + j, i] = bits[j]
 
 
+def _rows(a: np.ndarray, n: int) -> np.ndarray:
+    """``a`` as ``n`` rows (a view; no call into NumPy's broadcasting where it has them already: per-call cost at
+    small batches)."""
+    return a if a.shape == (n,) else np.broadcast_to(a, (n,))
+
+
 def check_candidate(ego_x, ego_y, ego_vx, ego_vy, a_x, a_y, l1_x, l1_v, l1_decel, f_x, f_v, f_aggressive,
                     prm: Params, completion) -> Verdict:  # fmt: skip
     """:func:`~.decide.check_candidate` without an own-lane leader, through :func:`candidate_kernel`."""
     args = [np.asarray(a, dtype=np.float64) for a in (ego_x, ego_y, ego_vx, ego_vy, a_x, a_y, l1_x, l1_v, l1_decel,
                                                       f_x, f_v)]  # fmt: skip
     n = max(a.size for a in args)
-    args = [np.broadcast_to(a, (n,)) for a in args] + [np.broadcast_to(np.asarray(f_aggressive, np.bool_), (n,))]
+    args = [_rows(a, n) for a in args] + [_rows(np.asarray(f_aggressive, np.bool_), n)]
     floats = np.empty((len(STATES) + len(FLOAT_PARTS), n))
     flags = np.empty((2 + len(BOOL_PARTS), n), dtype=np.bool_)
     candidate_kernel(*args, prm.a_x_a, prm.a_x_d, prm.a_y_m, prm.y_safe, prm.p_m, prm.dt,
