@@ -167,3 +167,70 @@ def test_the_sweep_gives_the_same_tables_on_one_and_two_processes():
     assert one.to_csv(index=False) == two.to_csv(index=False)
     assert coll_one.to_csv(index=False) == coll_two.to_csv(index=False)
     assert one["p"].tolist() == [0.0, 0.5]
+
+
+def _braking_run(limits: dict[str, float] | None, steps: int = 90, go_step: int = 40):
+    """Two equipped vehicles driven by SUMO: ``cav.hard`` closes on a standing vehicle in its lane (SUMO wants to
+    brake hard) that drives off at 30 m/s from step ``go_step`` (then SUMO wants to brake no more), ``cav.mild``
+    follows a faster vehicle (SUMO never wants to brake). With ``limits`` every step
+    limits their braking (``TrafficWorld.limit_braking``). Per step: SUMO's speeds after the step (its own, read
+    back with ``getSpeed``), lane positions, SUMO's wish where it was limited, and each vehicle's ``decel``."""
+    from safelane.traffic.world import TrafficWorld
+
+    routes = """<routes><vType id="car" length="4.8" width="1.8" minGap="2.5" accel="2.6" decel="4.5"
+    emergencyDecel="8" sigma="0" tau="1" speedFactor="1"/>
+    <route id="main" edges="in merge out"/>
+    <vehicle id="human.stop" type="car" route="main" depart="0" departLane="1" departPos="300" departSpeed="0"/>
+    <vehicle id="cav.hard" type="car" route="main" depart="0" departLane="1" departPos="150" departSpeed="25"/>
+    <vehicle id="human.fast" type="car" route="main" depart="0" departLane="2" departPos="250" departSpeed="33"/>
+    <vehicle id="cav.mild" type="car" route="main" depart="0" departLane="2" departPos="200" departSpeed="25"/>
+    </routes>"""
+    vids = ("cav.hard", "cav.mild")
+    out = {"v": [], "x": [], "wish": [], "decel": []}
+    with TrafficWorld(Demand(p=0.0, seconds=60, warmup_s=1), routes=routes, ssm=False) as world:
+        veh = world.api.vehicle
+        world.step()
+        world.read()
+        for vid in ("human.stop", "human.fast"):
+            veh.setLaneChangeMode(vid, 0)
+        veh.setSpeedMode("human.stop", 0)
+        for k in range(steps):
+            veh.setSpeed("human.stop", 0.0 if k < go_step else 30.0)
+            if limits is not None:
+                world.limit_braking(list(limits), list(limits.values()))
+            world.step()
+            world.read()
+            out["v"].append([veh.getSpeed(v) for v in vids])
+            out["x"].append([veh.getLanePosition(v) for v in vids])
+            out["wish"].append([world.wished.get(v, np.nan) for v in vids])
+            out["decel"].append([veh.getDecel(v) for v in vids])
+            world.wished.clear()
+        lag = world.max_lag_m
+    return {**{k: np.array(v) for k, v in out.items()}, "max_lag_m": lag}
+
+
+def test_a_connected_leader_brakes_at_most_at_its_bound_and_otherwise_as_sumo_wants():
+    _libsumo()
+    dt, bound = 0.1, 1.0
+    free = _braking_run(None)
+    lim = _braking_run({"cav.hard": bound, "cav.mild": 0.5})
+    # the vehicle whose wish is milder than its bound drives exactly as without any limit (the removed cap of
+    # SUMO's decel made Krauss plan with 0.5 m/s²: it ended at 20.5 m/s here instead of 33.8)
+    np.testing.assert_array_equal(lim["v"][:, 1], free["v"][:, 1])
+    np.testing.assert_array_equal(lim["x"][:, 1], free["x"][:, 1])
+    assert (lim["decel"] == 4.5).all()  # Krauss plans with the human decel throughout
+    assert (np.diff(free["v"][:, 0]) < -3.0 * dt).any()  # unlimited, SUMO brakes at > 3 m/s²
+    prev, v, wish = lim["v"][:-1, 0], lim["v"][1:, 0], lim["wish"][1:, 0]
+    wish = np.where(np.isnan(wish), v, wish)  # no entry: SUMO's choice was not changed
+    floor = prev - bound * dt
+    hard = wish < floor - 1e-9
+    assert hard.sum() > 10 and (hard[:-1] & ~hard[1:]).any()  # SUMO wanted to brake harder than the bound ...
+    np.testing.assert_allclose(v[hard], floor[hard], atol=1e-9)  # ... and it braked exactly at the bound
+    assert (v[~hard] >= floor[~hard] - 1e-9).all()  # elsewhere SUMO's own choice, milder, stands
+    first = np.flatnonzero(hard)[0] + 1
+    np.testing.assert_array_equal(lim["v"][:first, 0], free["v"][:first, 0])  # untouched before
+    # SUMO moved it with its own choice (the limit lifts the speed after the step): the position trails the
+    # limited motion by (floor - wish) dt / 2 per limited step, the lag the world reports
+    dx = np.diff(lim["x"][:, 0])
+    np.testing.assert_allclose(dx[hard], 0.5 * (prev[hard] + wish[hard]) * dt, atol=1e-6)
+    assert lim["max_lag_m"] == pytest.approx(0.5 * dt * (floor - wish)[hard].sum())

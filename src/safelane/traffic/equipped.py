@@ -17,7 +17,8 @@ every lane its body overlaps (a vehicle across a lane boundary counts in both).
 
 Connected leaders honour their promises as the guarantee needs: an equipped vehicle among the connected leaders
 of a changer's chain brakes at most at its chain bound (``max(promise, bound)``, the smallest over the chains it is
-in; SUMO's ``decel``/``emergencyDecel`` capped for that period).
+in) in the next step: SUMO's own choice of speed where it is milder, ``v − bound·dt`` where SUMO would brake harder
+(:meth:`.world.TrafficWorld.limit_braking`; SUMO's ``decel`` keeps the human value, so Krauss plans as before).
 """
 
 from __future__ import annotations
@@ -54,7 +55,6 @@ class LaneChanges:
         self.ex, self.ey, self.evx, self.evy, self.t0, self.t_done = (z.copy() for _ in range(6))
         self.aborted = np.zeros(0, bool)
         self.cool: dict[str, float] = {}
-        self.capped: dict[str, float] = {}
         self.counts = {"started": 0, "completed": 0, "aborted": 0, "gave_up": 0, "decisions": 0, "hesitate": 0,
                        "abort_steps": 0, "shield_calls": 0}  # fmt: skip
         self.k = 0
@@ -63,7 +63,7 @@ class LaneChanges:
     def period(self, fleet, t: float) -> None:
         prm = self.params
         index = {vid: i for i, vid in enumerate(fleet.ids)}
-        self._fleet_ids, self._alive = fleet.ids, index
+        self._fleet_ids = fleet.ids
         alive = np.array([vid in index for vid in self.ids], bool)
         keep = np.flatnonzero(alive)
         self._select(keep)
@@ -88,7 +88,7 @@ class LaneChanges:
             for vid in new:
                 self.world.take(vid)
         if not self.ids:
-            self._cap({})
+            self.world.limit_braking([], [])
             return
         rows = np.array([index[v] for v in self.ids])
         x = fleet.x.copy()
@@ -237,13 +237,4 @@ class LaneChanges:
             vid = fleet_ids[chain_ids[r, k]]
             if vid not in changing:
                 caps[vid] = min(caps.get(vid, np.inf), max(PROMISE_DECEL, float(bounds[r, k])))
-        self._cap(caps)
-
-    def _cap(self, caps: dict[str, float]) -> None:
-        lifted = [vid for vid in self.capped if vid not in caps and vid in self._alive]
-        if lifted:
-            self.world.cap_braking(lifted, np.full(len(lifted), dem.EQUIPPED["emergencyDecel"]))
-        changed = [vid for vid, c in caps.items() if self.capped.get(vid) != c]
-        if changed:
-            self.world.cap_braking(changed, [caps[v] for v in changed])
-        self.capped = caps
+        self.world.limit_braking(list(caps), list(caps.values()))

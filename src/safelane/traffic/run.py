@@ -20,7 +20,7 @@ CELL_COLUMNS = ("p", "main_vph", "ramp_vph", "demand_vph", "seconds", "warmup_s"
                 "throughput_vph", "mean_speed_mps", "mean_travel_time_s", "collisions", "collisions_equipped_involved",
                 "collisions_equipped_responsible", "collisions_cut_in", "ssm_conflicts", "ssm_ttc", "ssm_drac",
                 "ssm_pet", "ssm_equipped_involved", "lc_started", "lc_completed", "lc_aborted", "lc_gave_up",
-                "shield_decisions", "shield_calls", "human_lane_changes")  # fmt: skip
+                "shield_decisions", "shield_calls", "human_lane_changes", "leader_braking_limited")  # fmt: skip
 
 
 def run_cell(demand: Demand, params: Params | None = None) -> dict:
@@ -33,7 +33,7 @@ def run_cell(demand: Demand, params: Params | None = None) -> dict:
     tally = measures.Tally(demand.warmup_s)
     entries, collisions, seen = [], [], set()
     prev_lane: dict[str, int] = {}
-    human_changes = 0
+    human_changes = limited_before = 0
     with warnings.catch_warnings(), TrafficWorld(demand, prm) as world:
         warnings.simplefilter("ignore")  # geometry warnings of cut-ins: the situation is built with "ignore"
         changes = LaneChanges(world, prm)
@@ -46,7 +46,9 @@ def run_cell(demand: Demand, params: Params | None = None) -> dict:
             tally.speeds(t, fleet.v)
             new = measures.lane_entries(t, fleet, prev_lane)
             entries = [e for e in entries if t - e["t"] <= measures.CUT_IN_WINDOW_S] + new
-            if t >= demand.warmup_s:
+            if t < demand.warmup_s:
+                limited_before = world.limited_steps
+            else:
                 human_changes += sum(1 for e in new if not e["vid"].startswith("cav."))
             if len(fleet):
                 changes.period(fleet, t)
@@ -60,7 +62,7 @@ def run_cell(demand: Demand, params: Params | None = None) -> dict:
                         collisions.append(measures.blame([c], entries)[0])
             if world.api.simulation.getMinExpectedNumber() == 0 and t > demand.warmup_s:
                 break
-        inserted = tally.inserted
+        inserted, limited = tally.inserted, world.limited_steps - limited_before
         world.close()
         conflicts = measures.ssm_conflicts(world.ssm_file, demand.warmup_s)
     span_h = (demand.seconds - demand.warmup_s) / 3600.0
@@ -80,7 +82,7 @@ def run_cell(demand: Demand, params: Params | None = None) -> dict:
         "ssm_equipped_involved": sum(cav(r["ego"]) or cav(r["foe"]) for r in conflicts),
         "lc_started": c["started"], "lc_completed": c["completed"], "lc_aborted": c["aborted"],
         "lc_gave_up": c["gave_up"], "shield_decisions": c["decisions"], "shield_calls": c["shield_calls"],
-        "human_lane_changes": human_changes,
+        "human_lane_changes": human_changes, "leader_braking_limited": limited,
     }  # fmt: skip
     row = {k: row[k] for k in CELL_COLUMNS}
     return {"row": row, "collisions": [{"p": demand.p, "demand_vph": demand.total_vph, **x} for x in collisions],

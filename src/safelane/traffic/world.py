@@ -56,6 +56,13 @@ class TrafficWorld:
         tc = self.api.constants
         self._vars = (tc.VAR_POSITION, tc.VAR_SPEED, tc.VAR_ACCELERATION, tc.VAR_ROAD_ID)
         self.equipped: set[str] = set()
+        self.taken: set[str] = set()  # driven from Python (the shield's changers)
+        self._v_now: dict[str, float] = {}  # speeds of the last read
+        self._floors: dict[str, tuple[float, float]] = {}  # vid -> (speed floor, decel) for the next step
+        self._lag: dict[str, float] = {}  # position lag [m] of the vehicles limited in consecutive steps so far
+        self.wished: dict[str, float] = {}  # SUMO's own choice of each vehicle in its last limited step
+        self.limited_steps = 0  # vehicle-steps in which the limit changed SUMO's choice
+        self.max_lag_m = 0.0
         self.closed = False
 
     # -- reading --------------------------------------------------------------------------------------------------
@@ -80,6 +87,8 @@ class TrafficWorld:
             on_ramp = np.array([res[i][road_k] == "ramp" for i in ids], bool)
         else:
             pos, v, a, on_ramp = np.zeros((0, 2)), np.zeros(0), np.zeros(0), np.zeros(0, bool)
+        self._apply_floors(ids, v, a)
+        self._v_now = dict(zip(ids, v.tolist(), strict=True))
         x = front_to_centre(pos[:, 0], self.params.vehicle_length)
         lane = np.where(on_ramp, -1, dem.lane_of(pos[:, 1]))
         equipped = np.array([i in self.equipped for i in ids], bool)
@@ -110,10 +119,12 @@ class TrafficWorld:
     # -- commanding -----------------------------------------------------------------------------------------------
     def take(self, vid: str) -> None:
         """Python drives ``vid`` from now on (speed mode 0; placed every period by :meth:`place`)."""
+        self.taken.add(vid)
         self.api.vehicle.setSpeedMode(vid, SPEED_MODE_OURS)
 
     def release(self, vid: str) -> None:
         """Back to SUMO's car following (its speed command cleared)."""
+        self.taken.discard(vid)
         self.api.vehicle.setSpeedMode(vid, SPEED_MODE_SUMO)
         self.api.vehicle.setSpeed(vid, -1.0)
 
@@ -127,13 +138,42 @@ class TrafficWorld:
             veh.moveToXY(vid, "", -1, fx, y, angle=90.0, keepRoute=2)
             veh.setSpeed(vid, max(v, 0.0))
 
-    def cap_braking(self, vids, decel) -> None:
-        """Connected leaders honour their promises: at most ``decel`` [m/s²] of braking (SUMO's ``decel`` and
-        ``emergencyDecel`` of the vehicle; :data:`.demand.EQUIPPED`'s values restore it)."""
-        veh = self.api.vehicle
-        for vid, d in zip(vids, np.asarray(decel, float).tolist(), strict=True):
-            veh.setDecel(vid, min(d, dem.EQUIPPED["decel"]))
-            veh.setEmergencyDecel(vid, d)
+    def limit_braking(self, vids, decel_mps2) -> None:
+        """Connected leaders honour their promises: in the next step each of ``vids`` brakes at most at its
+        ``decel_mps2`` [m/s²] — its speed after the step is ``max(v_sumo, v − decel·dt)``, ``v_sumo`` SUMO's own
+        choice. SUMO's ``decel`` keeps the human value, so Krauss plans as before; only the executed braking is
+        limited. Only for the next step: a vehicle not named in the next call is SUMO's alone.
+
+        SUMO has no speed-floor command (``setSpeed`` replaces SUMO's choice, and while it is active SUMO's own
+        choice cannot be read back: ``getSpeedWithoutTraCI`` returns the command), so the limit acts after the
+        step (:meth:`read`): where SUMO braked harder, the speed is lifted to ``v − decel·dt``
+        (``setPreviousSpeed``, which the next step starts from). SUMO has already moved the vehicle with its own
+        choice, so its position trails the limited motion by ``(a_sumo − decel)·dt²/2`` per limited step (3.75 cm
+        for 8 vs 0.5 m/s²); :attr:`max_lag_m` is the largest such lag summed over consecutive limited steps."""
+        dt = self.params.dt
+        floors = {}
+        for vid, d in zip(vids, np.asarray(decel_mps2, float).tolist(), strict=True):
+            v = self._v_now.get(vid)
+            if v is not None and v - d * dt > 0.0 and vid not in self.taken:
+                floors[vid] = (v - d * dt, d)
+        self._floors = floors
+
+    def _apply_floors(self, ids, v, a) -> None:
+        """After a step: each limited vehicle's speed ``max(v_sumo, floor)`` (:meth:`limit_braking`), in SUMO
+        (``setPreviousSpeed``) and in this read's arrays (the subscriptions were taken before the correction)."""
+        floors, self._floors = self._floors, {}
+        veh, dt = self.api.vehicle, self.params.dt
+        lag = {}
+        for k, vid in enumerate(ids):
+            if vid in floors and v[k] < floors[vid][0]:
+                floor, d = floors[vid]
+                self.wished[vid] = float(v[k])
+                lag[vid] = self._lag.get(vid, 0.0) + 0.5 * (floor - v[k]) * dt
+                self.max_lag_m = max(self.max_lag_m, lag[vid])
+                self.limited_steps += 1
+                veh.setPreviousSpeed(vid, floor, -d)
+                v[k], a[k] = floor, -d
+        self._lag = lag
 
     def step(self) -> None:
         self.api.simulationStep()
