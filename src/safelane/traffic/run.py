@@ -20,7 +20,8 @@ CELL_COLUMNS = ("p", "main_vph", "ramp_vph", "demand_vph", "seconds", "warmup_s"
                 "throughput_vph", "mean_speed_mps", "mean_travel_time_s", "collisions", "collisions_equipped_involved",
                 "collisions_equipped_responsible", "collisions_cut_in", "ssm_conflicts", "ssm_ttc", "ssm_drac",
                 "ssm_pet", "ssm_equipped_involved", "lc_started", "lc_completed", "lc_aborted", "lc_gave_up",
-                "shield_decisions", "shield_calls", "human_lane_changes", "leader_braking_limited")  # fmt: skip
+                "shield_decisions", "shield_calls", "human_lane_changes", "leader_braking_limited",
+                "leader_lag_max_m")  # fmt: skip
 
 
 def run_cell(demand: Demand, params: Params | None = None) -> dict:
@@ -62,7 +63,7 @@ def run_cell(demand: Demand, params: Params | None = None) -> dict:
                         collisions.append(measures.blame([c], entries)[0])
             if world.api.simulation.getMinExpectedNumber() == 0 and t > demand.warmup_s:
                 break
-        inserted, limited = tally.inserted, world.limited_steps - limited_before
+        inserted, limited, lag = tally.inserted, world.limited_steps - limited_before, world.max_lag_m
         world.close()
         conflicts = measures.ssm_conflicts(world.ssm_file, demand.warmup_s)
     span_h = (demand.seconds - demand.warmup_s) / 3600.0
@@ -83,6 +84,7 @@ def run_cell(demand: Demand, params: Params | None = None) -> dict:
         "lc_started": c["started"], "lc_completed": c["completed"], "lc_aborted": c["aborted"],
         "lc_gave_up": c["gave_up"], "shield_decisions": c["decisions"], "shield_calls": c["shield_calls"],
         "human_lane_changes": human_changes, "leader_braking_limited": limited,
+        "leader_lag_max_m": lag,
     }  # fmt: skip
     row = {k: row[k] for k in CELL_COLUMNS}
     return {"row": row, "collisions": [{"p": demand.p, "demand_vph": demand.total_vph, **x} for x in collisions],
