@@ -35,12 +35,14 @@ from __future__ import annotations
 
 import numpy as np
 
+from .._motion import advance_core
 from ..params import Params
-from ._backend import ARRAY, FEASIBILITY_TOL_M, INF
+from ._backend import ARRAY, FEASIBILITY_TOL_M, INF, jitable
 from .chain import braked_position
 from .evasion import follower_offset
 from .lateral import lateral_core
 from .longitudinal import ego_position, ego_speed, longitudinal_core, profile
+from .responsible import pair_min_gap_core
 
 #: Bisection steps of the switch-time search where the closed form breaks the other leader's constraint.
 SEARCH_STEPS = 16
@@ -48,100 +50,172 @@ SEARCH_STEPS = 16
 #: Speeds this close count as equal in the tail test (round-off of a speed braked to zero at ``t2``).
 SPEED_TOL = 1e-9
 
-xp = ARRAY
+#: The fields of one member's check (:func:`member_parts`), in the order it returns them.
+MEMBER = ("exists", "lead_ok", "follow_ok", "t_x1", "v_switch", "t_brake_end", "follows_leader", "lead_gap",
+          "follow_gap", "own_gap")  # fmt: skip
+
+#: The plan's fields from the chosen member (:func:`choose_member` returns ``exists``, ``follows_own``, then these).
+CHOSEN = MEMBER[1:]
 
 
-def _stationary(num, den):
-    """``num / den`` where ``den != 0``, else 0 (a harmless extra candidate)."""
-    return np.where(den != 0.0, num / np.where(den != 0.0, den, 1.0), 0.0)
+def _finite(x):
+    """``isfinite(x)`` with comparisons only (False for NaN), backend-generic."""
+    return (x > -INF) & (x < INF)
 
 
-def _profile_candidates(u, V, t2, match, lead, prm: Params):
-    """The ego's breakpoints on profile ``(u, followed lead)``: ``[u, t2, stop of the followed leader if followed]``."""
-    _, vk, ak = lead
-    k_stop = xp.stop_time(vk, ak)
-    return [u, t2, np.where(match, k_stop, t2)]
-
-
-def leader_gap(u, p, v, lead, other, margin, horizon, prm: Params):
-    """Exact minimum over ``[0, horizon]`` of ``p_j(t) − p(t) − margin``: the ego on profile ``G(u, k)`` (``lead``:
-    the followed leader's ``(p, v, decel)``) behind ``other`` (``(p, v, decel)`` braking until it stops).
-    ``horizon`` may be ``inf``: then a gap that keeps shrinking after the last breakpoint is ``-inf``."""
+def leader_gap_core(xp, u, p, v, lead, other, margin, horizon, prm):
+    """Backend-generic :func:`leader_gap` (``lead``, ``other``: tuples ``(p, v, decel)``). The candidate instants, in
+    order: 0, the profile's breakpoints ``u``, ``t2`` and the followed leader's stop (``t2`` where it is not
+    followed), ``other``'s stop, the equal-speed instants of each phase, the end; a non-finite one is replaced by the
+    end, each clipped to ``[0, end]``."""
     a_a, a_d = prm.a_x_a, prm.a_x_d
     pk, vk, ak = lead
     pj, vj, aj = other
     V, t2, match = profile(xp, u, p, v, pk, vk, ak, prm)
     j_stop = xp.stop_time(vj, aj)
-    breaks = [*_profile_candidates(u, V, t2, match, lead, prm), j_stop]
-    stationary = [
-        _stationary(vj - v, a_a + aj),  # accelerating ego vs the leader
-        _stationary(V + a_d * u - vj, a_d - aj),  # braking ego vs the leader
-        _stationary(vk - vj, ak - aj),  # following ego vs the leader
-    ]
-    horizon = np.broadcast_to(horizon, np.shape(u)) if np.ndim(horizon) < np.ndim(u) else horizon
-    infinite = np.isinf(horizon)
-    finite_breaks = [np.where(np.isfinite(b), b, 0.0) for b in breaks]
-    last = np.maximum.reduce(np.broadcast_arrays(*finite_breaks))
-    end = np.where(infinite, last, horizon)
-    cands = np.stack(np.broadcast_arrays(0.0 * u, *breaks, *stationary, end))
-    t = np.clip(np.where(np.isfinite(cands), cands, end), 0.0, end)
-    ego = ego_position(xp, t, p, v, u, V, t2, match, pk, vk, ak, prm)
-    gap = (braked_position(xp, pj, vj, aj, t, j_stop) - ego).min(0) - margin
+    k_end = xp.where(match, xp.stop_time(vk, ak), t2)
+    infinite = horizon == INF  # a horizon is t_y_f >= 0 or +inf
+    last = xp.where(_finite(u), u, 0.0)
+    for b in (t2, k_end, j_stop):
+        last = xp.maximum(last, xp.where(_finite(b), b, 0.0))
+    end = xp.where(infinite, last, horizon)
+    lowest = INF
+    for c in (
+        0.0 * u, u, t2, k_end, j_stop,
+        xp.div(vj - v, a_a + aj, 0.0),  # accelerating ego vs the leader
+        xp.div(V + a_d * u - vj, a_d - aj, 0.0),  # braking ego vs the leader
+        xp.div(vk - vj, ak - aj, 0.0),  # following ego vs the leader
+        end,
+    ):  # fmt: skip
+        t = xp.clip(xp.where(_finite(c), c, end), 0.0, end)
+        gap = braked_position(xp, pj, vj, aj, t, j_stop) - ego_position(xp, t, p, v, u, V, t2, match, pk, vk, ak, prm)
+        lowest = xp.minimum(lowest, gap)
+    gap = lowest - margin
     # After the last breakpoint every speed is constant: the gap shrinks forever iff the ego is the faster.
     tail = end + 1.0  # any instant after the last breakpoint (speeds there are the tail's)
     ego_end = ego_speed(xp, tail, v, u, V, t2, match, vk, ak, prm)
     j_end = xp.maximum(vj - aj * tail, 0.0)
     # (A braking ego "stops" at t2 up to round-off: a speed excess below SPEED_TOL is no excess.)
-    return np.where(infinite & (ego_end > j_end + SPEED_TOL), -INF, gap)
+    return xp.where(infinite & (ego_end > j_end + SPEED_TOL), -INF, gap)
 
 
-def follower_gap(u, p, v, lead, f_p, f_v, aggressive, margin, horizon, prm: Params):
-    """Exact minimum over ``[0, horizon]`` of ``p(t) − p_f(t) − margin`` (the worst-case ``F`` of Eq. 9 behind the
-    ego on profile ``G(u, k)``)."""
+def leader_gap(u, p, v, lead, other, margin, horizon, prm: Params):
+    """Exact minimum over ``[0, horizon]`` of ``p_j(t) − p(t) − margin``: the ego on profile ``G(u, k)`` (``lead``:
+    the followed leader's ``(p, v, decel)``) behind ``other`` (``(p, v, decel)`` braking until it stops).
+    ``horizon`` may be ``inf``: then a gap that keeps shrinking after the last breakpoint is ``-inf``. NumPy arrays
+    (:func:`leader_gap_core` on ``ARRAY``)."""
+    return leader_gap_core(ARRAY, u, p, v, lead, other, margin, horizon, prm)
+
+
+def follower_gap_core(xp, u, p, v, lead, f_p, f_v, aggressive, margin, horizon, prm):
+    """Backend-generic :func:`follower_gap`. The candidate instants, in order: 0, ``u``, ``t2``, the followed
+    leader's stop (``t2`` where it is not followed), F's stop, the equal-speed instants, the horizon; each clipped to
+    ``[0, horizon]``."""
     a_a, a_d = prm.a_x_a, prm.a_x_d
     pk, vk, ak = lead
     V, t2, match = profile(xp, u, p, v, pk, vk, ak, prm)
     f_stop = xp.stop_time(f_v, a_d)
-    cands = [
-        0.0 * u,
-        *_profile_candidates(u, V, t2, match, lead, prm),
-        f_stop,
-        _stationary(f_v - v, a_a + a_d),  # accelerating ego vs braking F
-        _stationary(f_v - vk, a_d - ak),  # following ego vs braking F
+    lowest = INF
+    for c in (
+        0.0 * u, u, t2, xp.where(match, xp.stop_time(vk, ak), t2), f_stop,
+        xp.div(f_v - v, a_a + a_d, 0.0),  # accelerating ego vs braking F
+        xp.div(f_v - vk, a_d - ak, 0.0),  # following ego vs braking F
         horizon,
-    ]
-    t = np.clip(np.stack(np.broadcast_arrays(*cands)), 0.0, horizon)
-    ego = ego_position(xp, t, p, v, u, V, t2, match, pk, vk, ak, prm)
-    return (ego - follower_offset(xp, t, f_p, f_v, aggressive, prm, f_stop)).min(0) - margin
+    ):  # fmt: skip
+        t = xp.clip(c, 0.0, horizon)
+        ego = ego_position(xp, t, p, v, u, V, t2, match, pk, vk, ak, prm)
+        lowest = xp.minimum(lowest, ego - follower_offset(xp, t, f_p, f_v, aggressive, prm, f_stop))
+    return lowest - margin
 
 
-def _search(fixed, u_hi, prm: Params, tol: float):
+def follower_gap(u, p, v, lead, f_p, f_v, aggressive, margin, horizon, prm: Params):
+    """Exact minimum over ``[0, horizon]`` of ``p(t) − p_f(t) − margin`` (the worst-case ``F`` of Eq. 9 behind the
+    ego on profile ``G(u, k)``). NumPy arrays (:func:`follower_gap_core` on ``ARRAY``)."""
+    return follower_gap_core(ARRAY, u, p, v, lead, f_p, f_v, aggressive, margin, horizon, prm)
+
+
+def leaders_gap(xp, u, p, v, lead, l0, l1, T, nothing, lead_margin, own_margin, prm):
+    """Both leader constraints at switch time ``u``: ``(min(g0, g1), g1, g0)`` with ``g0`` the gap to ``L0`` over
+    ``[0, ∞)`` and ``g1`` that to ``L1`` over ``[0, T]`` (``+inf`` where there is nothing to evade)."""
+    g0 = leader_gap_core(xp, u, p, v, lead, l0, own_margin, INF, prm)
+    g1 = xp.where(nothing, INF, leader_gap_core(xp, u, p, v, lead, l1, lead_margin, T, prm))
+    return xp.minimum(g0, g1), g1, g0
+
+
+def member_bounds(xp, p, v, lead, l0, l1, T, nothing, lead_margin, own_margin, margin_k, prm, tol):
+    """The start of member ``G(·, k)`` (``lead`` the followed leader ``k``, ``margin_k`` its margin): ``(u_k, g_lo,
+    search)`` — the paper's closed form against ``k`` on ``[0, T]`` (:func:`~.longitudinal.longitudinal_core`, an
+    upper bound on the best ``u``), both leaders' gap at ``u = 0``, and whether the bisection must run (the closed
+    form breaks a leader constraint that ``u = 0`` keeps)."""
+    u_k = longitudinal_core(xp, p, v, lead[0], lead[1], lead[2], T, margin_k, prm, tol)[1]
+    g_hi = leaders_gap(xp, u_k, p, v, lead, l0, l1, T, nothing, lead_margin, own_margin, prm)[0]
+    g_lo = leaders_gap(xp, 0.0 * u_k, p, v, lead, l0, l1, T, nothing, lead_margin, own_margin, prm)[0]
+    return u_k, g_lo, (g_hi < -tol) & (g_lo >= -tol)
+
+
+def _search(xp, u_hi, p, v, lead, l0, l1, T, nothing, lead_margin, own_margin, prm, tol):
     """The feasible end of a ``SEARCH_STEPS``-step bisection of ``[0, u_hi]`` for the largest ``u`` whose leader gaps
     stay ``>= -tol/2`` (within ``tol`` at 0, infeasible at ``u_hi``; the gaps are non-increasing in ``u``); where no
     midpoint does, 0, whose gaps are within ``tol``. Sound: the returned ``u`` is verified; it is short of the
     family's optimum by at most ``u_hi · 2^-SEARCH_STEPS``. (The gap is not continuous in ``u`` where the profile
-    stops following a leader, so a secant method gains nothing.)"""
-    p, v, lead, l0, l1, nothing, T, lead_margin, own_margin = fixed
-    lo, hi = np.zeros_like(u_hi), u_hi.copy()
+    stops following a leader, so a secant method gains nothing.) Element-wise: every row takes every step."""
+    lo, hi = 0.0 * u_hi, u_hi
     for _ in range(SEARCH_STEPS):
         mid = 0.5 * (lo + hi)
-        g0 = leader_gap(mid, p, v, lead, l0, own_margin, INF, prm)
-        g1 = np.where(nothing, INF, leader_gap(mid, p, v, lead, l1, lead_margin, T, prm))
-        ok = np.minimum(g0, g1) >= -0.5 * tol
-        lo, hi = np.where(ok, mid, lo), np.where(ok, hi, mid)
+        ok = leaders_gap(xp, mid, p, v, lead, l0, l1, T, nothing, lead_margin, own_margin, prm)[0] >= -0.5 * tol
+        lo, hi = xp.where(ok, mid, lo), xp.where(ok, hi, mid)
     return lo
+
+
+def member_parts(xp, u, g_lo, p, v, lead, l0, l1, T, nothing, lead_margin, own_margin, f_p, f_v, aggressive,
+                 follow_margin, prm, tol):  # fmt: skip
+    """Member ``G(u, k)`` checked at its switch time ``u`` (``u_k`` or the search's; 0 where even ``u = 0`` breaks a
+    leader constraint, ``g_lo < -tol``): the fields :data:`MEMBER`."""
+    u = xp.where(g_lo >= -tol, u, 0.0)
+    g, g1, g0 = leaders_gap(xp, u, p, v, lead, l0, l1, T, nothing, lead_margin, own_margin, prm)
+    lead_ok = g >= -tol
+    fg = xp.where(nothing, INF, follower_gap_core(xp, u, p, v, lead, f_p, f_v, aggressive, follow_margin, T, prm))
+    follow_ok = fg >= -tol
+    V, t2, match = profile(xp, u, p, v, lead[0], lead[1], lead[2], prm)
+    return lead_ok & follow_ok, lead_ok, follow_ok, u, V, t2, match, g1, fg, g0
+
+
+def choose_member(xp, via_l1, via_l0):
+    """The plan: follow ``L1`` where that member's evasion exists, else ``L0`` where that one's does, else ``L1``'s
+    (failing) plan. Returns ``(exists, follows_own)`` and the fields :data:`CHOSEN`."""
+    own = xp.where(via_l1[0], False, via_l0[0])
+    return (
+        xp.where(own, via_l0[0], via_l1[0]), own, xp.where(own, via_l0[1], via_l1[1]),
+        xp.where(own, via_l0[2], via_l1[2]), xp.where(own, via_l0[3], via_l1[3]), xp.where(own, via_l0[4], via_l1[4]),
+        xp.where(own, via_l0[5], via_l1[5]), xp.where(own, via_l0[6], via_l1[6]), xp.where(own, via_l0[7], via_l1[7]),
+        xp.where(own, via_l0[8], via_l1[8]), xp.where(own, via_l0[9], via_l1[9]),
+    )  # fmt: skip
+
+
+def own_period(xp, ego_x, ego_vx, a_x, l0_x, l0_v, l0_decel, period_ok, completing, ego_vy_end, p_m, dt, tol):
+    """``L0`` over the period at the candidate (the shield's check, ``shield/decide.py``): the period stays safe only
+    if the ego keeps ``p_m`` behind ``L0`` braking at ``l0_decel`` at every instant of it (exact minimum, to half
+    ``tol``: a follower of ``L0`` settles exactly at the margin, the executor's round-off must stay inside ``tol``);
+    the step completes only moving away from ``L0`` or not at all laterally (``ego_vy_end >= 0``). Returns
+    ``(period_ok, completing, l0_x', l0_v')``, ``L0``'s worst case at the period's end."""
+    gap = pair_min_gap_core(xp, l0_x - ego_x - p_m, ego_vx, a_x, l0_v, -l0_decel, dt)
+    l0_x_end, l0_v_end = advance_core(xp, l0_x, l0_v, -l0_decel, dt)
+    return period_ok & (gap >= -0.5 * tol), completing & (ego_vy_end >= 0.0), l0_x_end, l0_v_end
 
 
 def own_lane_core(
     ego_px, ego_py, ego_vx, ego_vy, l1_p, l1_v, l1_decel, f_p, f_v, aggressive, l0_p, l0_v, l0_decel,
     lead_margin, follow_margin, own_margin, prm: Params, tol: float = FEASIBILITY_TOL_M,
 ):  # fmt: skip
-    """The evasion check with ``L0`` (every row has one; arrays of one batch shape ``(B,)``).
+    """The evasion check with ``L0`` (every row has one; NumPy arrays of one batch shape ``(B,)``).
 
     Returns ``(exists, parts)`` like :func:`~.evasion.evasion_core`, ``parts`` with ``follows_own`` (the plan
     follows ``L0``: ``k = L0``) and ``own_gap`` (the minimum gap to ``L0`` over ``[0, ∞)`` minus its margin). Both
-    members of the family (follow ``L1``, follow ``L0``) are evaluated in one stacked pass of ``2B`` rows.
+    members of the family (follow ``L1``, follow ``L0``) are evaluated in one stacked pass of ``2B`` rows, the search
+    on the rows that need it only. The closed forms are this module's backend-generic functions; the compiled rows
+    (``shield/_fast_own.py``) call the same ones in the same order, one row at a time.
     """
+    xp = ARRAY
     shape = np.shape(ego_px)
     b = shape[0]
     T, t_y1, y_acc_1, y_acc_2, t_y_end = lateral_core(xp, ego_py, ego_vy, prm)
@@ -155,40 +229,25 @@ def own_lane_core(
                  for x, y in zip((l1_p, l1_v, l1_decel), (l0_p, l0_v, l0_decel), strict=True))  # fmt: skip
     lm, om = two(lead_margin), two(own_margin)
     margin_k = np.concatenate([np.broadcast_to(lead_margin, shape), np.broadcast_to(own_margin, shape)])
-
-    def leaders_gap(u):
-        g0 = leader_gap(u, p, v, lead, l0, om, INF, prm)
-        g1 = np.where(nothing, INF, leader_gap(u, p, v, lead, l1, lm, T2, prm))
-        return np.minimum(g0, g1), g1, g0
-
-    # The closed form against the followed leader on [0, t_y_f]: an upper bound on the best u.
-    _, u_k, *_ = longitudinal_core(xp, p, v, *lead, T2, margin_k, prm, tol)
-    g_hi = leaders_gap(u_k)[0]
-    g_lo = leaders_gap(0.0 * u_k)[0]
+    u_k, g_lo, search = member_bounds(xp, p, v, lead, l0, l1, T2, nothing, lm, om, margin_k, prm, tol)
     u = u_k.copy()
-    rows = np.flatnonzero((g_hi < -tol) & (g_lo >= -tol))
+    rows = np.flatnonzero(search)
     if rows.size:  # where the closed form breaks the other leader: search [0, u_k], keeping a feasible lower end
-        fixed = (p[rows], v[rows], tuple(a[rows] for a in lead), tuple(a[rows] for a in l0),
-                 tuple(a[rows] for a in l1), nothing[rows], T2[rows], lm[rows], om[rows])  # fmt: skip
-        u[rows] = _search(fixed, u_k[rows], prm, tol)
-    u = np.where(g_lo >= -tol, u, 0.0)
-    g, g1, g0 = leaders_gap(u)
-    lead_ok = g >= -tol
-    fg = np.where(nothing, INF, follower_gap(u, p, v, lead, two(f_p), two(f_v), two(aggressive), two(follow_margin),
-                                             T2, prm))  # fmt: skip
-    follow_ok = fg >= -tol
-    V, t2, match = profile(xp, u, p, v, *lead, prm)
-    both = dict(exists=lead_ok & follow_ok, lead_ok=lead_ok, follow_ok=follow_ok, t_x1=u, v_switch=V,
-                t_brake_end=t2, follows_leader=match, lead_gap=g1, follow_gap=fg, own_gap=g0)  # fmt: skip
-    results = [{k: a[:b] for k, a in both.items()}, {k: a[b:] for k, a in both.items()}]
-    nothing = nothing[:b]
-    T = T1
-    via_l1, via_l0 = results
-    own = ~via_l1["exists"] & via_l0["exists"]
-    parts = {k: np.where(own, via_l0[k], via_l1[k]) for k in via_l1}
-    exists = parts.pop("exists")
+        sub = lambda vehicle: tuple(a[rows] for a in vehicle)  # noqa: E731
+        u[rows] = _search(xp, u_k[rows], p[rows], v[rows], sub(lead), sub(l0), sub(l1), T2[rows], nothing[rows],
+                          lm[rows], om[rows], prm, tol)  # fmt: skip
+    both = member_parts(xp, u, g_lo, p, v, lead, l0, l1, T2, nothing, lm, om, two(f_p), two(f_v), two(aggressive),
+                        two(follow_margin), prm, tol)  # fmt: skip
+    exists, own, *chosen = choose_member(xp, tuple(a[:b] for a in both), tuple(a[b:] for a in both))
+    parts = dict(zip(CHOSEN, chosen, strict=True))
     parts.update(
-        t_y_f=T, t_y_switch=t_y1, y_acc_1=y_acc_1, y_acc_2=y_acc_2, t_y_end=t_y_end, nothing=nothing,
+        t_y_f=T1, t_y_switch=t_y1, y_acc_1=y_acc_1, y_acc_2=y_acc_2, t_y_end=t_y_end, nothing=nothing[:b],
         follows_own=own,
     )  # fmt: skip
     return exists, parts
+
+
+# The closed forms compiled into the shield's kernel (shield/_fast_own.py, through safety/_compile.py): the same
+# functions, evaluated row by row.
+jitable(_finite, leader_gap_core, follower_gap_core, leaders_gap, member_bounds, _search, member_parts, choose_member,
+        own_period)  # fmt: skip
