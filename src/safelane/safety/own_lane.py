@@ -29,6 +29,15 @@ paper's and provably optimal (``docs/safety.md``); with ``L0`` the reference tes
 
 Every gap minimum is exact: each difference is piecewise quadratic, so its minimum is at ``0``, the horizon, a
 breakpoint (``u``, the end of braking, a stop) or a point where the speeds are equal within a phase — all evaluated.
+
+**One source, compiled** (docs/architecture.md). The check is written once against ``xp`` (``_backend``), in stages
+each a closed form marked ``jitable``: :func:`member_bounds` (``u_k``, the gaps at ``u = 0``, whether to search),
+:func:`_search` (the bisection, element-wise: a fixed ``SEARCH_STEPS`` loop of ``where``), :func:`member_parts` (the
+member at its ``u``), :func:`choose_member`; the gap minima :func:`leader_gap_core`, :func:`follower_gap_core`; and
+``L0`` over the shield's period, :func:`own_period`. :func:`own_lane_core` runs them on NumPy arrays (both members
+stacked, the bisection on the rows that need it only); ``shield/_fast_own.py`` compiles the same functions and runs
+them one row at a time (the bisection where that row needs it) — the same candidates in the same order, so the same
+bits (``tests/test_fast_own.py``).
 """
 
 from __future__ import annotations
