@@ -8,11 +8,12 @@ what the ego senses plus what V2X adds.
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Protocol, runtime_checkable
+from typing import NamedTuple, Protocol, runtime_checkable
 
 import numpy as np
 
 from ..params import Params
+from ..safety._backend import ARRAY, jitable
 
 #: Names of the 8 state features of ASP-DAC'23, in order.
 STATE_FEATURES = ("p_x", "p_y", "v_x", "v_y", "p_x_l", "v_x_l", "p_x_f", "v_x_f")
@@ -89,8 +90,34 @@ class ExpertPlanner:
     brake_comfort: float = float("inf")
 
     def __call__(self, obs: Observation, params: Params) -> tuple[np.ndarray, np.ndarray]:
-        mid = obs.p_x_f + self.gap_fraction * (obs.p_x_l - obs.p_x_f)
-        a_x = self.k_p * (mid - obs.p_x) + self.k_v * (obs.v_x_l - obs.v_x)
-        a_x = np.maximum(a_x, -self.brake_comfort)
-        a_y = self.omega**2 * (params.lane_width - obs.p_y) - 2.0 * self.omega * obs.v_y
-        return clip_actions(a_x, a_y, params)
+        with np.errstate(all="ignore"):
+            return expert_accel(ARRAY, obs.p_x_f, obs.p_x_l, obs.v_x_l, obs.p_x, obs.p_y, obs.v_x, obs.v_y,
+                                self.gains(), params.lane_width, params)  # fmt: skip
+
+    def gains(self) -> ExpertGains:
+        """The planner's gains as the closed form :func:`expert_accel` takes them."""
+        return ExpertGains(self.k_p, self.k_v, self.gap_fraction, self.brake_comfort, self.omega**2, 2.0 * self.omega)
+
+
+class ExpertGains(NamedTuple):
+    """:class:`ExpertPlanner`'s gains (``omega2 = omega²``, ``two_omega = 2 omega``), a record the kernels take."""
+
+    k_p: float
+    k_v: float
+    gap_fraction: float
+    brake_comfort: float
+    omega2: float
+    two_omega: float
+
+
+def expert_accel(xp, f_x, l1_x, l1_v, ego_x, ego_y, ego_vx, ego_vy, gains, lane_width, lim):
+    """:class:`ExpertPlanner`'s proposal ``(a_x, a_y)``, backend-generic (the one source: the planner evaluates it on
+    NumPy arrays, the compiled closed loop per row). ``gains``: :class:`ExpertGains`; ``lim``: ``Params`` or its
+    ``Limits``: the proposal is clipped to the mechanical limits, as :func:`clip_actions`."""
+    mid = f_x + gains.gap_fraction * (l1_x - f_x)
+    a_x = xp.maximum(gains.k_p * (mid - ego_x) + gains.k_v * (l1_v - ego_vx), -gains.brake_comfort)
+    a_y = gains.omega2 * (lane_width - ego_y) - gains.two_omega * ego_vy
+    return xp.clip(a_x, -lim.a_x_d, lim.a_x_a), xp.clip(a_y, -lim.a_y_m, lim.a_y_m)
+
+
+jitable(expert_accel)

@@ -25,6 +25,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..safety._backend import ARRAY, jitable
+
 
 @dataclass(frozen=True)
 class AssessmentState:
@@ -52,11 +54,17 @@ def update(state: AssessmentState, f_speed, t: float, dt: float, threshold: floa
     count = state.count + 1
     times = (np.arange(window) - (window - 1) / 2.0) * dt
     slope = _dot(history, times) / _dot(times[None, :], times)[0]
-    full = count >= window
-    latched = state.latched | (full & (slope >= threshold))
-    aggressive = latched | np.where(full & (slope <= -threshold), False, state.aggressive)
+    latched, aggressive = belief_core(ARRAY, slope, count >= window, state.latched, state.aggressive, threshold)
     first = np.where(np.isnan(state.first_collaborative_s) & ~aggressive, t, state.first_collaborative_s)
     return AssessmentState(history, count, aggressive, latched, first)
+
+
+def belief_core(xp, slope, full, latched, aggressive, threshold):
+    """``(latched, aggressive)`` after one slope of F's speed, backend-generic (the one source of the rule; the
+    compiled closed loop evaluates it per row): the window ``full``, a slope of at least ``+threshold`` latches
+    "aggressive"; at most ``−threshold`` gives "collaborative" unless latched; else the belief stays."""
+    latched = latched | (full & (slope >= threshold))
+    return latched, latched | xp.where(full & (slope <= -threshold), False, aggressive)
 
 
 def _dot(rows, weights):
@@ -66,3 +74,6 @@ def _dot(rows, weights):
     for j in range(1, len(weights)):
         out = out + rows[:, j] * weights[j]
     return out
+
+
+jitable(belief_core)

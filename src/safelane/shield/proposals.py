@@ -13,6 +13,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..params import Params
+from ..safety._backend import ARRAY, jitable
 
 _RANGE_TOL = 1e-9
 
@@ -28,16 +29,23 @@ def check_proposal(planner, proposal, batch: int, prm: Params):
         arr = np.asarray(value)
         if arr.dtype.kind not in "fiu":
             raise TypeError(
-                f"{who} returned {axis} of dtype {arr.dtype} ({type(value).__name__}); numbers "
-                "are required"
+                f"{who} returned {axis} of dtype {arr.dtype} ({type(value).__name__}); numbers are required"
             )
         if arr.shape != (batch,):
             raise ValueError(f"{who} returned {axis} of shape {arr.shape}; expected ({batch},)")
         out.append(arr.astype(float))
-    a_x, a_y = out
     with np.errstate(invalid="ignore"):
-        ok = np.isfinite(a_x) & np.isfinite(a_y)
-        ok &= (a_x >= -prm.a_x_d - _RANGE_TOL) & (a_x <= prm.a_x_a + _RANGE_TOL)
-        ok &= np.abs(a_y) <= prm.a_y_m + _RANGE_TOL
-    invalid = ~ok
-    return np.where(ok, a_x, 0.0), np.where(ok, a_y, 0.0), invalid
+        ok, a_x, a_y = proposal_core(ARRAY, *out, prm)
+    return a_x, a_y, ~ok
+
+
+def proposal_core(xp, a_x, a_y, lim):
+    """``(ok, a_x, a_y)``: whether the proposal is valid — finite and inside the mechanical limits (``lim``:
+    ``Params`` or its ``Limits``) to ``1e-9`` m/s² — and the proposal with ``0`` where it is not. Backend-generic:
+    :func:`check_proposal` evaluates it on arrays, the compiled closed loop per row. A NaN or an infinity fails the
+    range comparisons themselves (the limits are finite)."""
+    ok = (a_x >= -lim.a_x_d - _RANGE_TOL) & (a_x <= lim.a_x_a + _RANGE_TOL) & (abs(a_y) <= lim.a_y_m + _RANGE_TOL)
+    return ok, xp.where(ok, a_x, 0.0), xp.where(ok, a_y, 0.0)
+
+
+jitable(proposal_core)

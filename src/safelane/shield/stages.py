@@ -29,7 +29,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..params import Params
-from ..safety._backend import ARRAY, FEASIBILITY_TOL_M
+from ..safety._backend import ARRAY, FEASIBILITY_TOL_M, jitable
 from ..safety.chain import propagate_chain
 from ..safety.plan import set_rows
 from ..safety.responsible import responsible_accel, responsible_bound, responsible_ok
@@ -156,19 +156,25 @@ def worst_case(obs: Observed, flags, prm: Params, cfg: ShieldConfig) -> WorstCas
     uses_chain, uses_f_v2x, uses_assessment = flags
     s = obs.situation
     n = len(s)
-    a_o = prm.others_decel  # an L1 the chain does not bound brakes at the others' maximum
-    l1_decel = np.where(uses_chain & ~obs.unsafe, obs.bounds[:, 0], a_o)
     assessed = ASSESSMENTS[cfg.assessment].aggressive(obs.belief, s)
     trusted = uses_f_v2x & s.f_connected & s.f_collaborative
-    f_aggr = np.where(trusted, False, np.where(uses_assessment, assessed, True))
     broken = obs.breach.any if cfg.monitor else np.zeros(n, bool)
-    if cfg.monitor:
-        l1_decel = np.where(broken, a_o, l1_decel)
-        f_aggr = f_aggr | broken
+    l1_decel, f_aggr = worst_case_core(ARRAY, uses_chain, obs.unsafe, obs.bounds[:, 0], prm.others_decel, trusted,
+                                       uses_assessment, assessed, broken)  # fmt: skip
     own = own_leader(s, cfg, prm, uses_chain, broken)
     if own is not None:
         own = (obs.evaluated.own_x[:, 0], obs.evaluated.own_v[:, 0], own[2])
     return WorstCase(l1_decel, f_aggr, own)
+
+
+def worst_case_core(xp, uses_chain, unsafe, l1_bound, a_o, trusted, uses_assessment, assessed, broken):
+    """``(l1_decel, f_aggr)``, backend-generic (the one source; the compiled closed loop evaluates it per row): L1
+    brakes at its chain bound where the variant uses the chain and the chain is not unsafe, else at the others'
+    maximum ``a_o``; F is collaborative where it is trusted (connected, collaborative, and the variant listens), else
+    as assessed where the variant assesses, else aggressive; a breach (``broken``) makes both the most conservative."""
+    l1_decel = xp.where(broken | unsafe, a_o, xp.where(uses_chain, l1_bound, a_o))
+    f_aggr = xp.where(trusted, False, xp.where(uses_assessment, assessed, True))
+    return l1_decel, f_aggr | broken
 
 
 def proposal(raw, n: int, prm: Params, planner_name: str) -> Proposal:
@@ -337,3 +343,6 @@ def with_stale(breach: Breach, stale, t: float) -> Breach:
     flags[:, col] |= stale
     first = np.where(np.isnan(breach.first_s) & new, t, breach.first_s)
     return Breach(flags=flags, first_s=first)
+
+
+jitable(worst_case_core)

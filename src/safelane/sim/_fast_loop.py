@@ -22,6 +22,9 @@ from __future__ import annotations
 import numba
 import numpy as np
 
+from ..planners.base import ExpertGains, expert_accel
+from ..safety import _compile
+from ..safety._backend import SCALAR, Limits
 from ..safety._fast_base import (
     _max,
     _min,
@@ -30,12 +33,16 @@ from ..safety._fast_base import (
 from ..safety._fast_responsible import _min_follow_decel, _responsible_bound
 from ..shield._fast_decide import _candidate
 from ..shield._fast_monitor import _breach_row
+from ..shield.assessment import belief_core
 from ..shield.decide import ABORT, COMPLETED, HESITATE, PROCEED
+from ..shield.proposals import proposal_core
+from ..shield.stages import worst_case_core
 from ._fast_checks import _ego_row, _lane_row
 from ._fast_general import _general_pair
 from ._fast_held import _clip, _fleet, _motion_max, _plan_motion
 from ._fast_traffic import _chain_row, _follower_accel, _leader_accel, _responsible_accel
 
+_compile.register_rows()
 announce_compile(__file__)
 
 _INF = np.inf
@@ -72,6 +79,7 @@ def loop_kernel(
     k_p, k_v, gap_frac, brake_comfort, om2, two_om = prm[19:25]
     half = 0.5 * tol
     a_lim = _max(a_a, a_d)
+    gains, lim = ExpertGains(k_p, k_v, gap_frac, brake_comfort, om2, two_om), Limits(a_a, a_d, a_ym, y_safe)
     max_level = _max(conflict, overlap)
     bsz, k = x_init.shape
     m = k - 1
@@ -139,15 +147,10 @@ def loop_kernel(
             if step == n_steps:
                 break
             # --- observe, the expert planner (planners.base.ExpertPlanner), the proposal checked ---
-            mid = x[0] + gap_frac * (x[1] - x[0])
-            ax_n = _max(k_p * (mid - ex) + k_v * (v[1] - evx), -brake_comfort)
-            ay_n = om2 * (lane_w - ey) - two_om * evy
-            ax_n, ay_n = _clip(ax_n, -a_d, a_a), _clip(ay_n, -a_ym, a_ym)
-            ok = (ax_n == ax_n and abs(ax_n) != _INF) and (ay_n == ay_n and abs(ay_n) != _INF)
-            ok = ok and (ax_n >= -a_d - 1e-9) and (ax_n <= a_a + 1e-9) and (abs(ay_n) <= a_ym + 1e-9)
+            ax_n, ay_n = expert_accel(SCALAR, x[0], x[1], v[1], ex, ey, evx, evy, gains, lane_w, lim)
+            ok, ax_ok, ay_ok = proposal_core(SCALAR, ax_n, ay_n, lim)
             invalid = not ok
-            a_x = _clip(ax_n if ok else 0.0, -a_d, a_a)
-            a_y = _clip(ay_n if ok else 0.0, -a_ym, a_ym)
+            a_x, a_y = _clip(ax_ok, -a_d, a_a), _clip(ay_ok, -a_ym, a_ym)
             # --- the chain analysis (ClosedLoop.chain) ---
             unsafe = _chain_row(x2, v2, 0, promise, chain_margin, b, a_d, half, tol, bounds2)
             # --- the shield: assessment, worst cases ---
@@ -159,15 +162,12 @@ def loop_kernel(
             for j in range(1, window):
                 num = num + history[j] * times[j]
             slope = num / den
-            full = count >= window
-            latched = latched or (full and slope >= thr)
-            aggressive = latched or (False if (full and slope <= -thr) else aggressive)
+            latched, aggressive = belief_core(SCALAR, slope, count >= window, latched, aggressive, thr)
             if first_collab != first_collab and not aggressive:
                 first_collab = t
-            l1_decel = bounds[1] if (uses_chain and not unsafe) else a_d
-            f_aggr = False if trusted else (aggressive if uses_assess else True)
-            if br0 or br1 or br2 or br3:
-                l1_decel, f_aggr = a_d, True
+            broken = br0 or br1 or br2 or br3
+            l1_decel, f_aggr = worst_case_core(SCALAR, uses_chain, unsafe, bounds[1], a_d, trusted, uses_assess,
+                                               aggressive, broken)  # fmt: skip
             a_yh = _clip(-evy / dt, -a_ym, a_ym)
             active = not completed
             # --- proceed / hesitate / abort (decide.check_candidate with the commit guard) ---
