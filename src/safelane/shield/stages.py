@@ -267,7 +267,7 @@ def command(state, obs: Observed, worst: WorstCase, prop: Proposal, fr: Frame, v
             with np.errstate(all="ignore"):
                 ok = responsible_ok(ax_cmd[r], slack[soft], evx[r], l1v[r], l1d[soft], prm, tol=FEASIBILITY_TOL_M)
             ax_cmd[r] = np.where(ok, ax_cmd[r], -prm.a_x_d)
-        ay_cmd[done] = np.clip(0.8 * (prm.lane_width - ey[done]) - 1.6 * evy[done], -prm.a_y_m, prm.a_y_m)
+        ay_cmd[done] = lane_keep_accel(ARRAY, ey[done], evy[done], prm.lane_width, prm.a_y_m)
     abort_rows = np.flatnonzero((behaviour == ABORT) & paper_rule)
     abort = (abort_rows, None, None, None, None, None)
     if abort_rows.size:  # only the aborting rows follow their plan: evaluate it there alone
@@ -284,6 +284,13 @@ def command(state, obs: Observed, worst: WorstCase, prop: Proposal, fr: Frame, v
     for idx, ax, ay in verdicts.ruled:
         ax_cmd[idx], ay_cmd[idx] = ax, ay
     return Commands(ax_cmd, ay_cmd, abort)
+
+
+def lane_keep_accel(xp, ego_y, ego_vy, lane_width, a_y_m):
+    """After completion: the lateral acceleration that centres the ego in the target lane (a PD law, gains 0.8 s⁻²
+    and 1.6 s⁻¹: critically damped), within ``±a_y_m``. Backend-generic, the one source (the compiled closed loop
+    evaluates it per row)."""
+    return xp.clip(0.8 * (lane_width - ego_y) - 1.6 * ego_vy, -a_y_m, a_y_m)
 
 
 def remember(state, obs: Observed, worst: WorstCase, fr: Frame, verdicts: Verdicts, prm: Params):
@@ -345,4 +352,4 @@ def with_stale(breach: Breach, stale, t: float) -> Breach:
     return Breach(flags=flags, first_s=first)
 
 
-jitable(worst_case_core)
+jitable(worst_case_core, lane_keep_accel)
