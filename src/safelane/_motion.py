@@ -1,5 +1,4 @@
-"""Exact one-segment motion at constant acceleration, stopping at rest (speed never goes negative), and the maximum
-of a free (non-stopping) one.
+"""Exact one-segment motion at constant acceleration, stopping at rest (speed never goes negative).
 
 :func:`stop_time_core` and :func:`advance_core` are the rule, written once against a backend ``xp`` (``where``,
 ``minimum``, ``maximum``; :mod:`safelane.safety._backend`): on NumPy arrays here and in the safety math, on floats
@@ -7,7 +6,8 @@ compiled into the kernels (:mod:`safelane.safety.responsible` marks them ``jitab
 is a row of :func:`advance_core`). :func:`stop_time` and :func:`advance` pass ``numpy`` itself as the backend —
 those three operations of ``_backend.ARRAY`` are NumPy's own — so this module imports nothing from
 :mod:`safelane.safety`, and :mod:`safelane.v2x` (imported with the package) and the simulator share it without
-their imports.
+their imports. (The maximum of a free, non-stopping segment — the conflict zone's test — is
+:func:`safelane.shield.decide.lateral_max`.)
 """
 
 from __future__ import annotations
@@ -38,12 +38,3 @@ def advance(x, v, a, dt):
     """Exact state after ``dt`` at constant acceleration ``a``, stopping at rest: ``(x', v')``."""
     with np.errstate(over="ignore"):  # as stop_time
         return advance_core(np, x, v, a, dt)
-
-
-def free_max(y0, vy0, a, dt: float):
-    """Exact maximum over ``[0, dt]`` of ``y0 + vy0 t + a t²/2`` (one constant-acceleration segment)."""
-    end = y0 + vy0 * dt + 0.5 * a * dt * dt
-    safe = np.where(a < 0.0, a, -1.0)
-    tau = np.where(a < 0.0, -vy0 / safe, -1.0)
-    vertex = np.where((tau > 0.0) & (tau < dt), y0 + 0.5 * vy0 * tau, -np.inf)
-    return np.maximum(np.maximum(y0, end), vertex)

@@ -3,9 +3,8 @@
 No formula lives here. :func:`exists_kernel` and :func:`plan_kernel` are loops over the rows of a batch that call
 the backend-generic closed form :func:`~.evasion.evasion_parts` (Eq. 5 ``lateral_core``, Eqs. 6–8
 ``longitudinal_core``, Eq. 9) on ``SCALAR``, the Python-float backend, which :mod:`._compile` teaches numba; the row
-functions :func:`_plan_parts` (``plan_kernel``'s row) and :func:`_ego_position`, :func:`_ego_speed`,
-:func:`_lateral_state` (the held plan's motion in ``sim/_fast_held.py``) are rows of the same closed forms. The
-uncompiled path evaluates the same functions on NumPy arrays.
+function :func:`_plan_parts` is ``plan_kernel``'s row. The uncompiled path evaluates the same functions on NumPy
+arrays.
 
 **Same bits.** numba compiles without ``fastmath`` (LLVM neither contracts ``a * b + c`` into a fused multiply-add
 nor reassociates), ``sqrt`` and ``/`` are correctly rounded in both, ``SCALAR``'s ``maximum``/``minimum`` propagate
@@ -32,8 +31,6 @@ from ._fast_base import _B, _F, announce_compile
 # responsible.responsible_bound's dispatch finds its kernel here (fast_kernel() is this module): re-exported
 from ._fast_responsible import responsible, responsible_kernel  # noqa: F401
 from .evasion import PARTS, evasion_parts
-from .lateral import lateral_state
-from .longitudinal import ego_position, ego_speed
 
 _compile.register_rows()
 announce_compile(__file__)
@@ -57,24 +54,6 @@ def _plan_parts(py, vy, p, v, p1, v1, a1, fp, fv, aggr, margin, fmargin, a_a, a_
     r = evasion_parts(SCALAR, p, py, v, vy, p1, v1, a1, fp, fv, aggr, margin, fmargin, Limits(a_a, a_d, a_y, y_safe),
                       tol)  # fmt: skip
     return (r[1], r[2], r[3], r[4], r[5], r[6], r[7], r[8], r[9], r[10]), (r[0], r[11], r[12], r[13], r[14])
-
-
-@numba.njit(error_model="numpy", nogil=True)
-def _ego_position(t, p, v, u, V, t2, match, p1, v1, a1, a_a, a_d, l1_stop):
-    """One row of :func:`~.longitudinal.ego_position`."""
-    return ego_position(SCALAR, t, p, v, u, V, t2, match, p1, v1, a1, Limits(a_a, a_d, 0.0, 0.0), l1_stop)
-
-
-@numba.njit(error_model="numpy", nogil=True)
-def _ego_speed(t, v, u, V, t2, match, v1, a1, a_a, a_d):
-    """One row of :func:`~.longitudinal.ego_speed`."""
-    return ego_speed(SCALAR, t, v, u, V, t2, match, v1, a1, Limits(a_a, a_d, 0.0, 0.0))
-
-
-@numba.njit(error_model="numpy", nogil=True)
-def _lateral_state(t, p_y, v_y, t_1, acc_1, acc_2, t_end):
-    """One row of :func:`~.lateral.lateral_state`."""
-    return lateral_state(SCALAR, t, p_y, v_y, t_1, acc_1, acc_2, t_end)
 
 
 @numba.njit(_EXISTS_SIGNATURE, cache=True, nogil=True, error_model="numpy")

@@ -10,11 +10,12 @@ from __future__ import annotations
 import dataclasses
 import enum
 from dataclasses import dataclass
+from typing import NamedTuple
 
 import numpy as np
 
 from ..params import Params
-from ._backend import ARRAY
+from ._backend import ARRAY, jitable
 from ._checks import finish, float_array
 from .lateral import lateral_state
 from .longitudinal import ego_position, ego_speed
@@ -100,19 +101,9 @@ class EvasionPlan:
         t = float_array("t", t)
         if (t < 0).any() or not np.isfinite(t).all():
             raise ValueError(f"t must be finite and >= 0; got {t!r}")
-        T = self.t_y_f
-        check_broadcasts("t", t.shape, np.shape(T))
-        lon = (self.ego_px, self.ego_vx, self.t_x1, self.v_switch, self.t_brake_end, self.follows_leader)
-        p, v, u, V, t2, match = lon
-        lead = self.lead
+        check_broadcasts("t", t.shape, np.shape(self.t_y_f))
         with np.errstate(all="ignore"):
-            tt = np.where(self.continues, t, np.minimum(t, T))
-            px = ego_position(ARRAY, tt, p, v, u, V, t2, match, *lead, self.params)
-            vx = ego_speed(ARRAY, tt, v, u, V, t2, match, lead[1], lead[2], self.params)
-            px = px + vx * np.maximum(t - tt, 0.0)
-            lat = (self.t_y_switch, self.y_acc_1, self.y_acc_2, self.t_y_end)
-            py, vy = lateral_state(ARRAY, t, self.ego_py, self.ego_vy, *lat)
-        return px, py, vx, vy
+            return plan_state(ARRAY, self, t, *self.lead, self.params)
 
     def where(self, mask, other: EvasionPlan) -> EvasionPlan:
         """Element-wise choice: this plan where ``mask`` is True, ``other`` elsewhere."""
@@ -137,6 +128,44 @@ class EvasionPlan:
         """Planned ego ``(v_x, v_y)`` at time ``t``."""
         _, _, vx, vy = self.state(t)
         return vx, vy
+
+
+class PlanRecord(NamedTuple):
+    """The fields of an :class:`EvasionPlan` that :func:`plan_state` reads, as a record numba can take: the compiled
+    closed loop builds one from the plan it holds (``sim/_fast_held.py``); uncompiled code passes the plan itself."""
+
+    ego_px: float
+    ego_py: float
+    ego_vx: float
+    ego_vy: float
+    t_x1: float
+    v_switch: float
+    t_brake_end: float
+    follows_leader: bool
+    t_y_f: float
+    t_y_switch: float
+    y_acc_1: float
+    y_acc_2: float
+    t_y_end: float
+    continues: bool
+
+
+def plan_state(xp, plan, t, lead_p, lead_v, lead_decel, prm):
+    """The planned ego ``(p_x, p_y, v_x, v_y)`` at time ``t >= 0`` after the plan's state, exact: the longitudinal
+    profile (Eqs. 6–8, :func:`~.longitudinal.ego_position`, :func:`~.longitudinal.ego_speed`) up to ``t_y_f``, then
+    the speed reached held (the ego is back in its own lane, whose road ahead is free) — or, where the plan
+    ``continues`` (a leader ``L0`` in the own lane), the profile throughout; the lateral return (Eq. 5,
+    :func:`~.lateral.lateral_state`) throughout. ``plan``: an :class:`EvasionPlan` or a :class:`PlanRecord`; ``lead``:
+    ``(p, v, decel)`` of the vehicle the profile follows (:attr:`EvasionPlan.lead`); ``prm``: ``Params`` or its
+    ``Limits``. Backend-generic: :meth:`EvasionPlan.state` on NumPy arrays, the compiled closed loop's held plan row
+    by row."""
+    tt = xp.where(plan.continues, t, xp.minimum(t, plan.t_y_f))
+    p, v, u, V, t2, match = plan.ego_px, plan.ego_vx, plan.t_x1, plan.v_switch, plan.t_brake_end, plan.follows_leader
+    px = ego_position(xp, tt, p, v, u, V, t2, match, lead_p, lead_v, lead_decel, prm)
+    vx = ego_speed(xp, tt, v, u, V, t2, match, lead_v, lead_decel, prm)
+    px = px + vx * xp.maximum(t - tt, 0.0)
+    py, vy = lateral_state(xp, t, plan.ego_py, plan.ego_vy, plan.t_y_switch, plan.y_acc_1, plan.y_acc_2, plan.t_y_end)
+    return px, py, vx, vy
 
 
 def check_broadcasts(name: str, shape, batch_shape) -> tuple[int, ...]:
@@ -208,3 +237,7 @@ def set_rows(plan: EvasionPlan, pieces) -> EvasionPlan:
             arr[rows] = getattr(sub, f.name)
         out[f.name] = arr
     return EvasionPlan(**out, params=plan.params)
+
+
+# The plan's motion, compiled into the closed loop's held plan (sim/_fast_held.py; safety/_compile.py).
+jitable(plan_state)

@@ -72,8 +72,9 @@ def own_margin(prm: Params) -> float:
 
 
 def lateral_max(xp, y0, vy0, a, y_end, dt):
-    """Exact maximum over ``[0, dt]`` of ``y0 + vy0 t + a t²/2`` (one free segment, ending at ``y_end``), as
-    ``_motion.free_max``: the ends, and the vertex where it lies inside the period. Backend-generic."""
+    """Exact maximum over ``[0, dt]`` of ``y0 + vy0 t + a t²/2`` (one free segment, ending at ``y_end``): the ends,
+    and the vertex where it lies inside the period. Backend-generic; the one home of the conflict zone's test (the
+    candidate's period here, the delay's commands in :mod:`.realworld`, the checks' lateral extent)."""
     tau = xp.where(a < 0.0, xp.div(-vy0, a, 0.0), -1.0)
     vertex = xp.where((tau > 0.0) & (tau < dt), y0 + 0.5 * vy0 * tau, -INF)
     return xp.maximum(xp.maximum(y0, y_end), vertex)
@@ -248,13 +249,30 @@ def plan_motion(plan: EvasionPlan, age, dt: float):
     ``t_y_f``, the lateral switch and end), so each segment has constant accelerations.
     """
     _, lead_v, lead_decel = plan.lead
-    l1_stop = np.where(lead_decel > 0.0, lead_v / np.where(lead_decel > 0.0, lead_decel, 1.0), np.inf)
-    switches = [plan.t_x1, plan.t_brake_end, l1_stop, plan.t_y_f, plan.t_y_switch, plan.t_y_end]
-    rel = [np.clip(s - age, 0.0, dt) for s in switches]
+    rel = plan_switches(ARRAY, plan, lead_v, lead_decel, age, dt)
     knots = np.sort(np.stack([np.zeros_like(age), *rel, np.full_like(age, dt)], -1), -1)
     px, py, vx, vy = plan.take((..., None)).state(age[..., None] + knots)
     return knots, px, vx, py, vy
 
 
-# The candidate check compiled into the shield's kernel and the closed loop (safety/_compile.py): the same functions.
-jitable(lateral_max, candidate_period, candidate_row)
+def plan_switches(xp, plan, lead_v, lead_decel, age, dt):
+    """The switches of ``plan`` as instants of the period ``[age, age + dt]`` (relative to its start, clipped to
+    ``[0, dt]``): ``t_x1``, the end of braking, the stop of the vehicle it follows (``lead_v``, braking at
+    ``lead_decel``; never where it does not brake), ``t_y_f``, the lateral switch and end — :func:`plan_motion`'s
+    inner knots. ``plan``: an ``EvasionPlan`` or a ``PlanRecord``. Backend-generic (the compiled closed loop's held
+    plan, row by row)."""
+    braking = lead_decel > 0.0
+    l1_stop = xp.where(braking, lead_v / xp.where(braking, lead_decel, 1.0), INF)
+    return (
+        xp.clip(plan.t_x1 - age, 0.0, dt),
+        xp.clip(plan.t_brake_end - age, 0.0, dt),
+        xp.clip(l1_stop - age, 0.0, dt),
+        xp.clip(plan.t_y_f - age, 0.0, dt),
+        xp.clip(plan.t_y_switch - age, 0.0, dt),
+        xp.clip(plan.t_y_end - age, 0.0, dt),
+    )
+
+
+# The candidate check compiled into the shield's kernel and the closed loop, the held plan's switches into the closed
+# loop (safety/_compile.py): the same functions.
+jitable(lateral_max, candidate_period, candidate_row, plan_switches)

@@ -22,7 +22,7 @@ import dataclasses
 
 import numpy as np
 
-from .._motion import advance, free_max
+from .._motion import advance
 from ..params import Params
 from ..safety._backend import ARRAY, FEASIBILITY_TOL_M
 from ..safety.chain import min_follow_decel
@@ -30,7 +30,7 @@ from ..safety.lateral import LATERAL_TOL_M
 from ..safety.own_lane import own_lane_core
 from ..safety.plan import EvasionPlan, plan_from_core, set_rows
 from ..safety.responsible import pair_min_gap
-from .decide import own_margin
+from .decide import lateral_max, own_margin
 from .situation import Situation
 
 
@@ -117,7 +117,8 @@ def in_flight_checked(plan: EvasionPlan, s: Situation, own, delay: float, prm: P
     tol = FEASIBILITY_TOL_M
     ex, evx = s.ego_x, s.ego_vx
     zero = np.zeros(len(s))
-    conflict = free_max(s.ego_y, s.ego_vy, zero, delay) > prm.y_safe + LATERAL_TOL_M
+    y_max = lateral_max(ARRAY, s.ego_y, s.ego_vy, zero, s.ego_y + s.ego_vy * delay, delay)
+    conflict = y_max > prm.y_safe + LATERAL_TOL_M
     gap_l = pair_min_gap(s.chain_x[:, 0] - ex - prm.p_m, evx, zero, s.chain_v[:, 0], -prm.others_decel + zero, delay)
     gap_f = pair_min_gap(ex - s.f_x - prm.p_m, s.f_v, prm.a_x_a + zero, evx, zero, delay)
     ok = ~conflict | ((gap_l >= -tol) & (gap_f >= -tol))

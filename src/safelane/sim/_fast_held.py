@@ -1,11 +1,13 @@
-"""The compiled loop's one-vehicle motion and the held evasion plan's period (numba, extra ``fast``; used by
-:mod:`._fast_loop`).
+"""The compiled closed loop's held evasion plan over one period (numba, extra ``fast``; used by :mod:`._fast_loop`):
+loops and indexing only.
 
-``_fleet`` is ``kinematics.Fleet.constant`` for one vehicle; ``_plan_sample`` is ``EvasionPlan.state`` for a plan held
-as the loop's :data:`~._fast_loop.PLAN` values; ``_plan_motion`` is ``decide.plan_motion`` with
-``Motion.from_samples`` (the period an aborting ego executes); ``_motion_max`` is ``kinematics.extrema``' maximum.
-Each writes its NumPy original's expressions in their evaluation order (``tests/test_fast_loop.py`` compares the
-loop's tables with the NumPy path's, aborts included).
+No formula lives here. :func:`_plan_motion` is :func:`~safelane.shield.decide.plan_motion` with
+``Motion.from_samples`` for a plan held as the loop's :data:`~._fast_loop.PLAN` values: the plan's switches
+(:func:`~safelane.shield.decide.plan_switches`), sorted into knots, the plan's state at each
+(:func:`~safelane.safety.plan.plan_state`) and each segment's accelerations (:func:`~.kinematics.piece_acc`), the
+same closed forms the NumPy path evaluates on arrays, compiled on ``SCALAR``. :func:`_motion_max` is
+:func:`~.kinematics.extrema`' maximum, a walk over the knots with :func:`~.kinematics.vertex_extrema`. The loop's
+tables are the NumPy path's, bit for bit, aborts included (``tests/test_fast_loop.py``).
 """
 
 from __future__ import annotations
@@ -13,74 +15,50 @@ from __future__ import annotations
 import numba
 import numpy as np
 
-from ..safety._fast import _ego_position, _ego_speed, _lateral_state
-from ..safety._fast_base import _max, _min, _stop_time
+from ..safety import _compile
+from ..safety._backend import SCALAR, Limits
+from ..safety._fast_base import _max
+from ..safety.plan import PlanRecord, plan_state
+from ..shield.decide import plan_switches
+from .kinematics import piece_acc, vertex_extrema
+
+_compile.register_rows()
 
 _INF = np.inf
 
 
-@numba.njit(inline="always")
-def _clip(a, lo, hi):  # np.clip
-    return _min(_max(a, lo), hi)
-
-
-@numba.njit(inline="always")
-def _fleet(x, v, a, dt):  # kinematics.Fleet.constant for one vehicle: (acc, t_stop, x_end, v_end)
-    ts = _min(v / -a, dt) if a < 0.0 else dt
-    if ts <= 0.0:
-        a, ts = 0.0, dt
-    xs = x + v * ts + 0.5 * a * ts * ts
-    vs = 0.0 if ts < dt else _max(v + a * ts, 0.0)
-    return a, ts, xs, vs
-
-
-@numba.njit(error_model="numpy", nogil=True)
-def _plan_sample(tq, plan, follows, a_a, a_d):
-    """``EvasionPlan.state`` at ``tq`` of a plan held as :data:`PLAN` values (no own-lane leader): ``(px, py, vx,
-    vy)``."""
-    p, py0, v, vy0, p1, v1, a1, u, V, t2, T, t_1, acc_1, acc_2, t_end = plan
-    tt = _min(tq, T)
-    l1_stop = _stop_time(v1, a1)
-    px = _ego_position(tt, p, v, u, V, t2, follows, p1, v1, a1, a_a, a_d, l1_stop)
-    vx = _ego_speed(tt, v, u, V, t2, follows, v1, a1, a_a, a_d)
-    px = px + vx * _max(tq - tt, 0.0)
-    y, vy = _lateral_state(tq, py0, vy0, t_1, acc_1, acc_2, t_end)
-    return px, y, vx, vy
-
-
 @numba.njit(error_model="numpy", nogil=True)
 def _plan_motion(plan, follows, age, dt, a_a, a_d, kt, kx, kv, ky, kvy, kax, kay):
-    """``decide.plan_motion`` and ``Motion.from_samples`` of one held plan on ``[age, age + dt]``: the 8 knots into
-    ``kt``, the samples into ``kx, kv, ky, kvy``, the segment accelerations into ``kax, kay``."""
-    l1_v, l1_decel = plan[5], plan[6]
-    l1_stop = l1_v / l1_decel if l1_decel > 0.0 else _INF
+    """``decide.plan_motion`` and ``Motion.from_samples`` of one held plan (:data:`~._fast_loop.PLAN` values, no
+    own-lane leader: it follows L1 where ``follows``) on ``[age, age + dt]``: the 8 knots into ``kt``, the samples
+    into ``kx, kv, ky, kvy``, the segment accelerations into ``kax, kay``."""
+    held = PlanRecord(plan[0], plan[1], plan[2], plan[3], plan[7], plan[8], plan[9], follows, plan[10], plan[11],
+                      plan[12], plan[13], plan[14], False)  # fmt: skip
+    l1_p, l1_v, l1_decel = plan[4], plan[5], plan[6]
+    lim = Limits(a_a, a_d, 0.0, 0.0)
+    switches = plan_switches(SCALAR, held, l1_v, l1_decel, age, dt)
     kt[0] = 0.0
-    kt[1] = _clip(plan[7] - age, 0.0, dt)  # t_x1
-    kt[2] = _clip(plan[9] - age, 0.0, dt)  # t_brake_end
-    kt[3] = _clip(l1_stop - age, 0.0, dt)
-    kt[4] = _clip(plan[10] - age, 0.0, dt)  # t_y_f
-    kt[5] = _clip(plan[11] - age, 0.0, dt)  # t_y_switch
-    kt[6] = _clip(plan[14] - age, 0.0, dt)  # t_y_end
+    for j in range(6):
+        kt[j + 1] = switches[j]
     kt[7] = dt
     kt.sort()
     for j in range(8):
-        kx[j], ky[j], kv[j], kvy[j] = _plan_sample(age + kt[j], plan, follows, a_a, a_d)
+        kx[j], ky[j], kv[j], kvy[j] = plan_state(SCALAR, held, age + kt[j], l1_p, l1_v, l1_decel, lim)
     for j in range(7):
         span = kt[j + 1] - kt[j]
-        kax[j] = (kv[j + 1] - kv[j]) / span if span > 0.0 else 0.0
-        kay[j] = (kvy[j + 1] - kvy[j]) / span if span > 0.0 else 0.0
+        kax[j] = piece_acc(SCALAR, kv[j], kv[j + 1], span)
+        kay[j] = piece_acc(SCALAR, kvy[j], kvy[j + 1], span)
 
 
 @numba.njit(inline="always")
-def _motion_max(t, x, v):  # kinematics.extrema(m)[1]
+def _motion_max(t, x, v):
+    """``kinematics.extrema(m)[1]`` of one motion's knots: the largest knot value, then the largest vertex inside a
+    segment, in its order of evaluation."""
     hi = x[0]
     for j in range(1, t.shape[0]):
         hi = _max(hi, x[j])
     top = -_INF
     for j in range(t.shape[0] - 1):
         span = t[j + 1] - t[j]
-        ra = (v[j + 1] - v[j]) / span if span > 0.0 else 0.0
-        tau = -v[j] / ra if ra != 0.0 else -1.0
-        if tau > 0.0 and tau < span and ra < 0.0:
-            top = _max(top, x[j] + v[j] * tau + 0.5 * ra * tau * tau)
+        top = _max(top, vertex_extrema(SCALAR, x[j], v[j], piece_acc(SCALAR, v[j], v[j + 1], span), span)[1])
     return _max(hi, top)

@@ -24,7 +24,7 @@ import numpy as np
 
 from ..planners.base import ExpertGains, expert_accel
 from ..safety import _compile
-from ..safety._backend import SCALAR, Limits
+from ..safety._backend import SCALAR, Limits, _clip
 from ..safety._fast_base import (
     _max,
     _min,
@@ -39,8 +39,9 @@ from ..shield.proposals import proposal_core
 from ..shield.stages import worst_case_core
 from ._fast_checks import _ego_row, _lane_row
 from ._fast_general import _general_pair
-from ._fast_held import _clip, _fleet, _motion_max, _plan_motion
+from ._fast_held import _motion_max, _plan_motion
 from ._fast_traffic import _chain_row, _follower_accel, _leader_accel, _responsible_accel
+from .kinematics import constant_segment
 
 _compile.register_rows()
 announce_compile(__file__)
@@ -246,10 +247,10 @@ def loop_kernel(
                                      False, p_m, a_a, a_d, open_decel, open_gap, dt, eps)  # fmt: skip
             row_acc = 0.0
             for i in range(k):
-                f_acc[i], f_ts[i], f_xe[i], f_ve[i] = _fleet(x[i], v[i], acc[i], dt)
+                f_acc[i], f_ts[i], f_xe[i], f_ve[i] = constant_segment(SCALAR, x[i], v[i], acc[i], dt)
                 row_acc = _max(row_acc, abs(f_acc[i]))
             # --- the ego's motion: a constant command, or the held plan ---
-            l_acc, l_ts, l_xe, l_ve = _fleet(ex, evx, ax_cmd, dt)
+            l_acc, l_ts, l_xe, l_ve = constant_segment(SCALAR, ex, evx, ax_cmd, dt)
             ey1 = ey + evy * dt + 0.5 * ay_cmd * dt * dt
             evy1 = evy + ay_cmd * dt
             # --- the checks (checks.ego_checks, lane_checks) ---

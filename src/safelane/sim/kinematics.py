@@ -6,15 +6,15 @@ Every vehicle's longitudinal acceleration is piecewise constant; a braking vehic
 extrema between two motions are exact: on each interval of the merged knots the gap is one quadratic, so
 its extrema lie at the knots or at the vertex.
 
-**One source.** The arithmetic per instant, per segment and per interval — the state at a time
-(:func:`state_at`), a segment's acceleration from its end speeds (:func:`piece_acc`), the extrema of one quadratic
-piece (:func:`vertex_extrema`, :func:`piece_extrema`), the instants a segment crosses a level
-(:func:`segment_crossings`) and one interval of a windowed gap (:func:`windowed_piece`) — is written once against
-the backend ``xp`` (:mod:`safelane.safety._backend`) and marked ``jitable``: the functions below evaluate it on
-NumPy arrays (every knot, segment and interval of a batch at once), the compiled checks (:mod:`._fast_general`,
-:mod:`._fast_checks`, the compiled closed loop) per row. What stays apart is structure: here the knots of a batch are
-merged with ``np.sort`` and a time's segment found by counting knots; a compiled row merges its knots into scratch
-and walks them.
+**One source.** The arithmetic per instant, per segment and per interval — one vehicle's segment at constant
+acceleration with stopping (:func:`constant_segment`), the state at a time (:func:`state_at`), a segment's
+acceleration from its end speeds (:func:`piece_acc`), the extrema of one quadratic piece (:func:`vertex_extrema`,
+:func:`piece_extrema`), the instants a segment crosses a level (:func:`segment_crossings`) and one interval of a
+windowed gap (:func:`windowed_piece`) — is written once against the backend ``xp`` (:mod:`safelane.safety._backend`)
+and marked ``jitable``: the functions below evaluate it on NumPy arrays (every knot, segment and interval of a batch
+at once), the compiled checks (:mod:`._fast_general`, :mod:`._fast_checks`, the compiled closed loop) per row. What
+stays apart is structure: here the knots of a batch are merged with ``np.sort`` and a time's segment found by
+counting knots; a compiled row merges its knots into scratch and walks them.
 """
 
 from __future__ import annotations
@@ -23,15 +23,15 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .._motion import free_max, stop_time
+from .._motion import stop_time, stop_time_core
 from ..safety._backend import ARRAY, INF, jitable
 
 __all__ = [
     "Fleet",
     "Motion",
+    "constant_segment",
     "crossing_knots",
     "extrema",
-    "free_max",
     "gap_extrema",
     "piece_acc",
     "piece_extrema",
@@ -113,12 +113,10 @@ class Fleet:
 
     @classmethod
     def constant(cls, x, v, a, dt: float) -> Fleet:
-        ts = stop_time(v, a, dt)
-        at_rest = ts <= 0.0
-        a, ts = np.where(at_rest, 0.0, a), np.where(at_rest, dt, ts)
-        xs = x + v * ts + 0.5 * a * ts * ts
-        vs = np.where(ts < dt, 0.0, np.maximum(v + a * ts, 0.0))
-        return cls(x=x, v=v, acc=a, t_stop=ts, x_end=xs, v_end=vs, dt=dt)
+        """Each entry at its constant acceleration ``a`` with stopping: :func:`constant_segment`."""
+        with np.errstate(over="ignore"):  # a vanishing deceleration: v / tiny -> inf, then capped at dt
+            acc, ts, xs, vs = constant_segment(ARRAY, x, v, a, dt)
+        return cls(x=x, v=v, acc=acc, t_stop=ts, x_end=xs, v_end=vs, dt=dt)
 
     @classmethod
     def switched(cls, x, v, a1, t_switch, a2, dt: float) -> Fleet:
@@ -256,6 +254,19 @@ def windowed_gap_extrema(behind: Motion, ahead: Motion, lateral: Motion, lateral
     return lo.min(-1), hi.max(-1)
 
 
+def constant_segment(xp, x, v, a, dt):
+    """One vehicle over the period at constant acceleration ``a`` from ``(x, v)``, stopping at rest:
+    ``(acc, t_stop, x_end, v_end)`` — the acceleration of its first segment (0 for a vehicle already at rest that
+    "brakes": it stays), the instant it stops (``dt`` where it does not stop inside the period) and its state at
+    ``dt``. :meth:`Fleet.constant`'s numbers; backend-generic (the compiled closed loop's vehicles, row by row)."""
+    ts = stop_time_core(xp, v, a, dt)
+    at_rest = ts <= 0.0
+    acc, ts = xp.where(at_rest, 0.0, a), xp.where(at_rest, dt, ts)
+    xs = x + v * ts + 0.5 * acc * ts * ts
+    vs = xp.where(ts < dt, 0.0, xp.maximum(v + acc * ts, 0.0))
+    return acc, ts, xs, vs
+
+
 def state_at(xp, x, v, a, tau):
     """``(x, v)`` a time ``tau`` into a segment at constant acceleration ``a`` that starts at ``(x, v)``.
     Backend-generic; every argument broadcasts."""
@@ -309,4 +320,4 @@ def segment_crossings(xp, t0, span, x0, v0, a, level):
 
 
 # The per-instant, per-segment and per-interval arithmetic, compiled into the checks' kernels (safety/_compile.py).
-jitable(state_at, piece_acc, vertex_extrema, piece_extrema, windowed_piece, segment_crossings)
+jitable(constant_segment, state_at, piece_acc, vertex_extrema, piece_extrema, windowed_piece, segment_crossings)
