@@ -173,12 +173,21 @@ def propagate_chain(xp, p, v, promise, margin, params: Params, n_links: int):
     a_ahead = a_o
     slacks = [p[i + 1] - p[i] - margin[i] for i in range(n_links)] if xp is not ARRAY else p[1:] - p[:-1] - margin
     for i in range(n_links - 1, -1, -1):
-        z = min_follow_decel(xp, slacks[i], v[i], v[i + 1], a_ahead)
-        unsafe = unsafe | (z > a_o)
-        a_ahead = xp.minimum(xp.maximum(promise[i], z), a_o)
+        z, a_ahead, broken = chain_link(xp, slacks[i], v[i], v[i + 1], a_ahead, promise[i], a_o)
+        unsafe = unsafe | broken
         decel.insert(0, a_ahead)
         required.insert(0, z)
     return decel, required, unsafe
+
+
+def chain_link(xp, slack, v_f, v_l, a_ahead, promise, a_o):
+    """One link of :func:`propagate_chain`'s scan (Eqs. 2–3, corrected), backend-generic: a leader ``slack`` metres
+    clear of its margin behind a vehicle whose worst case is ``a_ahead``. Returns ``(z, decel, broken)``: the least
+    deceleration it needs (:func:`min_follow_decel`), its worst case ``min(max(promise, z), a_o)`` (its promise, or
+    an expected violation, never beyond the others' maximum ``a_o``) and whether ``z`` exceeds ``a_o`` (the link
+    cannot be shown safe). The compiled chain scan (``sim/_fast_traffic.py``) calls it link by link."""
+    z = min_follow_decel(xp, slack, v_f, v_l, a_ahead)
+    return z, xp.minimum(xp.maximum(promise, z), a_o), z > a_o
 
 
 def worst_case_leader_decel(p, v, promise_decel, params: Params, *, human_driven=None):
@@ -233,4 +242,4 @@ def _as_chain(name: str, value) -> np.ndarray:
 
 
 # The closed forms compiled into the kernels (safety/_compile.py): the same functions, evaluated row by row.
-jitable(braked_position, min_follow_decel)
+jitable(braked_position, min_follow_decel, chain_link)

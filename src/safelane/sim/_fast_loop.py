@@ -7,7 +7,7 @@ planner, the chain analysis, **the shield** (:func:`safelane.shield.core.step`: 
 assumption monitor, proceed / hesitate / abort with the commit guard, the held plan, the responsible follow after
 completion), the paper's traffic with the worst-case leader rule, the exact motion and the continuous-time checks.
 It is built from the row functions of the part kernels (``_candidate``, ``_breach_row``, ``_chain_row``,
-``_leader_accel``, ``_follower_accel``, ``_ego_row``, ``_general_pair``, ``_lane_row``), each tested bit for bit
+``_leader_row``, ``_follower_row``, ``_ego_row``, ``_general_pair``, ``_lane_row``), each tested bit for bit
 against its NumPy function, with the held plan's evaluation from :mod:`._fast_held`, and writes the glue in the
 NumPy path's evaluation order: the results table is the NumPy path's, bit for bit (``tests/test_fast_loop.py``,
 several variants, sizes and settings).
@@ -31,6 +31,7 @@ from ..safety._fast_base import (
     announce_compile,
 )
 from ..safety._fast_responsible import _min_follow_decel, _responsible_bound
+from ..safety.responsible import responsible_accel_core
 from ..shield._fast_decide import _candidate
 from ..shield._fast_monitor import _breach_row
 from ..shield.assessment import belief_core
@@ -40,7 +41,8 @@ from ..shield.stages import worst_case_core
 from ._fast_checks import _ego_row, _lane_row
 from ._fast_general import _general_pair
 from ._fast_held import _motion_max, _plan_motion
-from ._fast_traffic import _chain_row, _follower_accel, _leader_accel, _responsible_accel
+from ._fast_traffic import _chain_row, _follower_row, _leader_row
+from .behaviours import hold_speed, task_core
 from .kinematics import constant_segment
 
 _compile.register_rows()
@@ -76,7 +78,7 @@ def loop_kernel(
     outputs :data:`OUT_F`, :data:`OUT_B`, ``counts (B, 3)``, ``n_invalid``, ``breach_flags (B, 5)``, and
     ``bad_step`` (the first period whose state is not finite, ``-1`` if none)."""
     dt, a_a, a_d, a_ym, y_safe, p_m, lane_w, y_bound, length, conflict, overlap = prm[:11]
-    lat_tol, tol, eps, mon_tol, brake_start, thr, open_decel, open_gap = prm[11:19]
+    lat_tol, tol, _eps, mon_tol, brake_start, thr, open_decel, open_gap = prm[11:19]
     k_p, k_v, gap_frac, brake_comfort, om2, two_om = prm[19:25]
     half = 0.5 * tol
     a_lim = _max(a_a, a_d)
@@ -153,7 +155,7 @@ def loop_kernel(
             invalid = not ok
             a_x, a_y = _clip(ax_ok, -a_d, a_a), _clip(ay_ok, -a_ym, a_ym)
             # --- the chain analysis (ClosedLoop.chain) ---
-            unsafe = _chain_row(x2, v2, 0, promise, chain_margin, b, a_d, half, tol, bounds2)
+            unsafe = _chain_row(x2, v2, 0, promise, chain_margin, b, a_d, bounds2)
             # --- the shield: assessment, worst cases ---
             for j in range(window - 1):
                 history[j] = history[j + 1]
@@ -206,7 +208,8 @@ def loop_kernel(
             ax_cmd = a_x
             ay_cmd = a_yh if behaviour == HESITATE else a_y
             if completed:  # after completion: centre in the target lane, follow L1 responsibly
-                ax_cmd = _responsible_accel(a_x, x[1] - ex - p_m, evx, v[1], l1_decel, a_d, dt, eps)
+                bound = _responsible_bound(x[1] - ex - p_m, evx, v[1], l1_decel, a_d, dt)
+                ax_cmd = responsible_accel_core(SCALAR, a_x, bound, a_d)
                 ay_cmd = _clip(0.8 * (lane_w - ey) - 1.6 * evy, -a_ym, a_ym)
             on_plan = behaviour == ABORT
             if on_plan:  # the aborting rows follow their held plan, exactly
@@ -237,14 +240,15 @@ def loop_kernel(
             for i in range(k):
                 a_i = 0.0
                 if 1 <= i < k - 1 and acts[b, i]:
-                    task = _min(_max(0.5 * (v_desired[b, i] - v[i]), -promise_decel[b, i]), promise_accel[b, i])
-                    a_i = _leader_accel(x[i + 1] - x[i] - margin[b, i], v[i], v[i + 1], cap[i + 1], cap[i], task,
-                                        False, 0.0, decel_last[b], a_d, dt, eps, tol, half)  # fmt: skip
+                    task = task_core(SCALAR, hold_speed(SCALAR, v[i], v_desired[b, i]), promise_decel[b, i],
+                                     promise_accel[b, i])  # fmt: skip
+                    a_i = _leader_row(x[i + 1] - x[i] - margin[b, i], v[i], v[i + 1], cap[i + 1], cap[i], task,
+                                      False, 0.0, decel_last[b], a_d, dt)  # fmt: skip
                 if is_last[b, i]:
                     a_i = a_last
                 acc[i] = a_i
-            acc[0] = _follower_accel(x[0], v[0], x[1], v[1], ex, evx, f_aggressive[b], completed, gap0[b], False, 0.0,
-                                     False, p_m, a_a, a_d, open_decel, open_gap, dt, eps)  # fmt: skip
+            acc[0] = _follower_row(x[0], v[0], x[1], v[1], ex, evx, f_aggressive[b], completed, gap0[b], False, 0.0,
+                                   False, p_m, a_a, a_d, open_decel, open_gap, dt)  # fmt: skip
             row_acc = 0.0
             for i in range(k):
                 f_acc[i], f_ts[i], f_xe[i], f_ve[i] = constant_segment(SCALAR, x[i], v[i], acc[i], dt)

@@ -1,14 +1,18 @@
-"""Optional compiled kernel of the connected leaders' rule (:func:`~.behaviours.leader_accels`; numba, extra ``fast``).
+"""Optional compiled kernels of the paper's traffic and the chain scan (numba, extra ``fast``): loops and indexing only.
 
-:func:`leader_kernel` is ``leader_accels`` element by element: each connected ``L_i`` keeps its task while that
-keeps it responsible behind the vehicle ahead's chain bound with its own bound as its braking
-(:func:`~safelane.safety.responsible.responsible_bound`, confirmed by
-:func:`~safelane.safety.responsible.responsible_ok` where its bound is softer than the one ahead), else brakes at
-its bound; an unexpected violation brakes at ``U[z_i, a_x_N+1_d]``; ``L(N+1)`` follows its profile. The NumPy
-function evaluates ~50 array operations over every slot and a masked exact check; the kernel does the same
-arithmetic per element, only where a leader acts, in the NumPy path's evaluation order (the scalar helpers of
-:mod:`safelane.safety._fast_responsible`), so the accelerations are the same bits
-(``tests/test_fast_traffic.py``). The NumPy function stays the reference and the fallback.
+No rule lives here. Each kernel is a loop over rows that calls the closed forms of the modules that own the rules,
+compiled on the float backend ``SCALAR`` (:mod:`safelane.safety._compile`): :func:`leader_kernel` calls
+:func:`~.behaviours.leader_want`, :func:`~.behaviours.leader_confirmed` and :func:`~.behaviours.leader_keep` for
+each acting connected leader (:func:`~.behaviours.link_decel` and :func:`~.behaviours.violation_accel` where it
+violates), :func:`follower_kernel` :func:`~.behaviours.follower_wish_core` and :func:`~.behaviours.follow_core`,
+:func:`chain_kernel` :func:`safelane.safety.chain.chain_link` link by link. The NumPy functions
+(:func:`~.behaviours.leader_accels`, :func:`~.behaviours.follower_accel`, :func:`safelane.safety.chain.propagate_chain`)
+evaluate the very same functions on arrays; numba compiles without ``fastmath`` and in the source's order, so the
+kernels give their bits (``tests/test_fast_traffic.py``). Where the NumPy path selects with a mask or ``where``
+(the exact check where :func:`~.behaviours.leader_needs_check`, the violation's draw, F's follow of the ego where
+:func:`~.behaviours.follows_ego`), a row branches instead and skips what the NumPy path discards: measured on the
+closed loop, evaluating both sides per row made it about a quarter slower. The row functions :func:`_leader_row`,
+:func:`_follower_row` and :func:`_chain_row` are what the compiled closed loop (:mod:`._fast_loop`) calls too.
 """
 
 from __future__ import annotations
@@ -18,51 +22,49 @@ import numpy as np
 from numba import types
 
 from ..params import Params
-from ..safety._backend import FEASIBILITY_TOL_M
-from ..safety._fast_base import (
-    _max,
-    _min,
-    announce_compile,
-    row_function,
+from ..safety import _compile
+from ..safety._backend import SCALAR
+from ..safety._fast_base import announce_compile, row_function
+from ..safety.chain import chain_link
+from .behaviours import (
+    follow_core,
+    follower_wish_core,
+    follows_ego,
+    leader_confirmed,
+    leader_keep,
+    leader_needs_check,
+    leader_want,
+    link_decel,
+    violation_accel,
 )
-from ..safety._fast_responsible import _min_follow_decel, _responsible_bound, _responsible_ok
-from ..safety.responsible import ROOT_EPS_MPS2
 
+_compile.register_rows()
 announce_compile(__file__)
 
 _M = types.Array(types.float64, 2, "A", readonly=True)
 _MB = types.Array(types.bool_, 2, "A", readonly=True)
 _V = types.Array(types.float64, 1, "A", readonly=True)
 _SIGNATURE = types.void(
-    _M, _M, _M, _MB, _MB, _M, _M, _V, _V, types.boolean, _MB, _M, *(types.float64,) * 5,
+    _M, _M, _M, _MB, _MB, _M, _M, _V, _V, types.boolean, _MB, _M, *(types.float64,) * 2,
     types.Array(types.float64, 2, "F"),
 )  # fmt: skip
 
 
 @row_function
-def _leader_accel(slack, v_f, v_l, d, own, task, violating, pick, decel_last, a_x_d, dt, eps, tol, half):
-    """One connected leader's acceleration (:func:`leader_kernel`'s element): ``slack`` to the vehicle ahead, its
-    bound ``d`` and the leader's own bound ``own``."""
-    want = _min(task, _responsible_bound(slack, v_f, v_l, d, own, dt) - eps)
-    # The closed form is exact where the own bound is at least the one ahead: else confirm it — unless the answer is
-    # -own either way (want < -own: the maximum below is -own whatever the check says).
+def _leader_row(slack, v_f, v_l, d, own, task, violating, pick, decel_last, a_o, dt):
+    """One acting connected leader: ``slack`` to the vehicle ahead, that vehicle's bound ``d``, its own ``own``."""
+    if violating:  # the NumPy path's where: the draw replaces the rule
+        return violation_accel(SCALAR, link_decel(SCALAR, slack, v_f, v_l, d, a_o), decel_last, pick)
+    want = leader_want(SCALAR, slack, v_f, v_l, d, own, task, dt)
     ok = True
-    if own < d and not want < -own:
-        ok = _responsible_ok(want, slack, v_f, v_l, d, own, dt, tol, half, tol)
-    a_conn = _max(want if ok else -own, -own)
-    if violating:
-        z = _min(_min_follow_decel(slack, v_f, v_l, d, half, tol), a_x_d)
-        lo = _min(z, decel_last)
-        hi = _max(z, decel_last)
-        a_conn = -(lo + pick * (hi - lo))
-    return a_conn
+    if leader_needs_check(SCALAR, own, d):  # the NumPy path's mask: the exact check only where it is needed
+        ok = leader_confirmed(SCALAR, want, slack, v_f, v_l, d, own, dt)
+    return leader_keep(SCALAR, want, ok, own)
 
 
 @numba.njit(_SIGNATURE, cache=True, nogil=True, error_model="numpy")
-def leader_kernel(
-    x, v, margin, is_last, acts, bounds, task, a_last, decel_last, any_violation, violating, pick, a_x_d, dt, eps,
-    tol, half, acc,
-):  # fmt: skip
+def leader_kernel(x, v, margin, is_last, acts, bounds, task, a_last, decel_last, any_violation, violating, pick, a_o,
+                  dt, acc):  # fmt: skip
     """Write :func:`~.behaviours.leader_accels`' accelerations into ``acc`` (``(B, K)``, zero on entry). Inputs as
     that function's; ``violating``/``pick`` are read only where ``any_violation``."""
     bsz, k = x.shape
@@ -71,9 +73,9 @@ def leader_kernel(
             if not acts[b, i]:
                 continue
             breaks = any_violation and violating[b, i]
-            acc[b, i] = _leader_accel(
+            acc[b, i] = _leader_row(
                 x[b, i + 1] - x[b, i] - margin[b, i], v[b, i], v[b, i + 1], bounds[b, i + 1], bounds[b, i],
-                task[b, i], breaks, pick[b, i] if breaks else 0.0, decel_last[b], a_x_d, dt, eps, tol, half,
+                task[b, i], breaks, pick[b, i] if breaks else 0.0, decel_last[b], a_o, dt,
             )  # fmt: skip
     for i in range(k):
         for b in range(bsz):
@@ -93,58 +95,40 @@ def leader_accels(x, v, margin, roles, bounds, task, a_last, decel_last, violati
     args += [np.asarray(a, dtype=np.float64) for a in (bounds, task)]
     args += [np.broadcast_to(np.asarray(a, dtype=np.float64), (bsz,)) for a in (a_last, decel_last)]
     acc = np.zeros((bsz, k), order="F")
-    leader_kernel(
-        *args, any_violation, np.asarray(violating, dtype=np.bool_),
-        np.asarray(violate_pick, dtype=np.float64), prm.others_decel, prm.dt, ROOT_EPS_MPS2, FEASIBILITY_TOL_M,
-        0.5 * FEASIBILITY_TOL_M, acc,
-    )  # fmt: skip
+    leader_kernel(*args, any_violation, np.asarray(violating, dtype=np.bool_),
+                  np.asarray(violate_pick, dtype=np.float64), prm.others_decel, prm.dt, acc)  # fmt: skip
     return acc
 
 
 _R = types.Array(types.float64, 1, "A", readonly=True)
 _RB = types.Array(types.bool_, 1, "A", readonly=True)
 _FOLLOWER_SIGNATURE = types.void(
-    *(_R,) * 6, _RB, _RB, _R, types.boolean, _R, types.boolean, *(types.float64,) * 7,
+    *(_R,) * 6, _RB, _RB, _R, types.boolean, _R, types.boolean, *(types.float64,) * 6,
     types.Array(types.float64, 1, "C"),
 )  # fmt: skip
 
 
-@numba.njit(error_model="numpy", nogil=True)
-def _responsible_accel(a_wanted, slack, v_f, v_l, lead_decel, a_x_d, dt, eps):  # responsible.responsible_accel
-    bound = _responsible_bound(slack, v_f, v_l, lead_decel, a_x_d, dt)
-    return a_wanted if bound > a_wanted else _max(bound - eps, -a_x_d)
-
-
 @row_function
-def _follower_accel(fx, fv, lx, lv, ex, evx, aggr, completed, gap0, has_wanted, wanted, ignores_ego, p_m, a_x_a,
-                    a_x_d, open_decel, open_gap_m, dt, eps):  # fmt: skip
-    """F's acceleration (:func:`follower_kernel`'s element)."""
-    gap_ego = ex - fx
-    gap_l1 = lx - fx
-    if has_wanted:
-        want = wanted
-    elif aggr:
-        want = _min(_max(0.5 * (gap_l1 - p_m - 1.0) + 1.5 * (lv - fv), -a_x_d), a_x_a)
-    elif gap_ego < gap0 + open_gap_m:
-        want = -open_decel
-    else:
-        want = _min(_max(evx - fv, -open_decel), open_decel)
-    a = _responsible_accel(want, gap_l1 - p_m, fv, lv, a_x_d, a_x_d, dt, eps)
-    if gap_ego > 0.0 and ((not aggr) or completed) and not ignores_ego:
-        a = _responsible_accel(a, gap_ego - p_m, fv, evx, a_x_d, a_x_d, dt, eps)
+def _follower_row(f_x, f_v, l1_x, l1_v, ego_x, ego_vx, aggressive, completed, gap0, has_wanted, wanted, ignores_ego,
+                  p_m, a_x_a, a_o, open_decel, open_gap_m, dt):  # fmt: skip
+    """F's acceleration: a hook's ``wanted`` where ``has_wanted``, else its nominal wish."""
+    if not has_wanted:
+        wanted = follower_wish_core(SCALAR, f_x, f_v, l1_x, l1_v, ego_x, ego_vx, aggressive, gap0, p_m, a_x_a, a_o,
+                                    open_decel, open_gap_m)  # fmt: skip
+    a = follow_core(SCALAR, wanted, l1_x - f_x - p_m, f_v, l1_v, a_o, dt)
+    if follows_ego(SCALAR, ego_x - f_x, aggressive, completed, ignores_ego):  # the NumPy path's where
+        a = follow_core(SCALAR, a, ego_x - f_x - p_m, f_v, ego_vx, a_o, dt)
     return a
 
 
 @numba.njit(_FOLLOWER_SIGNATURE, cache=True, nogil=True, error_model="numpy")
-def follower_kernel(
-    f_x, f_v, l1_x, l1_v, ego_x, ego_vx, aggressive, completed, gap0, has_wanted, wanted, ignores_ego, p_m, a_x_a,
-    a_x_d, open_decel, open_gap_m, dt, eps, out,
-):  # fmt: skip
+def follower_kernel(f_x, f_v, l1_x, l1_v, ego_x, ego_vx, aggressive, completed, gap0, has_wanted, wanted, ignores_ego,
+                    p_m, a_x_a, a_o, open_decel, open_gap_m, dt, out):  # fmt: skip
     """:func:`~.behaviours.follower_accel` per scenario into ``out``; ``wanted`` is read only where ``has_wanted``."""
     for i in range(out.shape[0]):
-        out[i] = _follower_accel(
+        out[i] = _follower_row(
             f_x[i], f_v[i], l1_x[i], l1_v[i], ego_x[i], ego_vx[i], aggressive[i], completed[i], gap0[i], has_wanted,
-            wanted[i], ignores_ego, p_m, a_x_a, a_x_d, open_decel, open_gap_m, dt, eps,
+            wanted[i], ignores_ego, p_m, a_x_a, a_o, open_decel, open_gap_m, dt,
         )  # fmt: skip
 
 
@@ -158,41 +142,40 @@ def follower_accel(f_x, f_v, l1_x, l1_v, ego_x, ego_vx, aggressive, completed, g
     follower_kernel(
         *(r(a) for a in floats), r(aggressive, np.bool_), r(completed, np.bool_), r(gap0), wanted is not None,
         r(0.0 if wanted is None else wanted), bool(ignores_ego), prm.p_m, prm.a_x_a, prm.others_decel,
-        float(open_decel), float(open_gap_m), prm.dt, ROOT_EPS_MPS2, out,
+        float(open_decel), float(open_gap_m), prm.dt, out,
     )  # fmt: skip
     return out
 
 
 _CHAIN_SIGNATURE = types.void(
-    _M, _M, _M, _M, *(types.float64,) * 3, types.Array(types.float64, 2, "F"), types.Array(types.bool_, 1, "C")
+    _M, _M, _M, _M, types.float64, types.Array(types.float64, 2, "F"), types.Array(types.bool_, 1, "C")
 )
 
 
 @row_function
-def _chain_row(x, v, r, promise, margin, col, a_x_d, half, tol, bounds):
+def _chain_row(x, v, r, promise, margin, col, a_o, bounds):
     """One scenario of :func:`chain_kernel`: row ``r`` of ``x``, ``v`` and ``bounds`` (``(., K)``), column ``col`` of
     ``promise``, ``margin`` (``(N, .)``); writes ``bounds[r]``, returns ``unsafe``."""
     k = x.shape[1]
-    a_ahead = a_x_d
-    broken = False
-    bounds[r, 0] = a_x_d
-    bounds[r, k - 1] = a_x_d
+    a_ahead = a_o
+    unsafe = False
+    bounds[r, 0] = a_o
+    bounds[r, k - 1] = a_o
     for i in range(k - 3, -1, -1):  # link i: L(i+1) behind L(i+2), slots i+1 and i+2
         slack = x[r, i + 2] - x[r, i + 1] - margin[i, col]
-        z = _min_follow_decel(slack, v[r, i + 1], v[r, i + 2], a_ahead, half, tol)
-        broken = broken | (z > a_x_d)
-        a_ahead = _min(_max(promise[i, col], z), a_x_d)
+        _, a_ahead, broken = chain_link(SCALAR, slack, v[r, i + 1], v[r, i + 2], a_ahead, promise[i, col], a_o)
+        unsafe = unsafe | broken
         bounds[r, i + 1] = a_ahead
-    return broken
+    return unsafe
 
 
 @numba.njit(_CHAIN_SIGNATURE, cache=True, nogil=True, error_model="numpy")
-def chain_kernel(x, v, promise, margin, a_x_d, half, tol, bounds, unsafe):
+def chain_kernel(x, v, promise, margin, a_o, bounds, unsafe):
     """:meth:`~.step.ClosedLoop.chain` per scenario: the scan of :func:`safelane.safety.chain.propagate_chain` from
-    ``L(N+1)`` (``a_x_d``) down to ``L1`` into ``bounds`` (``(B, K)``, F's slot ``a_x_d``) and ``unsafe``.
+    ``L(N+1)`` (``a_o``) down to ``L1`` into ``bounds`` (``(B, K)``, F's slot ``a_o``) and ``unsafe``.
     ``promise``, ``margin``: ``(N, B)`` rows of the links ``L1..LN``."""
     for b in range(x.shape[0]):
-        unsafe[b] = _chain_row(x, v, b, promise, margin, b, a_x_d, half, tol, bounds)
+        unsafe[b] = _chain_row(x, v, b, promise, margin, b, a_o, bounds)
 
 
 def chain_bounds(x, v, promise, margin, prm: Params):
@@ -200,6 +183,5 @@ def chain_bounds(x, v, promise, margin, prm: Params):
     bsz, k = x.shape
     bounds = np.empty((bsz, k), order="F")
     unsafe = np.empty(bsz, dtype=np.bool_)
-    chain_kernel(x, v, promise.reshape(k - 2, bsz), margin.reshape(k - 2, bsz), prm.others_decel,
-                 0.5 * FEASIBILITY_TOL_M, FEASIBILITY_TOL_M, bounds, unsafe)  # fmt: skip
+    chain_kernel(x, v, promise.reshape(k - 2, bsz), margin.reshape(k - 2, bsz), prm.others_decel, bounds, unsafe)
     return bounds, unsafe

@@ -16,6 +16,17 @@
 A responsible follower picks the largest acceleration ``a <= a_wanted`` such that after one period at ``a`` it
 can still keep its margin by braking at ``a_x_d`` while the vehicle ahead brakes at its worst case
 (RSS's proper response with a one-period response time); if none exists it brakes at ``a_x_d``.
+
+**One source.** Each rule is one backend-generic closed form per row (first argument the backend ``xp`` of
+:mod:`safelane.safety._backend`, marked ``jitable`` at the end of the module): :func:`hold_speed` and
+:func:`task_core` (a leader's task), :func:`leader_want`, :func:`leader_needs_check`, :func:`leader_confirmed` and
+:func:`leader_keep` (the worst-case rule), :func:`link_decel` and :func:`violation_accel` (an unexpected violation;
+with :func:`reactive_core`, the reactive rule), :func:`follower_wish_core`, :func:`follow_core` and
+:func:`follows_ego` (F); the chain scan's link is :func:`safelane.safety.chain.chain_link`. The functions below
+evaluate them on NumPy arrays (``ARRAY``); the compiled kernels (:mod:`._fast_traffic`, :mod:`._fast_loop`) compile
+the very same functions on ``SCALAR`` and keep only loops, indexing and the branches that skip what a mask or a
+``where`` here discards (the exact check where :func:`leader_needs_check` is false, the rule of a leader that
+violates, F's follow of the ego where :func:`follows_ego` is false): the same bits (``tests/test_fast_traffic.py``).
 """
 
 from __future__ import annotations
@@ -23,10 +34,10 @@ from __future__ import annotations
 import numpy as np
 
 from ..params import Params
-from ..safety._backend import ARRAY, FEASIBILITY_TOL_M
+from ..safety._backend import ARRAY, FEASIBILITY_TOL_M, jitable
 from ..safety.chain import min_follow_decel
 from ..safety.evasion import fast_kernel
-from ..safety.responsible import ROOT_EPS_MPS2, responsible_accel, responsible_bound, responsible_ok
+from ..safety.responsible import ROOT_EPS_MPS2, responsible_accel_core, responsible_bound_core, responsible_ok_core
 
 #: :func:`leader_accels` runs the compiled kernel (:mod:`._fast_traffic`) from this many ``(B, K)`` elements on.
 FAST_MIN_ELEMENTS = 64
@@ -49,6 +60,49 @@ def leader_roles(valid, connected, n_connected):
     is_last = np.asfortranarray(slots == n_connected[:, None] + 1)
     acts = np.asfortranarray(connected & valid & (slots >= 1) & (slots <= n_connected[:, None]) & ~is_last)
     return is_last, acts
+
+
+def leader_want(xp, slack, v_f, v_l, d, own, task, dt):
+    """A connected leader's wish: its ``task``, capped by the largest acceleration that keeps it responsible behind
+    the vehicle ahead braking at ``d`` with its own bound ``own`` as its braking
+    (:func:`~safelane.safety.responsible.responsible_bound_core`, ``ROOT_EPS_MPS2`` on the safe side)."""
+    return xp.minimum(task, responsible_bound_core(xp, slack, v_f, v_l, d, own, dt) - ROOT_EPS_MPS2)
+
+
+def leader_needs_check(xp, own, d):
+    """Where :func:`leader_want`'s closed form is not exact, so :func:`leader_confirmed` must confirm it: the leader's
+    own bound softer than the one ahead (elsewhere the gap is convex after the period: tested)."""
+    return own < d
+
+
+def leader_confirmed(xp, want, slack, v_f, v_l, d, own, dt):
+    """The exact check of :func:`leader_want` (:func:`~safelane.safety.responsible.responsible_ok_core` with brake
+    ``own``, gaps within ``FEASIBILITY_TOL_M`` of the margin kept)."""
+    return responsible_ok_core(xp, want, slack, v_f, v_l, d, own, dt, FEASIBILITY_TOL_M, FEASIBILITY_TOL_M)
+
+
+def leader_keep(xp, want, ok, own):
+    """The leader's acceleration: its wish where confirmed (``ok``), else its bound ``-own`` (always safe); never
+    harder than ``-own``."""
+    return xp.maximum(xp.where(ok, want, -own), -own)
+
+
+def link_decel(xp, slack, v_f, v_l, a_l, a_o):
+    """The least deceleration that keeps a link's follower clear of a vehicle ahead braking at ``a_l`` (Eq. 3,
+    :func:`~safelane.safety.chain.min_follow_decel`), never beyond the others' maximum ``a_o``."""
+    return xp.minimum(min_follow_decel(xp, slack, v_f, v_l, a_l), a_o)
+
+
+def violation_accel(xp, z, decel_last, pick):
+    """An unexpected violation: braking at ``U[z, a_x_N+1_d]`` (``pick`` the uniform draw; paper §4.2)."""
+    lo, hi = xp.minimum(z, decel_last), xp.maximum(z, decel_last)
+    return -(lo + pick * (hi - lo))
+
+
+def reactive_core(xp, task, z):
+    """The reactive rule's leader: its task, or the minimal safe deceleration ``z`` against the vehicle ahead's
+    current braking where that needs more."""
+    return xp.minimum(task, -z)
 
 
 def leader_accels(x, v, margin, roles, bounds, task, a_last, decel_last, violating, violate_pick, prm: Params):
@@ -85,20 +139,17 @@ def leader_accels(x, v, margin, roles, bounds, task, a_last, decel_last, violati
         slack = x[:, 2:] - x[:, 1:-1] - margin[:, 1:-1]
         v_f, v_l, d, own = v[:, 1:-1], v[:, 2:], bounds[:, 2:], bounds[:, 1:-1]
         with np.errstate(all="ignore"):
-            bound = responsible_bound(slack, v_f, v_l, d, prm, brake=own) - ROOT_EPS_MPS2
-            want = np.minimum(task[:, 1:-1], bound)
-            # The closed form is exact where the leader's own bound is at least the vehicle ahead's (then the gap
-            # is convex after the period: tested); elsewhere it is confirmed by the exact check.
+            want = leader_want(ARRAY, slack, v_f, v_l, d, own, task[:, 1:-1], prm.dt)
             ok = np.ones(want.shape, bool)
-            soft = own < d
+            soft = leader_needs_check(ARRAY, own, d)
             if soft.any():
-                ok[soft] = responsible_ok(want[soft], slack[soft], v_f[soft], v_l[soft], d[soft], prm,
-                                          brake=own[soft], tol=FEASIBILITY_TOL_M)  # fmt: skip
-            a_conn = np.maximum(np.where(ok, want, -own), -own)
+                ok[soft] = leader_confirmed(ARRAY, want[soft], slack[soft], v_f[soft], v_l[soft], d[soft], own[soft],
+                                            prm.dt)  # fmt: skip
+            a_conn = leader_keep(ARRAY, want, ok, own)
             if violating is not None:
-                z = np.minimum(min_follow_decel(ARRAY, slack, v_f, v_l, d), prm.others_decel)
-                lo, hi = np.minimum(z, decel_last[:, None]), np.maximum(z, decel_last[:, None])
-                a_conn = np.where(violating[:, 1:-1], -(lo + violate_pick[:, 1:-1] * (hi - lo)), a_conn)
+                z = link_decel(ARRAY, slack, v_f, v_l, d, prm.others_decel)
+                a_conn = np.where(violating[:, 1:-1], violation_accel(ARRAY, z, decel_last[:, None],
+                                                                      violate_pick[:, 1:-1]), a_conn)  # fmt: skip
         acc[:, 1:-1] = np.where(acts[:, 1:-1], a_conn, 0.0)
     acc = np.where(is_last, a_last[:, None], acc)
     return np.asfortranarray(acc)
@@ -123,25 +174,54 @@ def reactive_leader_accels(x, v, margin, roles, task, a_last, decel_last, violat
         for i in range(k - 1, 0, -1):  # front to back: each link reacts to the one ahead (a scan over vehicles)
             if i + 1 < k:
                 ahead_decel = np.maximum(-acc[:, i + 1], 0.0)
-                z = np.minimum(
-                    min_follow_decel(ARRAY, slack[:, i], v[:, i], v[:, i + 1], ahead_decel), prm.others_decel
-                )
+                z = link_decel(ARRAY, slack[:, i], v[:, i], v[:, i + 1], ahead_decel, prm.others_decel)
             else:
                 z = np.zeros(bsz)
-            a_conn = np.minimum(task[:, i], -z)
+            a_conn = reactive_core(ARRAY, task[:, i], z)
             if violating is not None:
-                lo, hi = np.minimum(z, decel_last), np.maximum(z, decel_last)
-                a_conn = np.where(violating[:, i], -(lo + violate_pick[:, i] * (hi - lo)), a_conn)
+                a_conn = np.where(violating[:, i], violation_accel(ARRAY, z, decel_last, violate_pick[:, i]), a_conn)
             acc[:, i] = np.where(is_last[:, i], a_last, np.where(acts[:, i], a_conn, 0.0)) if mixed[i] else a_conn
     return acc
 
 
+def hold_speed(xp, v, v_desired):
+    """A connected leader's default wish: holding its initial speed ``v_desired`` (a P law)."""
+    return 0.5 * (v_desired - v)
+
+
+def task_core(xp, wanted, promise_decel, promise_accel):
+    """A connected leader's task: its wish inside its promise ``[−a_m_d, a_m_a]``."""
+    return xp.minimum(xp.maximum(wanted, -promise_decel), promise_accel)
+
+
 def leader_task(v, v_desired, promise_decel, promise_accel, wanted=None):
     """Each connected leader's own driving task, inside its promise ``[−a_m_d, a_m_a]``: ``wanted`` (a traffic
-    hook's wish) or, by default, holding its initial speed (a P law)."""
+    hook's wish) or, by default, holding its initial speed (:func:`hold_speed`)."""
     if wanted is None:
-        wanted = 0.5 * (v_desired - v)
-    return np.minimum(np.maximum(wanted, -promise_decel), promise_accel)
+        wanted = hold_speed(ARRAY, v, v_desired)
+    return task_core(ARRAY, wanted, promise_decel, promise_accel)
+
+
+def follower_wish_core(xp, f_x, f_v, l1_x, l1_v, ego_x, ego_vx, aggressive, gap0, p_m, a_x_a, a_o, open_decel,
+                       open_gap_m):  # fmt: skip
+    """F's nominal wish (:func:`follower_accel`'s two laws): collaborative, brake at ``open_decel`` until the gap to
+    the ego has grown by ``open_gap_m``, then match the ego's speed; aggressive, close on L1 (a PD law on the gap to
+    ``p_m``, inside ``[−a_o, a_x_a]``)."""
+    collab = xp.where(ego_x - f_x < gap0 + open_gap_m, -open_decel, xp.clip(ego_vx - f_v, -open_decel, open_decel))
+    aggr = xp.clip(0.5 * (l1_x - f_x - p_m - 1.0) + 1.5 * (l1_v - f_v), -a_o, a_x_a)
+    return xp.where(aggressive, aggr, collab)
+
+
+def follow_core(xp, a_wanted, slack, v_f, v_l, a_o, dt):
+    """F's responsible filter behind one vehicle: the vehicle ahead and F itself braking up to the others' maximum
+    ``a_o`` (:func:`~safelane.safety.responsible.responsible_accel_core`)."""
+    return responsible_accel_core(xp, a_wanted, responsible_bound_core(xp, slack, v_f, v_l, a_o, a_o, dt), a_o)
+
+
+def follows_ego(xp, gap_ego, aggressive, completed, ignores_ego):
+    """Whether F follows the ego as well as L1: the ego ahead of F, F collaborative or the lane change completed,
+    and F not ignoring the ego."""
+    return (gap_ego > 0.0) & xp.where(aggressive, completed, True) & xp.where(ignores_ego, False, True)
 
 
 def follower_accel(
@@ -176,16 +256,21 @@ def follower_accel(
     if np.size(f_x) >= FAST_MIN_ELEMENTS and (kernel := traffic_kernel()) is not None:
         return kernel.follower_accel(f_x, f_v, l1_x, l1_v, ego_x, ego_vx, aggressive, completed, gap0, prm, open_decel,
                                      open_gap_m, wanted, ignores_ego)  # fmt: skip
-    gap_ego = ego_x - f_x
-    collab_nominal = np.where(gap_ego < gap0 + open_gap_m, -open_decel, np.clip(ego_vx - f_v, -open_decel, open_decel))
-    gap_l1 = l1_x - f_x
     # F is one of the others: it brakes up to a_o = a_o_d and, as RSS's rear vehicle, takes the vehicle ahead (L1 or
     # the ego) to brake up to a_o as well (a_x_d, and the paper's F, where a_o_d is not set).
-    a_o = prm.others_decel
-    aggr_nominal = np.clip(0.5 * (gap_l1 - prm.p_m - 1.0) + 1.5 * (l1_v - f_v), -a_o, prm.a_x_a)
-    if wanted is None:
-        wanted = np.where(aggressive, aggr_nominal, collab_nominal)
-    a = responsible_accel(wanted, gap_l1 - prm.p_m, f_v, l1_v, a_o, prm, brake=a_o)
-    follows_ego = (gap_ego > 0.0) & (~aggressive | completed) & (not ignores_ego)
-    a_ego = responsible_accel(a, gap_ego - prm.p_m, f_v, ego_vx, a_o, prm, brake=a_o)
-    return np.where(follows_ego, a_ego, a)
+    a_o, p_m, dt = prm.others_decel, prm.p_m, prm.dt
+    with np.errstate(all="ignore"):
+        if wanted is None:
+            wanted = follower_wish_core(ARRAY, f_x, f_v, l1_x, l1_v, ego_x, ego_vx, aggressive, gap0, p_m, prm.a_x_a,
+                                        a_o, open_decel, open_gap_m)  # fmt: skip
+        a = follow_core(ARRAY, wanted, l1_x - f_x - p_m, f_v, l1_v, a_o, dt)
+        a_ego = follow_core(ARRAY, a, ego_x - f_x - p_m, f_v, ego_vx, a_o, dt)
+        return np.where(follows_ego(ARRAY, ego_x - f_x, aggressive, completed, ignores_ego), a_ego, a)
+
+
+# The closed forms compiled into the kernels (safety/_compile.py, through _fast_traffic and _fast_loop): the same
+# functions, evaluated row by row.
+jitable(
+    leader_want, leader_needs_check, leader_confirmed, leader_keep, link_decel, violation_accel, reactive_core,
+    hold_speed, task_core, follower_wish_core, follow_core, follows_ego,
+)  # fmt: skip
