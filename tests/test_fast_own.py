@@ -158,3 +158,30 @@ def test_own_lane_rows_give_own_lane_cores_bits(monkeypatch, seed):
         _assert_bits(name, parts[name], np.broadcast_to(value, (N,)))
     assert sum(searched) > 100 and 0 < exists.sum() < N
     assert parts["follows_own"].any() and (parts["follows_own"] & exists).any()
+
+
+@needs_numba
+@pytest.mark.parametrize("family", FAMILIES, ids=lambda f: f.__name__)
+def test_check_candidate_dispatches_the_l0_rows_to_the_kernel_with_the_same_verdicts_and_plans(monkeypatch, family):
+    """Where ``decide`` dispatches the rows with L0 to this kernel (``decide.own_kernel``): the whole
+    ``check_candidate`` — verdicts, completing rows, every field of every plan — is the NumPy path's, and the kernel
+    ran."""
+    from safelane.shield import _fast_own
+    from test_fast_decide import _assert_same
+
+    if not hasattr(decide, "own_kernel"):
+        pytest.skip("decide.check_candidate does not dispatch the rows with L0 to shield/_fast_own yet")
+    rng = np.random.default_rng([7, FAMILIES.index(family)])
+    s = _states(N, rng)
+    own = family(s, rng)
+    calls = []
+    real = _fast_own.check_own
+    monkeypatch.setattr(_fast_own, "check_own", lambda *a: calls.append(len(a[0][0])) or real(*a))
+    monkeypatch.delenv("SAFELANE_NO_NUMBA", raising=False)
+    fast = decide.check_candidate(*(s[k] for k in ORDER), PRM, own=own)
+    monkeypatch.setenv("SAFELANE_NO_NUMBA", "1")
+    slow = decide.check_candidate(*(s[k] for k in ORDER), PRM, own=own)
+    monkeypatch.delenv("SAFELANE_NO_NUMBA")
+    assert calls == [np.isfinite(own[0]).sum()]
+    _assert_same(fast, slow)
+    assert 0 < slow.ok.sum() < N
