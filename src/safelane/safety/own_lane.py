@@ -81,8 +81,8 @@ def leader_gap_core(xp, u, p, v, lead, other, margin, horizon, prm):
     pk, vk, ak = lead
     pj, vj, aj = other
     V, t2, match = profile(xp, u, p, v, pk, vk, ak, prm)
-    j_stop = xp.stop_time(vj, aj)
-    k_end = xp.where(match, xp.stop_time(vk, ak), t2)
+    j_stop, k_stop = xp.stop_time(vj, aj), xp.stop_time(vk, ak)
+    k_end = xp.where(match, k_stop, t2)
     infinite = horizon == INF  # a horizon is t_y_f >= 0 or +inf
     last = xp.where(_finite(u), u, 0.0)
     for b in (t2, k_end, j_stop):
@@ -97,8 +97,8 @@ def leader_gap_core(xp, u, p, v, lead, other, margin, horizon, prm):
         end,
     ):  # fmt: skip
         t = xp.clip(xp.where(_finite(c), c, end), 0.0, end)
-        gap = braked_position(xp, pj, vj, aj, t, j_stop) - ego_position(xp, t, p, v, u, V, t2, match, pk, vk, ak, prm)
-        lowest = xp.minimum(lowest, gap)
+        ego = ego_position(xp, t, p, v, u, V, t2, match, pk, vk, ak, prm, k_stop)
+        lowest = xp.minimum(lowest, braked_position(xp, pj, vj, aj, t, j_stop) - ego)
     gap = lowest - margin
     # After the last breakpoint every speed is constant: the gap shrinks forever iff the ego is the faster.
     tail = end + 1.0  # any instant after the last breakpoint (speeds there are the tail's)
@@ -123,16 +123,16 @@ def follower_gap_core(xp, u, p, v, lead, f_p, f_v, aggressive, margin, horizon, 
     a_a, a_d = prm.a_x_a, prm.a_x_d
     pk, vk, ak = lead
     V, t2, match = profile(xp, u, p, v, pk, vk, ak, prm)
-    f_stop = xp.stop_time(f_v, a_d)
+    f_stop, k_stop = xp.stop_time(f_v, a_d), xp.stop_time(vk, ak)
     lowest = INF
     for c in (
-        0.0 * u, u, t2, xp.where(match, xp.stop_time(vk, ak), t2), f_stop,
+        0.0 * u, u, t2, xp.where(match, k_stop, t2), f_stop,
         xp.div(f_v - v, a_a + a_d, 0.0),  # accelerating ego vs braking F
         xp.div(f_v - vk, a_d - ak, 0.0),  # following ego vs braking F
         horizon,
     ):  # fmt: skip
         t = xp.clip(c, 0.0, horizon)
-        ego = ego_position(xp, t, p, v, u, V, t2, match, pk, vk, ak, prm)
+        ego = ego_position(xp, t, p, v, u, V, t2, match, pk, vk, ak, prm, k_stop)
         lowest = xp.minimum(lowest, ego - follower_offset(xp, t, f_p, f_v, aggressive, prm, f_stop))
     return lowest - margin
 
