@@ -24,16 +24,16 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .._motion import advance, advance_core
+from .._motion import advance_core
 from ..params import Params
 from ..safety._backend import ARRAY, INF, jitable
 from ..safety.chain import min_follow_decel
 from ..safety.evasion import PARTS, evasion_parts, fast_kernel
 from ..safety.lateral import LATERAL_TOL_M
 from ..safety.longitudinal import FEASIBILITY_TOL_M
-from ..safety.own_lane import own_lane_core
+from ..safety.own_lane import own_lane_core, own_period
 from ..safety.plan import EvasionPlan, plan_from_core
-from ..safety.responsible import pair_min_gap, pair_min_gap_core
+from ..safety.responsible import pair_min_gap_core
 
 #: The supervisor's choice per step (the trace's ``behaviour``); ``COMPLETED``: the lane change is done.
 PROCEED, HESITATE, ABORT, COMPLETED = 0, 1, 2, -1
@@ -133,6 +133,17 @@ def candidate_kernel():
     return _fast_decide
 
 
+def own_kernel():
+    """The compiled own-lane check's module :mod:`._fast_own` (the rows with ``L0`` of :func:`check_candidate`, every
+    batch size), or ``None`` where :func:`~safelane.safety.evasion.fast_kernel` is ``None`` (numba missing, or
+    ``SAFELANE_NO_NUMBA=1``): then the NumPy block of :func:`_with_own`, the same functions on arrays."""
+    if fast_kernel() is None:
+        return None
+    from . import _fast_own
+
+    return _fast_own
+
+
 def completion_level(completion, prm: Params) -> float:
     """Where a step completes under the rule ``completion`` (its ``level``, else the lane boundary)."""
     return completion.level(prm) if hasattr(completion, "level") else prm.y_boundary
@@ -216,19 +227,22 @@ def _with_own(args, has_own, own, prm: Params, completion) -> Verdict:
     # With L0 the lane change completes only at own_completion_level, and only moving away from L0 (or not at all
     # laterally): the lane-keeping after completion then never brings the ego back toward it.
     level = max(own_completion_level(prm), completion_level(completion, prm))
-    with np.errstate(all="ignore"):
-        state, period_ok, done = candidate_period(
-            ARRAY, ego_x, ego_y, ego_vx, ego_vy, a_x, a_y, l1_x, l1_v, l1_decel, f_x, f_v, f_aggr, prm, prm.p_m, dt,
-            level, LATERAL_TOL_M, tol,
+    if (kernel := own_kernel()) is not None:  # the same functions, compiled row by row (shield/_fast_own.py)
+        state, period_ok, done, (ox, ov), exists, parts = kernel.check_own(
+            (ego_x, ego_y, ego_vx, ego_vy, a_x, a_y, l1_x, l1_v, l1_decel, f_x, f_v, f_aggr), (o_x, o_v, o_decel), prm,
+            level,
         )  # fmt: skip
-        # Half the tolerance for L0, here and in the evasion (own_margin): a follower of L0 settles exactly at the
-        # margin, and the executor's round-off must stay inside the tolerance.
-        period_ok = period_ok & (pair_min_gap(o_x - ego_x - prm.p_m, ego_vx, a_x, o_v, -o_decel, dt) >= -0.5 * tol)
-        done = done & (state[3] >= 0.0)
-        ox, ov = advance(o_x, o_v, -o_decel, dt)
-        ex, ey, evx, evy, lx, lv, fx, fv = state
-        exists, parts = own_lane_core(ex, ey, evx, evy, lx, lv, l1_decel, fx, fv, f_aggr, ox, ov, o_decel, prm.p_m,
-                                      prm.p_m, own_margin(prm), prm)  # fmt: skip
+    else:
+        with np.errstate(all="ignore"):
+            state, period_ok, done = candidate_period(
+                ARRAY, ego_x, ego_y, ego_vx, ego_vy, a_x, a_y, l1_x, l1_v, l1_decel, f_x, f_v, f_aggr, prm, prm.p_m,
+                dt, level, LATERAL_TOL_M, tol,
+            )  # fmt: skip
+            period_ok, done, ox, ov = own_period(ARRAY, ego_x, ego_vx, a_x, o_x, o_v, o_decel, period_ok, done,
+                                                 state[3], prm.p_m, dt, tol)  # fmt: skip
+            ex, ey, evx, evy, lx, lv, fx, fv = state
+            exists, parts = own_lane_core(ex, ey, evx, evy, lx, lv, l1_decel, fx, fv, f_aggr, ox, ov, o_decel,
+                                          prm.p_m, prm.p_m, own_margin(prm), prm)  # fmt: skip
     sub = verdict_of(state, period_ok, done, exists, parts, l1_decel, f_aggr, prm, completion,
                   own=(ox, ov, o_decel, own_margin(prm)))  # fmt: skip
     ok[rows], completing[rows] = sub.ok, sub.completing
