@@ -53,9 +53,14 @@ def commit_guard(ex, evx, lx, lv, l1_decel, fx, fv, prm: Params):
     to the target lane, so it needs the ego able to keep ``p_m`` behind L1's worst case and a worst-case F able to
     keep ``p_m`` behind the ego, each braking at no more than ``a_x_d`` (arguments: the predicted states at the end
     of the period, rows that complete)."""
-    z_l = min_follow_decel(ARRAY, lx - ex - prm.p_m, evx, lv, l1_decel)
-    z_f = min_follow_decel(ARRAY, ex - fx - prm.p_m, fv, evx, prm.a_x_d)
-    return (z_l <= prm.a_x_d) & (z_f <= prm.a_x_d)
+    return commit_guard_core(ARRAY, ex, evx, lx, lv, l1_decel, fx, fv, prm.p_m, prm.a_x_d, FEASIBILITY_TOL_M)
+
+
+def commit_guard_core(xp, ex, evx, lx, lv, l1_decel, fx, fv, p_m, a_x_d, tol):
+    """:func:`commit_guard`, backend-generic (the one source; the compiled closed loop evaluates it per row)."""
+    z_l = min_follow_decel(xp, lx - ex - p_m, evx, lv, l1_decel, tol)
+    z_f = min_follow_decel(xp, ex - fx - p_m, fv, evx, a_x_d, tol)
+    return (z_l <= a_x_d) & (z_f <= a_x_d)
 
 
 def own_completion_level(prm: Params) -> float:
@@ -252,7 +257,12 @@ def _with_own(args, has_own, own, prm: Params, completion) -> Verdict:
 
 def hesitate_lateral(ego_vy, prm: Params):
     """Lateral acceleration driving the lateral speed to zero within a period (as far as ``a_y_m`` allows)."""
-    return np.clip(-ego_vy / prm.dt, -prm.a_y_m, prm.a_y_m)
+    return hesitate_core(ARRAY, ego_vy, prm.dt, prm.a_y_m)
+
+
+def hesitate_core(xp, ego_vy, dt, a_y_m):
+    """:func:`hesitate_lateral`, backend-generic (the one source; the compiled closed loop evaluates it per row)."""
+    return xp.clip(-ego_vy / dt, -a_y_m, a_y_m)
 
 
 def plan_motion(plan: EvasionPlan, age, dt: float):
@@ -289,4 +299,4 @@ def plan_switches(xp, plan, lead_v, lead_decel, age, dt):
 
 # The candidate check compiled into the shield's kernel and the closed loop, the held plan's switches into the closed
 # loop (safety/_compile.py): the same functions.
-jitable(lateral_max, candidate_period, candidate_row, plan_switches)
+jitable(lateral_max, candidate_period, candidate_row, plan_switches, commit_guard_core, hesitate_core)

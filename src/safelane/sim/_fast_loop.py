@@ -30,14 +30,14 @@ from ..safety._fast_base import (
     _min,
     announce_compile,
 )
-from ..safety._fast_responsible import _min_follow_decel, _responsible_bound
+from ..safety._fast_responsible import _responsible_bound
 from ..safety.responsible import responsible_accel_core
 from ..shield._fast_decide import _candidate
 from ..shield._fast_monitor import _breach_row
 from ..shield.assessment import belief_core
-from ..shield.decide import ABORT, COMPLETED, HESITATE, PROCEED
+from ..shield.decide import ABORT, COMPLETED, HESITATE, PROCEED, commit_guard_core, hesitate_core
 from ..shield.proposals import proposal_core
-from ..shield.stages import worst_case_core
+from ..shield.stages import lane_keep_accel, worst_case_core
 from ._fast_checks import _ego_row, _lane_row
 from ._fast_general import _general_pair
 from ._fast_held import _motion_max, _plan_motion
@@ -80,7 +80,6 @@ def loop_kernel(
     dt, a_a, a_d, a_ym, y_safe, p_m, lane_w, y_bound, length, conflict, overlap = prm[:11]
     lat_tol, tol, _eps, mon_tol, brake_start, thr, open_decel, open_gap = prm[11:19]
     k_p, k_v, gap_frac, brake_comfort, om2, two_om = prm[19:25]
-    half = 0.5 * tol
     a_lim = _max(a_a, a_d)
     gains, lim = ExpertGains(k_p, k_v, gap_frac, brake_comfort, om2, two_om), Limits(a_a, a_d, a_ym, y_safe)
     max_level = _max(conflict, overlap)
@@ -171,7 +170,7 @@ def loop_kernel(
             broken = br0 or br1 or br2 or br3
             l1_decel, f_aggr = worst_case_core(SCALAR, uses_chain, unsafe, bounds[1], a_d, trusted, uses_assess,
                                                aggressive, broken)  # fmt: skip
-            a_yh = _clip(-evy / dt, -a_ym, a_ym)
+            a_yh = hesitate_core(SCALAR, evy, dt, a_ym)
             active = not completed
             # --- proceed / hesitate / abort (decide.check_candidate with the commit guard) ---
             behaviour = COMPLETED
@@ -188,9 +187,8 @@ def loop_kernel(
                     )  # fmt: skip
                     if crossing:  # decide.commit_guard on the predicted states
                         pex, pevx, plx, plv, pfx, pfv = state[0], state[2], state[4], state[5], state[6], state[7]
-                        z_l = _min_follow_decel(plx - pex - p_m, pevx, plv, l1_decel, half, tol)
-                        z_f = _min_follow_decel(pex - pfx - p_m, pfv, pevx, a_d, half, tol)
-                        keep = period_ok and (z_l <= a_d and z_f <= a_d)
+                        keep = period_ok and commit_guard_core(SCALAR, pex, pevx, plx, plv, l1_decel, pfx, pfv, p_m,
+                                                               a_d, tol)  # fmt: skip
                     else:
                         keep = period_ok and bits[0]
                     if keep:
@@ -210,7 +208,7 @@ def loop_kernel(
             if completed:  # after completion: centre in the target lane, follow L1 responsibly
                 bound = _responsible_bound(x[1] - ex - p_m, evx, v[1], l1_decel, a_d, dt)
                 ax_cmd = responsible_accel_core(SCALAR, a_x, bound, a_d)
-                ay_cmd = _clip(0.8 * (lane_w - ey) - 1.6 * evy, -a_ym, a_ym)
+                ay_cmd = lane_keep_accel(SCALAR, ey, evy, lane_w, a_ym)
             on_plan = behaviour == ABORT
             if on_plan:  # the aborting rows follow their held plan, exactly
                 age = _max(t + 0.0 - plan_t0, 0.0)
