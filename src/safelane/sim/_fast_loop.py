@@ -42,7 +42,7 @@ from ._fast_checks import _ego_row, _lane_row
 from ._fast_general import _general_pair
 from ._fast_held import _motion_max, _plan_motion
 from ._fast_traffic import _chain_row, _follower_row, _leader_row
-from .behaviours import hold_speed, task_core
+from .behaviours import hold_speed, last_accel, task_core
 from .kinematics import constant_segment
 
 _compile.register_rows()
@@ -234,7 +234,7 @@ def loop_kernel(
             # --- traffic (behaviours: worst-case leaders, F) on the running minimum of the chain bounds ---
             for i in range(k):
                 cap[i] = _min(cap[i], bounds[i])
-            a_last = -decel_last[b] if t + 1e-9 >= brake_start else 0.0
+            a_last = last_accel(SCALAR, t, brake_start, decel_last[b])
             for i in range(k):
                 a_i = 0.0
                 if 1 <= i < k - 1 and acts[b, i]:

@@ -6,7 +6,8 @@ from __future__ import annotations
 import numpy as np
 
 from ..params import Params
-from .behaviours import follower_accel, leader_accels, leader_roles, leader_task, reactive_leader_accels
+from ..safety._backend import ARRAY
+from .behaviours import follower_accel, last_accel, leader_accels, leader_roles, leader_task, reactive_leader_accels
 from .rng import counter_uniform
 from .traffic import TrafficHooks, TrafficView, hook_output, profile_segment
 
@@ -41,7 +42,7 @@ class BoundPaperTraffic:
         task = leader_task(v, self.v_desired, b.promise_decel, b.promise_accel, wanted)
         switch = None
         if b.last_profile_t is None:
-            a_last = np.where(view.t + 1e-9 >= cfg.brake_start_s, -b.decel_last, 0.0)
+            a_last = last_accel(ARRAY, view.t, cfg.brake_start_s, b.decel_last)
         else:
             a_last, t_sw, a2 = profile_segment(view.t, prm.dt, b.last_profile_t, b.last_profile_a)
             if (t_sw < prm.dt).any():

@@ -18,7 +18,8 @@ can still keep its margin by braking at ``a_x_d`` while the vehicle ahead brakes
 (RSS's proper response with a one-period response time); if none exists it brakes at ``a_x_d``.
 
 **One source.** Each rule is one backend-generic closed form per row (first argument the backend ``xp`` of
-:mod:`safelane.safety._backend`, marked ``jitable`` at the end of the module): :func:`hold_speed` and
+:mod:`safelane.safety._backend`, marked ``jitable`` at the end of the module): :func:`last_accel` (``L(N+1)``'s
+default profile), :func:`hold_speed` and
 :func:`task_core` (a leader's task), :func:`leader_want`, :func:`leader_needs_check`, :func:`leader_confirmed` and
 :func:`leader_keep` (the worst-case rule), :func:`link_decel` and :func:`violation_accel` (an unexpected violation;
 with :func:`reactive_core`, the reactive rule), :func:`follower_wish_core`, :func:`follow_core` and
@@ -51,6 +52,12 @@ def traffic_kernel():
     from . import _fast_traffic
 
     return _fast_traffic
+
+
+def last_accel(xp, t, brake_start, decel_last):
+    """``L(N+1)``'s default profile at time ``t``: constant speed, then braking at ``decel_last`` (``a_x_N+1_d``) from
+    ``brake_start`` on (a start within 1 ns after ``t`` counts: round-off in the period count)."""
+    return xp.where(t + 1e-9 >= brake_start, -decel_last, 0.0)
 
 
 def leader_roles(valid, connected, n_connected):
@@ -271,6 +278,6 @@ def follower_accel(
 # The closed forms compiled into the kernels (safety/_compile.py, through _fast_traffic and _fast_loop): the same
 # functions, evaluated row by row.
 jitable(
-    leader_want, leader_needs_check, leader_confirmed, leader_keep, link_decel, violation_accel, reactive_core,
-    hold_speed, task_core, follower_wish_core, follow_core, follows_ego,
+    last_accel, leader_want, leader_needs_check, leader_confirmed, leader_keep, link_decel, violation_accel,
+    reactive_core, hold_speed, task_core, follower_wish_core, follow_core, follows_ego,
 )  # fmt: skip
