@@ -157,16 +157,38 @@ def test_collisions_come_from_sumos_own_list():
     assert measures.blame(found[:1], [])[0]["responsible"] == "cav.rear"
 
 
-def test_the_sweep_gives_the_same_tables_on_one_and_two_processes():
+@pytest.fixture(scope="module")
+def sweep_jobs_and_one_process():
+    """A short sweep's jobs and its tables on one process (the reference of the other backends)."""
     _libsumo()
     from safelane.traffic.run import cells, sweep
 
     jobs = cells([0.0, 0.5], [2500], seconds=40, warmup_s=10, seed=3)
     one, coll_one, _ = sweep(jobs, "process", 1)
+    return jobs, one.to_csv(index=False), coll_one.to_csv(index=False)
+
+
+def test_the_sweep_gives_the_same_tables_on_one_and_two_processes(sweep_jobs_and_one_process):
+    from safelane.traffic.run import sweep
+
+    jobs, one, coll_one = sweep_jobs_and_one_process
     two, coll_two, _ = sweep(jobs, "process", 2)
-    assert one.to_csv(index=False) == two.to_csv(index=False)
-    assert coll_one.to_csv(index=False) == coll_two.to_csv(index=False)
-    assert one["p"].tolist() == [0.0, 0.5]
+    assert one == two.to_csv(index=False)
+    assert coll_one == coll_two.to_csv(index=False)
+    assert two["p"].tolist() == [0.0, 0.5]
+
+
+def test_the_sweep_gives_the_same_tables_on_ray(sweep_jobs_and_one_process):
+    from safelane.parallel import Backend, ray_available, ray_session
+    from safelane.traffic.run import sweep
+
+    if not ray_available():
+        pytest.skip("ray is not installed: pip install 'safelane[ray]'")
+    jobs, one, coll_one = sweep_jobs_and_one_process
+    with ray_session(num_cpus=1):  # a local instance (or the cluster $RAY_ADDRESS names); one task at a time
+        table, coll, _ = sweep(jobs, Backend("ray", 2))
+    assert one == table.to_csv(index=False)
+    assert coll_one == coll.to_csv(index=False)
 
 
 def _braking_run(limits: dict[str, float] | None, steps: int = 90, go_step: int = 40):
