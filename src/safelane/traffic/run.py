@@ -117,7 +117,9 @@ def cells(penetrations, demands_vph, *, seconds: float, warmup_s: float, seed: i
 
 
 def sweep(jobs: list[dict], backend="process", workers: int | None = None, ray_address: str | None = None):
-    """``(cells table, collisions table, wall seconds per job)``: :func:`run_cell` of every job on ``backend``."""
+    """``(cells table, collisions table, wall seconds per job)``: :func:`run_cell` of every job on ``backend``, each in
+    a fresh process (:func:`_cell_job`). The processes are started with ``spawn``, which imports the calling script's
+    main module again: a script that calls this needs the usual ``if __name__ == "__main__":`` guard."""
     import pandas as pd
 
     from ..parallel import map_chunks
