@@ -287,3 +287,91 @@ def test_a_follower_exactly_at_its_margin_keeps_it():
         exists, parts = own_lane_core(**kw, prm=Params())
         assert parts["follow_gap"][0] == pytest.approx(offset, abs=1e-12)
         assert bool(exists[0]) == ok and bool(parts["follow_ok"][0]) == ok
+
+
+def _own_period_reference(ego_x, ego_vx, a_x, l0_x, l0_v, l0_decel, dt, n=4001):
+    """Time-stepped reference of :func:`own_period`'s motion: both vehicles at constant acceleration over ``[0, dt]``
+    (``n`` instants, both ends included), each stopping at rest rather than reversing. Returns ``(min over the
+    instants of l0 − ego, L0's position and speed at dt)``."""
+    t = np.linspace(0.0, 1.0, n)[None, :] * dt[:, None]
+
+    def pos(x, v, a):
+        # The instant it reaches rest (never where it accelerates, or is at rest and not pushed forward).
+        stop = np.where(a < 0.0, v / np.where(a < 0.0, -a, 1.0), np.where((v <= 0.0) & (a <= 0.0), 0.0, np.inf))
+        tt = np.minimum(t, stop[:, None])
+        return x[:, None] + v[:, None] * tt + 0.5 * a[:, None] * tt * tt, np.maximum(v + a * dt, 0.0)
+
+    ego, _ = pos(ego_x, ego_vx, a_x)
+    l0, l0_v_end = pos(l0_x, l0_v, -l0_decel)
+    return (l0 - ego).min(axis=1), l0[:, -1], l0_v_end
+
+
+def test_own_period_keeps_l0_over_the_period_as_the_time_stepped_reference():
+    """``own_period`` (the shield's check of ``L0`` over one period, ``shield/decide.py``) against a time-stepped
+    reference: random egos (accelerating, cruising, braking to rest within the period) behind an ``L0`` braking at
+    up to ``a_x_d``, at positions away from 0; the period stays safe iff the minimum gap over the period stays
+    ``>= p_m − tol/2`` (rows within 1 mm of the boundary are left out: the reference samples), ``L0``'s state at the
+    period's end is its exact braked state, the step completes only where it did and ``ego_vy_end >= 0``, and a
+    period already failed stays failed."""
+    from safelane.safety._backend import ARRAY
+    from safelane.safety.own_lane import own_period
+
+    rng = np.random.default_rng(77)
+    prm, n = Params(), 600
+    ego_x = rng.uniform(-300.0, 300.0, n)
+    ego_vx = np.where(rng.random(n) < 0.1, 0.0, rng.uniform(0.0, 35.0, n))
+    a_x = rng.uniform(-prm.a_x_d, prm.a_x_a, n)
+    l0_v = np.maximum(ego_vx + rng.normal(0.0, 6.0, n), 0.0)
+    l0_decel = np.where(rng.random(n) < 0.3, prm.a_x_d, rng.uniform(0.0, prm.a_x_d, n))
+    l0_x = ego_x + prm.p_m + rng.uniform(-1.0, 6.0, n)
+    dt = rng.uniform(0.05, 1.0, n)
+    period_in, completing_in = rng.random(n) < 0.9, rng.random(n) < 0.8
+    vy_end = rng.uniform(-1.0, 1.0, n)
+    tol = 1e-9
+    ok, completing, x_end, v_end = own_period(ARRAY, ego_x, ego_vx, a_x, l0_x, l0_v, l0_decel, period_in,
+                                              completing_in, vy_end, prm.p_m, dt, tol)  # fmt: skip
+    gap, ref_x, ref_v = _own_period_reference(ego_x, ego_vx, a_x, l0_x, l0_v, l0_decel, dt)
+    gap = gap - prm.p_m
+    clear = np.abs(gap) > 1e-3
+    assert (clear & (gap < 0.0) & period_in).sum() > 50 and (clear & (gap > 0.0) & period_in).sum() > 50
+    np.testing.assert_array_equal(ok[clear], (period_in & (gap >= 0.0))[clear])
+    np.testing.assert_allclose(x_end, ref_x, rtol=1e-12, atol=1e-9)
+    np.testing.assert_allclose(v_end, ref_v, rtol=1e-12, atol=1e-9)
+    np.testing.assert_array_equal(completing, completing_in & (vy_end >= 0.0))
+
+
+@pytest.mark.parametrize("tol, offset, kept", [(2.0, -1.0, True), (2.0, -1.0 - 2.0**-20, False), (0.0, 0.0, True)])
+def test_own_period_keeps_a_gap_exactly_at_half_its_tolerance(tol, offset, kept):
+    """Ego and ``L0`` at rest, ``L0`` exactly ``p_m + offset`` ahead (dyadic numbers: every gap is exact): the period
+    is kept iff the gap ``offset >= −tol/2`` — at ``−tol/2`` itself it is (``tol`` is the caller's)."""
+    from safelane.safety._backend import ARRAY
+    from safelane.safety.own_lane import own_period
+
+    one = lambda x: np.atleast_1d(np.asarray(x, float))  # noqa: E731
+    yes = np.array([True])
+    ok, completing, x_end, v_end = own_period(ARRAY, one(8.0), one(0.0), one(0.0), one(8.0 + 7.0 + offset), one(0.0),
+                                              one(6.0), yes, yes, one(0.0), 7.0, 0.5, tol)  # fmt: skip
+    assert bool(ok[0]) == kept and bool(completing[0])
+    assert x_end[0] == 15.0 + offset and v_end[0] == 0.0
+
+
+@pytest.mark.parametrize("offset, exists", [(-0.5, True), (-0.5 - 2.0**-20, False)])
+def test_a_gap_exactly_at_the_callers_tolerance_is_kept(offset, exists):
+    """The case of :func:`test_braking_at_once_within_the_tolerance_is_an_evasion` (braking at once keeps the gap to
+    L0 at its initial ``offset``; L1 and F clear) with ``tol = 0.5`` and dyadic positions, so every gap is exact:
+    at ``offset = −tol`` exactly the evasion exists (a gap of ``−tol`` counts as kept) with ``own_gap == −0.5`` and
+    the switch time 0; a hair beyond, none. And F exactly ``tol`` inside its margin: kept, a hair more: not."""
+    prm = Params()
+    kw = {k: np.atleast_1d(np.asarray(v, bool if k == "aggressive" else float)) for k, v in dict(
+        ego_px=0.0, ego_py=0.85 + 1.0, ego_vx=20.0, ego_vy=0.0, l1_p=28.0, l1_v=10.0, l1_decel=8.0, f_p=-100.0,
+        f_v=0.0, aggressive=False, l0_p=7.0 + offset, l0_v=20.0, l0_decel=2.0, lead_margin=7.0, follow_margin=7.0,
+        own_margin=7.0).items()}  # fmt: skip
+    got, parts = own_lane_core(**kw, prm=prm, tol=0.5)
+    assert bool(got[0]) == exists and bool(parts["lead_ok"][0]) == exists
+    assert parts["own_gap"][0] == offset and parts["t_x1"][0] == 0.0
+    # F at rest exactly `-offset` inside its margin behind the ego (L1 and L0 far and fast).
+    kw.update(l1_p=np.array([500.0]), l1_v=np.array([50.0]), l1_decel=np.array([0.0]), l0_p=np.array([1000.0]),
+              l0_v=np.array([50.0]), l0_decel=np.array([0.0]), f_p=np.array([-7.0 - offset]))  # fmt: skip
+    got, parts = own_lane_core(**kw, prm=prm, tol=0.5)
+    assert parts["follow_gap"][0] == offset
+    assert bool(got[0]) == exists and bool(parts["follow_ok"][0]) == exists
