@@ -48,6 +48,10 @@ CASES = {
         lambda: _mixed(5, 3.0, scenario=ScenarioConfig(follower_connected_share=0.5, human_share=0.5)),
         {},
     ),
+    "others brake harder than the ego commits to (a_o_d = 9.5, a_N+1 = 9)": (
+        lambda: _mixed(3, 9.0, seed=3),
+        dict(params=Params(a_o_d=9.5)),
+    ),
     "other parameters, settings and planner": (
         lambda: _mixed(2, 6.0, seed=2),
         dict(

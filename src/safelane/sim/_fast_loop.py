@@ -31,7 +31,7 @@ from ..safety._fast_base import (
     announce_compile,
 )
 from ..safety._fast_responsible import _responsible_bound
-from ..safety.responsible import responsible_accel_core
+from ..safety.responsible import responsible_accel_core, responsible_ok_core
 from ..shield._fast_decide import _candidate
 from ..shield._fast_monitor import _breach_row
 from ..shield.assessment import belief_core
@@ -53,7 +53,7 @@ _INF = np.inf
 PRM = (
     "dt", "a_x_a", "a_x_d", "a_y_m", "y_safe", "p_m", "lane_width", "y_boundary", "vehicle_length", "conflict",
     "overlap", "lat_tol", "tol", "eps", "monitor_tol", "brake_start_s", "assess_threshold", "open_decel",
-    "open_gap_m", "k_p", "k_v", "gap_fraction", "brake_comfort", "omega2", "two_omega",
+    "open_gap_m", "k_p", "k_v", "gap_fraction", "brake_comfort", "omega2", "two_omega", "a_o_d",
 )  # fmt: skip
 #: The plan fields the loop holds per scenario (the ones its evaluation needs), in order.
 PLAN = (
@@ -80,6 +80,7 @@ def loop_kernel(
     dt, a_a, a_d, a_ym, y_safe, p_m, lane_w, y_bound, length, conflict, overlap = prm[:11]
     lat_tol, tol, _eps, mon_tol, brake_start, thr, open_decel, open_gap = prm[11:19]
     k_p, k_v, gap_frac, brake_comfort, om2, two_om = prm[19:25]
+    a_o = prm[25]  # the others' maximum braking (a_x_d: the ego's committed braking, its own limits only)
     a_lim = _max(a_a, a_d)
     gains, lim = ExpertGains(k_p, k_v, gap_frac, brake_comfort, om2, two_om), Limits(a_a, a_d, a_ym, y_safe)
     max_level = _max(conflict, overlap)
@@ -154,7 +155,7 @@ def loop_kernel(
             invalid = not ok
             a_x, a_y = _clip(ax_ok, -a_d, a_a), _clip(ay_ok, -a_ym, a_ym)
             # --- the chain analysis (ClosedLoop.chain) ---
-            unsafe = _chain_row(x2, v2, 0, promise, chain_margin, b, a_d, bounds2)
+            unsafe = _chain_row(x2, v2, 0, promise, chain_margin, b, a_o, bounds2)
             # --- the shield: assessment, worst cases ---
             for j in range(window - 1):
                 history[j] = history[j + 1]
@@ -168,7 +169,7 @@ def loop_kernel(
             if first_collab != first_collab and not aggressive:
                 first_collab = t
             broken = br0 or br1 or br2 or br3
-            l1_decel, f_aggr = worst_case_core(SCALAR, uses_chain, unsafe, bounds[1], a_d, trusted, uses_assess,
+            l1_decel, f_aggr = worst_case_core(SCALAR, uses_chain, unsafe, bounds[1], a_o, trusted, uses_assess,
                                                aggressive, broken)  # fmt: skip
             a_yh = hesitate_core(SCALAR, evy, dt, a_ym)
             active = not completed
@@ -208,6 +209,9 @@ def loop_kernel(
             if completed:  # after completion: centre in the target lane, follow L1 responsibly
                 bound = _responsible_bound(x[1] - ex - p_m, evx, v[1], l1_decel, a_d, dt)
                 ax_cmd = responsible_accel_core(SCALAR, a_x, bound, a_d)
+                if l1_decel > a_d:  # L1 may brake harder than the ego: the closed form confirmed (stages.command)
+                    if not responsible_ok_core(SCALAR, ax_cmd, x[1] - ex - p_m, evx, v[1], l1_decel, a_d, dt, tol):
+                        ax_cmd = -a_d
                 ay_cmd = lane_keep_accel(SCALAR, ey, evy, lane_w, a_ym)
             on_plan = behaviour == ABORT
             if on_plan:  # the aborting rows follow their held plan, exactly
@@ -226,7 +230,7 @@ def loop_kernel(
             # For the monitor at the next period: what a responsible follower of the ego could do this period.
             limit = _INF
             if active and not plan_f_aggr and ex - x[0] > 0.0:
-                limit = _max(_responsible_bound(ex - x[0] - p_m, v[0], evx, a_d, a_d, dt), -a_d)
+                limit = _max(_responsible_bound(ex - x[0] - p_m, v[0], evx, a_d, a_o, dt), -a_o)
             for i in range(m):
                 snap_x[i], snap_v[i], snap_bounds[i] = x[i + 1], v[i + 1], bounds[i + 1]
             snap_fx, snap_fv, snap_limit, snap_l1d, snap_active = x[0], v[0], limit, plan[6], active
@@ -241,12 +245,12 @@ def loop_kernel(
                     task = task_core(SCALAR, hold_speed(SCALAR, v[i], v_desired[b, i]), promise_decel[b, i],
                                      promise_accel[b, i])  # fmt: skip
                     a_i = _leader_row(x[i + 1] - x[i] - margin[b, i], v[i], v[i + 1], cap[i + 1], cap[i], task,
-                                      False, 0.0, decel_last[b], a_d, dt)  # fmt: skip
+                                      False, 0.0, decel_last[b], a_o, dt)  # fmt: skip
                 if is_last[b, i]:
                     a_i = a_last
                 acc[i] = a_i
             acc[0] = _follower_row(x[0], v[0], x[1], v[1], ex, evx, f_aggressive[b], completed, gap0[b], False, 0.0,
-                                   False, p_m, a_a, a_d, open_decel, open_gap, dt)  # fmt: skip
+                                   False, p_m, a_a, a_o, open_decel, open_gap, dt)  # fmt: skip
             row_acc = 0.0
             for i in range(k):
                 f_acc[i], f_ts[i], f_xe[i], f_ve[i] = constant_segment(SCALAR, x[i], v[i], acc[i], dt)

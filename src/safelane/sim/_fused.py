@@ -84,10 +84,10 @@ def unclassified(config_cls) -> list[str]:
     return sorted({f for f in fields if named.count(f) != 1} | (set(named) - fields))
 
 
-def reasons(batch, cfg, nominal, traffic, trace: bool, record_observations: bool, prm=None) -> list[str]:
-    """Why the compiled loop does not run this simulation (empty: it runs it); see the module docstring. ``prm``:
-    the run's :class:`~safelane.Params` — the loop takes every vehicle to brake at most ``a_x_d`` (one float), so
-    the others' maximum ``a_o_d`` set apart from it runs period by period."""
+def reasons(batch, cfg, nominal, traffic, trace: bool, record_observations: bool) -> list[str]:
+    """Why the compiled loop does not run this simulation (empty: it runs it); see the module docstring. Any
+    :class:`~safelane.Params` runs compiled (the loop takes the ego's ``a_x_d`` and the others' maximum ``a_o_d``
+    apart, as the stages do)."""
     missing = unclassified(type(cfg))
     if missing:
         raise RuntimeError(
@@ -111,8 +111,6 @@ def reasons(batch, cfg, nominal, traffic, trace: bool, record_observations: bool
         out.append(f"the nominal planner {type(nominal).__name__} (the loop runs ExpertPlanner only)")
     out.extend(f"config.{name}={setting(cfg, name)!r} (compiled: {value!r})" for name, value in FIXED.items()
                if setting(cfg, name) != value)  # fmt: skip
-    if prm is not None and prm.others_decel != prm.a_x_d:
-        out.append(f"params.a_o_d={prm.a_o_d} (compiled: unset, the others braking at most a_x_d)")
     if batch.l0_x is not None:
         out.append("own-lane leaders in the batch")
     if batch.last_profile_t is not None:
@@ -153,8 +151,6 @@ def run_chunk(sim, n_steps: int) -> dict:
     from ._fast_loop import OUT_B, OUT_F, PLAN, PRM, loop_kernel
 
     b, prm, cfg, nominal = sim.b, sim.prm, sim.cfg, sim.nominal
-    if prm.others_decel != prm.a_x_d:  # reasons() refuses it: the loop's one a_x_d stands for every vehicle
-        raise ValueError(f"the compiled loop takes the others' maximum braking as a_x_d; got a_o_d={prm.a_o_d}")
     start = sim.initial_state()
     traffic = sim.traffic_step  # the paper's, bound to the batch (covers() admits no other)
     n = len(b)
@@ -168,6 +164,7 @@ def run_chunk(sim, n_steps: int) -> dict:
         open_decel=cfg.follower_open_decel, open_gap_m=cfg.follower_open_gap_m, k_p=nominal.k_p, k_v=nominal.k_v,
         gap_fraction=nominal.gap_fraction,
         brake_comfort=nominal.brake_comfort, omega2=nominal.omega**2, two_omega=2.0 * nominal.omega,
+        a_o_d=prm.others_decel,
     )  # fmt: skip
     prm_vec = np.array([float(values[name]) for name in PRM])
     plan = start.shield.plan

@@ -123,7 +123,7 @@ def simulate_batch(
             return _simulate_parallel(batch, seed, prm, cfg, nominal, backend, chunks, traffic, blame)
     sim = ClosedLoop(batch, seed, prm, cfg, nominal, traffic, blame=blame or None)
     n_steps = round(cfg.horizon_s / prm.dt)
-    why = fused.reasons(batch, cfg, nominal, traffic, trace, record_observations, prm)
+    why = fused.reasons(batch, cfg, nominal, traffic, trace, record_observations)
     if not why:  # the whole run compiled
         table = results_table(batch, fused.run(sim, n_steps, progress))
         if blame:
