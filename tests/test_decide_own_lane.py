@@ -9,10 +9,12 @@ fine grid (braking to rest and following L0 have the same minimum gap: they coin
 from __future__ import annotations
 
 import numpy as np
+import pytest
 
 from safelane import Params
 from safelane.safety.longitudinal import FEASIBILITY_TOL_M
 from safelane.shield.decide import check_candidate, own_completion_level
+from safelane.shield.policies import COMPLETION_RULES
 
 PRM = Params()
 FAR = 1e4
@@ -228,3 +230,55 @@ def test_the_margin_to_l0_keeps_half_the_tolerance():
     from safelane.shield.decide import own_margin
 
     assert abs((own_margin(PRM) - PRM.p_m) - 0.5 * FEASIBILITY_TOL_M) < 1e-14
+
+
+def _far_l0(s, rows):
+    """``own`` with an L0 1 km ahead of the ego at its speed in ``rows`` (irrelevant to every verdict there) and none
+    elsewhere."""
+    l0_x = np.where(rows, s["ego_x"] + 1e3, np.inf)
+    return l0_x, s["ego_vx"].copy(), np.full(len(rows), PRM.a_x_d)
+
+
+def test_a_far_l0_changes_no_verdict_of_rows_that_do_not_complete_whatever_f_is():
+    """The rows with L0 take F's worst case as the rows without do: with an L0 too far ahead to matter and steps that
+    stay below both completion levels, every verdict is the one without L0 — for an aggressive F close behind too
+    (run on whichever path the environment selects: NumPy under mutation testing)."""
+    from test_decide import ORDER, _states
+
+    rng = np.random.default_rng(28)
+    s = _states(3000, rng)
+    s["ego_y"] = rng.uniform(0.0, 0.8, 3000)  # far below the boundary: no step completes
+    s["ego_vy"] = rng.uniform(-0.5, 0.8, 3000)
+    args = [s[k] for k in ORDER]
+    plain = check_candidate(*args, PRM)
+    own = check_candidate(*args, PRM, own=_far_l0(s, np.ones(3000, bool)))
+    assert not plain.completing.any()
+    np.testing.assert_array_equal(own.ok, plain.ok)
+    # F's type decides some rows here, so a check that ignored it with L0 would differ
+    flipped = check_candidate(*args[:11], ~np.asarray(s["f_aggressive"], bool), PRM)
+    assert (flipped.ok != plain.ok).sum() > 20
+
+
+@pytest.mark.parametrize("rule", sorted(COMPLETION_RULES))
+def test_rows_without_l0_in_a_mixed_batch_keep_the_completion_rule(rule):
+    """In a batch where some rows have L0, the others are decided under the completion rule asked for — the verdicts
+    and completions of a batch without L0 under that rule, which differ from the default rule's in some rows."""
+    from test_decide import ORDER, _states
+
+    rng = np.random.default_rng(29)
+    n = 3000
+    s = _states(n, rng)
+    s["ego_y"] = rng.uniform(PRM.y_boundary - 0.3, PRM.y_boundary + 0.05, n)  # steps across the boundary
+    s["ego_vy"] = rng.uniform(0.0, 1.5, n)
+    args = [s[k] for k in ORDER]
+    with_l0 = rng.random(n) < 0.3
+    completion = COMPLETION_RULES[rule]
+    mixed = check_candidate(*args, PRM, completion=completion, own=_far_l0(s, with_l0))
+    alone = check_candidate(*args, PRM, completion=completion)
+    rows = ~with_l0
+    np.testing.assert_array_equal(mixed.ok[rows], alone.ok[rows])
+    np.testing.assert_array_equal(mixed.completing[rows], alone.completing[rows])
+    assert mixed.ok.dtype == bool and mixed.completing.dtype == bool
+    if rule != "commit_guard":
+        default = check_candidate(*args, PRM)
+        assert (default.ok[rows] != alone.ok[rows]).any() or (default.completing[rows] != alone.completing[rows]).any()
