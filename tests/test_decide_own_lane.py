@@ -282,3 +282,27 @@ def test_rows_without_l0_in_a_mixed_batch_keep_the_completion_rule(rule):
     if rule != "commit_guard":
         default = check_candidate(*args, PRM)
         assert (default.ok[rows] != alone.ok[rows]).any() or (default.completing[rows] != alone.completing[rows]).any()
+
+
+def test_with_l0_a_rule_with_a_higher_level_completes_only_at_that_level():
+    """With L0, the step completes at the higher of the own-lane level and the completion rule's own level
+    (``paper_body_across``: half a vehicle width past the boundary): a step ending between the two does not complete."""
+    rule = COMPLETION_RULES["paper_body_across"]
+    y_end = 0.5 * (own_completion_level(PRM) + rule.level(PRM))
+    assert own_completion_level(PRM) < y_end < rule.level(PRM)
+    n = 1
+    far = np.full(n, FAR)
+    args = (np.zeros(n), np.full(n, y_end - 0.05), np.full(n, 20.0), np.full(n, 0.5), np.zeros(n), np.zeros(n), far,
+            np.full(n, 30.0), np.zeros(n), -far, np.zeros(n), np.zeros(n, bool))  # fmt: skip
+    own = (np.full(n, 300.0), np.full(n, 20.0), np.full(n, PRM.a_x_d))
+    assert not check_candidate(*args, PRM, completion=rule, own=own).completing[0]
+    assert check_candidate(*args, PRM, own=own).completing[0]  # the default rule's level is below y_end
+
+
+def test_the_uncompiled_switch_keeps_the_own_lane_rows_on_numpy(monkeypatch):
+    """``SAFELANE_NO_NUMBA=1`` (debugging, mutation testing) keeps the rows with L0 on the NumPy functions: no kernel
+    module is handed out."""
+    from safelane.shield import decide
+
+    monkeypatch.setenv("SAFELANE_NO_NUMBA", "1")
+    assert decide.own_kernel() is None
