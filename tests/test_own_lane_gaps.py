@@ -167,6 +167,9 @@ def test_every_part_of_the_core_matches_the_reference(seed, kind):
     assert parts["follows_own"].any() and (exists & ~parts["follows_own"]).any() and (~exists).any()
     for name in ("t_y_switch", "y_acc_1", "y_acc_2", "t_y_end"):
         assert np.shape(parts[name]) in ((), (N,))
+    # Plain float64 arrays (no object dtype sneaking in through a closed form's fallback value).
+    for name in ("t_x1", "v_switch", "t_brake_end", "lead_gap", "follow_gap", "own_gap"):
+        assert parts[name].dtype == np.float64, name
 
 
 @pytest.mark.parametrize("target", [0.0, -0.3e-9, -1.2e-9, -1e-6])
