@@ -17,10 +17,10 @@ from __future__ import annotations
 import argparse
 import os
 import sys
-import time
 
 import numpy as np
 
+from bench_one_source import best_of
 from safelane import Params
 from safelane.safety._backend import ARRAY, FEASIBILITY_TOL_M
 from safelane.safety.evasion import fast_kernel
@@ -83,15 +83,6 @@ def same_bits(a, b, n: int) -> bool:
     if isinstance(a, tuple):
         return len(a) == len(b) and all(same_bits(x, y, n) for x, y in zip(a, b, strict=True))
     return bool(np.array_equal(_bits(a, n), _bits(b, n)))
-
-
-def best_of(repeat: int, fn) -> float:
-    best = float("inf")
-    for _ in range(repeat):
-        t0 = time.perf_counter()
-        fn()
-        best = min(best, time.perf_counter() - t0)
-    return best
 
 
 def main(argv=None) -> None:
