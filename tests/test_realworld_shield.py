@@ -392,3 +392,28 @@ def test_delay_periods_rounds_within_a_nanosecond():
     assert delay_periods(Cfg(0.0), prm) == 0
     with pytest.raises(ValueError, match="actuation_delay_s"):
         delay_periods(Cfg(2e-9), prm)
+
+
+@dataclasses.dataclass(frozen=True)
+class _Feasible:
+    feasible: np.ndarray
+
+
+def test_in_flight_checks_l1_and_f_only_where_the_drift_reaches_the_conflict_zone():
+    """During the delay the ego drifts at its lateral speed (no lateral acceleration in flight): the gaps to L1 and F
+    count only where ``max(y0, y0 + v_y·delay)`` passes ``y_safe`` (the reference: that line's two ends). L1 sits
+    inside the margin in every row, so a row stays feasible exactly where the drift stays out of the zone."""
+    prm = Params()
+    delay = 0.2
+    y0 = np.array([prm.y_safe - 0.30, prm.y_safe - 0.30, prm.y_safe - 0.05, prm.y_safe + 0.10, prm.y_safe - 1.0])
+    vy = np.array([0.5, 1.6, 0.0, -1.0, 3.0])  # ends: -0.20, +0.02, -0.05, +0.10 (start inside), -0.40
+    b = len(y0)
+    ex = np.zeros(b)
+    s = Situation.from_arrays(
+        t=0.0, ego=(ex, y0, np.full(b, 20.0), vy), follower=(ex - 300.0, np.full(b, 20.0)),
+        leaders=((ex + prm.p_m - 1.0)[:, None], np.full((b, 1), 20.0)), n_connected=0, params=prm,
+    )  # fmt: skip
+    got = in_flight_checked(_Feasible(np.ones(b, bool)), s, None, delay, prm).feasible
+    reaches = np.maximum(y0, y0 + vy * delay) > prm.y_safe
+    np.testing.assert_array_equal(got, ~reaches)
+    assert reaches.any() and (~reaches).any()
