@@ -123,8 +123,9 @@ def candidate_row(xp, ego_x, ego_y, ego_vx, ego_vy, a_x, a_y, l1_x, l1_v, l1_dec
 
 
 #: :func:`check_candidate` runs the compiled kernel (:mod:`._fast_decide`) for batches of at least this many rows:
-#: every batch (measured, ``benchmarks/bench_shield_latency.py``: one vehicle's ``Shield.step`` 2.2x faster than with
-#: the NumPy path below 32 rows). The threshold stays so a test can see where the dispatch switches.
+#: every batch (measured with ``benchmarks/bench_shield_latency.py``'s situation: one vehicle's ``Shield.step`` about
+#: 2.4x faster than with the NumPy path below 32 rows). The threshold stays so a test can see where the dispatch
+#: switches.
 FAST_CANDIDATE_MIN = 1
 
 
