@@ -172,8 +172,12 @@ def test_last_profile_validation_names_the_problem():
     batch = paper_scenarios("CV_all", 1, 5.0, 2, np.random.default_rng(0))
     with pytest.raises(ValueError, match="at least one period"):
         with_last_profile(batch, [[0.0, 1.0, 1.05]] * 2, [[0.0, -8.0, 0.0]] * 2)
-    with pytest.raises(ValueError, match="a_x_d"):
+    with pytest.raises(ValueError, match=r"a_o_d=-8\.0"):  # L(N+1) brakes up to the others' maximum (a_x_d unless set)
         with_last_profile(batch, [[0.0, 1.0]] * 2, [[0.0, -9.0]] * 2)
+    harder = Params(a_o_d=9.5)
+    assert with_last_profile(batch, [[0.0, 1.0]] * 2, [[0.0, -9.5]] * 2, harder).last_profile_a.min() == -9.5
+    with pytest.raises(ValueError, match=r"a_o_d=-9\.5"):
+        with_last_profile(batch, [[0.0, 1.0]] * 2, [[0.0, -9.6]] * 2, harder)
     with pytest.raises(ValueError, match=r"\[:, 0\] must be 0"):
         with_last_profile(batch, [[0.5, 1.0]] * 2, [[0.0, -8.0]] * 2)
 

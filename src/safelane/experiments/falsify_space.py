@@ -5,8 +5,9 @@ the L(N+1) profile, the adversarial planner's and the traffic hooks' parameters)
 
 * :func:`decode` maps a point ``u ∈ [0, 1]^D`` of the unit cube (random search, cross-entropy) to a spec. Each
   coordinate has an *edge mixture*: part of its range maps to exact edge values (a slack of exactly 0, a speed
-  equal to the vehicle ahead's, ``a_x_d`` exactly), part to tiny values (log-uniform down to 1e-12), the rest to
-  the plain range;
+  equal to the vehicle ahead's, the others' maximum braking ``a_o_d`` exactly), part to tiny values (log-uniform
+  down to 1e-12), the rest to the plain range. The others brake up to their own maximum ``Params.others_decel``
+  (``a_o_d``; ``a_x_d`` in the paper's world), not only up to the ego's committed ``a_x_d``;
 * :func:`knife_specs` snaps random specs to knife edges: leaders exactly at their margin at equal speed, speed
   matches that land on a period boundary, profile switches on or a hair off a boundary, lateral positions at the
   conflict-zone edge and the lane boundary;
@@ -82,16 +83,16 @@ def decode(u: np.ndarray, prm: Params, brake_start_s: float = 0.0, world: str = 
     spec["lv_dv"] = np.where(c.take(L) < 0.3, 0.0, lin(c.take(L), -8.0, 8.0))  # L_i − L(i+1) speed
     spec["slack"] = _edge(c.take(L), 0.0, 40.0)  # L(i+1) − L_i − margin_i
     spec["human"] = c.take(L) < 0.2
-    spec["promise_decel"] = _edge(c.take(L), 0.0, prm.a_x_d, exact=0.5, p_exact=0.3, p_tiny=0.1)
+    spec["promise_decel"] = _edge(c.take(L), 0.0, prm.others_decel, exact=0.5, p_exact=0.3, p_tiny=0.1)
     spec["promise_accel"] = _edge(c.take(L), 0.0, prm.a_x_a, exact=0.5, p_exact=0.3, p_tiny=0.1)
     # L(N+1): piecewise-constant profile; segment j starts dt..3 s after j−1 (snapped to a period with prob 0.5).
     gaps = lin(c.take(P - 1), prm.dt, 3.0)
     snap = c.take(P - 1) < 0.5
     gaps = np.where(snap, np.maximum(np.round(gaps / prm.dt), 1.0) * prm.dt, gaps)
     spec["profile_t"] = np.concatenate([np.zeros((len(u), 1)), np.cumsum(gaps, axis=1)], axis=1)
-    acc = lin(c.take(P), -prm.a_x_d, prm.a_x_a)
-    spec["profile_a"] = np.where(c.take(P) < 0.25, -prm.a_x_d, acc)
-    spec["decel_last"] = _edge(c.take(), 1e-3, prm.a_x_d, exact=prm.a_x_d, p_exact=0.3, p_tiny=0.0)
+    acc = lin(c.take(P), -prm.others_decel, prm.a_x_a)  # the others brake up to their own maximum a_o_d
+    spec["profile_a"] = np.where(c.take(P) < 0.25, -prm.others_decel, acc)
+    spec["decel_last"] = _edge(c.take(), 1e-3, prm.others_decel, exact=prm.others_decel, p_exact=0.3, p_tiny=0.0)
     spec["brake_start_s"] = np.full(len(u), float(brake_start_s))
     spec["mode"] = np.minimum((c.take() * 4).astype(np.int64), 3)
     spec["planner"] = c.take(PLANNER_PARAMS)
@@ -111,7 +112,7 @@ def decode(u: np.ndarray, prm: Params, brake_start_s: float = 0.0, world: str = 
 
 def _decode_realistic(c: _Cube, spec: dict, prm: Params) -> None:
     """L0 (present in 85 % of rows): its slack behind which the ego starts (edge mixture: exactly ``p_m``), its speed
-    relative to the ego's, a piecewise-constant profile as L(N+1)'s (a quarter of the segments at ``-a_x_d``); the
+    relative to the ego's, a piecewise-constant profile as L(N+1)'s (a quarter of the segments at ``-a_o_d``); the
     actuation delay in periods (0–3)."""
     n = len(spec["n"])
     spec["l0_present"] = c.take() < 0.85
@@ -121,8 +122,8 @@ def _decode_realistic(c: _Cube, spec: dict, prm: Params) -> None:
     snap = c.take(P - 1) < 0.5
     gaps = np.where(snap, np.maximum(np.round(gaps / prm.dt), 1.0) * prm.dt, gaps)
     spec["l0_profile_t"] = np.concatenate([np.zeros((n, 1)), np.cumsum(gaps, axis=1)], axis=1)
-    acc = lin(c.take(P), -prm.a_x_d, prm.a_x_a)
-    spec["l0_profile_a"] = np.where(c.take(P) < 0.25, -prm.a_x_d, acc)
+    acc = lin(c.take(P), -prm.others_decel, prm.a_x_a)
+    spec["l0_profile_a"] = np.where(c.take(P) < 0.25, -prm.others_decel, acc)
     spec["delay_periods"] = np.minimum((c.take() * (MAX_DELAY_PERIODS + 1)).astype(np.int64), MAX_DELAY_PERIODS)
     spec["world_key"] = (c.take() * 2**52).astype(np.int64)  # keys the measurement errors: a replay draws the same
 
@@ -189,10 +190,11 @@ def knife_specs(rng: np.random.Generator, count: int, prm: Params, brake_start_s
     aligned = np.where(pick(0.5)[:, None], starts * prm.dt, running)
     jitter = rng.choice([0.0, 0.0, 1e-12, -1e-12, 1e-9, -1e-9, 0.5 * prm.dt], size=(count, P - 1))
     times = np.concatenate([np.zeros((count, 1)), aligned + jitter], axis=1)
-    d1, d2 = rng.uniform(0.5, prm.a_x_d, size=count), rng.uniform(0.0, 0.5, size=count)
-    harder = np.stack([-d1, -d2 * d1, -prm.a_x_d * np.ones(count), np.zeros(count)], 1)
+    d1, d2 = rng.uniform(0.5, prm.others_decel, size=count), rng.uniform(0.0, 0.5, size=count)
+    harder = np.stack([-d1, -d2 * d1, -prm.others_decel * np.ones(count), np.zeros(count)], 1)
     profile_a = np.where(pick(0.5)[:, None], harder, spec["profile_a"])
-    profile_a[rows] = np.stack([a[rows], np.zeros(rows.size), np.zeros(rows.size), -prm.a_x_d * np.ones(rows.size)], 1)
+    hardest = -prm.others_decel * np.ones(rows.size)
+    profile_a[rows] = np.stack([a[rows], np.zeros(rows.size), np.zeros(rows.size), hardest], 1)
     times[rows, 1] = t_match[rows]
     times[rows, 2:] = np.maximum(times[rows, 2:], t_match[rows, None] + prm.dt * np.arange(1, P - 1))
     for j in range(1, P):  # at most one switch per period: a jittered switch may not come within dt of the last
@@ -242,7 +244,7 @@ def knife_specs(rng: np.random.Generator, count: int, prm: Params, brake_start_s
     lateral = pick(0.4) & ~paper
     spec["ego_y"] = np.where(lateral, rng.choice(y_edges, size=count), spec["ego_y"])
     spec["ego_vy"] = np.where(lateral, rng.choice([0.0, 1e-12, -1e-12, 0.5, -0.5], size=count), spec["ego_vy"])
-    if world == "realistic":  # L0 at its margin at the ego's speed, braking at a_x_d from a period boundary or not
+    if world == "realistic":  # L0 at its margin at the ego's speed, braking at a_o_d from a period boundary or not
         tie = pick(0.5)
         spec["l0_slack"] = np.where(tie, 0.0, np.round(spec["l0_slack"] * 1024) / 1024)
         spec["l0_dv"] = np.where(tie | pick(0.3), 0.0, spec["l0_dv"])
@@ -252,8 +254,8 @@ def knife_specs(rng: np.random.Generator, count: int, prm: Params, brake_start_s
         t0 = t0 + rng.choice([0.0, 0.0, 1e-12, 1e-9, 0.5 * prm.dt], size=count)
         times = np.stack([np.zeros(count), np.maximum(t0, prm.dt), np.maximum(t0, prm.dt) + 1.0,
                           np.maximum(t0, prm.dt) + 2.0], 1)  # fmt: skip
-        accels = np.stack([rng.uniform(0.0, prm.a_x_a, count), -prm.a_x_d * np.ones(count), np.zeros(count),
-                           -prm.a_x_d * np.ones(count)], 1)  # fmt: skip
+        accels = np.stack([rng.uniform(0.0, prm.a_x_a, count), -prm.others_decel * np.ones(count), np.zeros(count),
+                           -prm.others_decel * np.ones(count)], 1)  # fmt: skip
         spec["l0_profile_t"] = np.where(brake[:, None], times, spec["l0_profile_t"])
         spec["l0_profile_a"] = np.where(brake[:, None], accels, spec["l0_profile_a"])
     return spec

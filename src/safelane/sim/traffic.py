@@ -115,8 +115,9 @@ def with_last_profile(batch, switch_times_s, accels_mps2, params: Params | None 
         batch: a :class:`~safelane.sim.ScenarioBatch`.
         switch_times_s: ``(B, P)`` ascending times [s] at which segment ``j`` starts; ``[:, 0]`` must be 0. Pad
             unused segments by repeating the last time (zero-length segments are ignored).
-        accels_mps2: ``(B, P)`` acceleration of each segment, inside ``[−a_x_d, a_x_a]`` (a deceleration beyond
-            ``a_x_d`` leaves the assumptions: it is rejected here; use ``decel_last`` for that study).
+        accels_mps2: ``(B, P)`` acceleration of each segment, inside ``[−a_o_d, a_x_a]`` (the others' maximum
+            braking ``a_o_d``, ``a_x_d`` unless set; beyond it leaves the assumptions: it is rejected here; use
+            ``decel_last`` for that study).
         params: the limits to check against (default ``Params()``).
 
     Consecutive switches must be at least one control period apart apart from padding (at most one switch
@@ -137,9 +138,11 @@ def with_last_profile(batch, switch_times_s, accels_mps2, params: Params | None 
         raise ValueError("switch_times_s must be ascending along each row")
     if ((steps > 0) & (steps < prm.dt - 1e-12)).any():
         raise ValueError(f"switches must be at least one period (dt={prm.dt} s) apart (at most one per period)")
-    if (a < -prm.a_x_d - 1e-12).any() or (a > prm.a_x_a + 1e-12).any():
-        bad = a[(a < -prm.a_x_d - 1e-12) | (a > prm.a_x_a + 1e-12)].flat[0]
-        raise ValueError(f"accels_mps2 must lie in [-a_x_d={-prm.a_x_d}, a_x_a={prm.a_x_a}]; got {bad!r}")
+    brake = prm.others_decel  # L(N+1) is one of the others: it brakes up to their maximum a_o_d (a_x_d unless set)
+    if (a < -brake - 1e-12).any() or (a > prm.a_x_a + 1e-12).any():
+        bad = a[(a < -brake - 1e-12) | (a > prm.a_x_a + 1e-12)].flat[0]
+        raise ValueError(f"accels_mps2 must lie in [-a_o_d={-brake}, a_x_a={prm.a_x_a}] (a_o_d: Params.others_decel); "
+                         f"got {bad!r}")  # fmt: skip
     return dataclasses.replace(batch, last_profile_t=t, last_profile_a=a)
 
 
