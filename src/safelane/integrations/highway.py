@@ -39,6 +39,7 @@ from .highway_road import (  # noqa: E402
     check_road,
     classify_crash,
     crash_partner,
+    highway_params,
     longitudinal,
     own_lane_leaders,
 )
@@ -79,15 +80,6 @@ __all__ = [
     "own_lane_leaders",
     "register_highway_envs",
 ]
-
-
-def highway_params(**overrides) -> Params:
-    """:class:`Params` for highway-env's geometry and traffic: 4 m lanes, 5 × 2 m vehicles, and ``a_x_a = 3`` m/s²
-    (IDM's largest acceleration, ``COMFORT_ACC_MAX``: an aggressive F accelerates at most at it). ``a_x_d`` stays 8
-    m/s² (IDM brakes at up to 6; the scene's L(N+1) at up to 8)."""
-    values = {"lane_width": 4.0, "vehicle_width": 2.0, "vehicle_length": 5.0, "a_x_a": 3.0}
-    values.update(overrides)
-    return Params(**values)
 
 
 def register_highway_envs() -> None:

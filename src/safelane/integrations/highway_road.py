@@ -17,6 +17,15 @@ except ImportError as exc:  # pragma: no cover - exercised only without the extr
     raise ImportError('safelane.integrations.highway needs highway-env: pip install "safelane[highway]"') from exc
 
 
+def highway_params(**overrides) -> Params:
+    """:class:`Params` for highway-env's geometry and traffic: 4 m lanes, 5 × 2 m vehicles, and ``a_x_a = 3`` m/s²
+    (IDM's largest acceleration, ``COMFORT_ACC_MAX``: an aggressive F accelerates at most at it). ``a_x_d`` stays 8
+    m/s² (IDM brakes at up to 6; the scene's L(N+1) at up to 8)."""
+    values = {"lane_width": 4.0, "vehicle_width": 2.0, "vehicle_length": 5.0, "a_x_a": 3.0}
+    values.update(overrides)
+    return Params(**values)
+
+
 def check_frequencies(env, params: Params) -> None:
     """Raise a ``ValueError`` naming the config keys unless the host simulates and decides every ``params.dt``."""
     config = env.unwrapped.config

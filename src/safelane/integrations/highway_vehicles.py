@@ -15,6 +15,7 @@ from highway_env.vehicle.behavior import IDMVehicle
 from highway_env.vehicle.kinematics import Vehicle
 
 from .._motion import advance
+from .highway_road import highway_params
 
 
 class PointMassVehicle(Vehicle):
@@ -169,8 +170,6 @@ class PromiseIDMVehicle(IDMVehicle):
 
     def _params(self):
         if self.safelane_params is None:
-            from .highway import highway_params  # the wrapper's defaults (highway imports this module)
-
             self.safelane_params = highway_params()
         return self.safelane_params
 
