@@ -181,11 +181,7 @@ def plan_from_core(xp, shape, args, exists, parts, lead_margin, follow_margin, p
     which calls the unchecked core on states it built itself). ``own``: ``(l0_p, l0_v, l0_decel, margin)`` where the
     parts come from :func:`~.own_lane.own_lane_core`."""
     with np.errstate(all="ignore"):
-        reason = (
-            xp.where(parts["lead_ok"], 0, int(Reason.LEADER_INFEASIBLE))
-            + xp.where(parts["lead_ok"], xp.where(parts["follow_ok"], 0, int(Reason.FOLLOWER_TOO_CLOSE)), 0)
-            + xp.where(parts["nothing"], int(Reason.NOTHING_TO_EVADE), 0)
-        )
+        reason = plan_reason(xp, parts["lead_ok"], parts["follow_ok"], parts["nothing"])
     if xp is not ARRAY:
         args = tuple(np.float64(x) if not isinstance(x, bool) else np.bool_(x) for x in args)
     reason = np.asarray(finish(xp, shape, reason, np.uint8))
@@ -222,6 +218,23 @@ def plan_from_core(xp, shape, args, exists, parts, lead_margin, follow_margin, p
     )  # fmt: skip
 
 
+def plan_reason(xp, lead_ok, follow_ok, nothing):
+    """The :class:`Reason` bits of a plan from the evasion's parts (without ``CHAIN_UNSAFE``, which the caller adds):
+    ``LEADER_INFEASIBLE`` where the leader constraint fails, else ``FOLLOWER_TOO_CLOSE`` where the follower's does;
+    ``NOTHING_TO_EVADE`` where the ego never left its lane. Backend-generic (the compiled shield period, row by row)."""
+    return (
+        xp.where(lead_ok, 0, _LEADER_INFEASIBLE)
+        + xp.where(lead_ok, xp.where(follow_ok, 0, _FOLLOWER_TOO_CLOSE), 0)
+        + xp.where(nothing, _NOTHING_TO_EVADE, 0)
+    )
+
+
+# The bits as plain ints (compiled code reads them as constants).
+_LEADER_INFEASIBLE, _FOLLOWER_TOO_CLOSE, _NOTHING_TO_EVADE = (
+    int(Reason.LEADER_INFEASIBLE), int(Reason.FOLLOWER_TOO_CLOSE), int(Reason.NOTHING_TO_EVADE)
+)
+
+
 def set_rows(plan: EvasionPlan, pieces) -> EvasionPlan:
     """``plan`` with the rows of each ``(rows, sub_plan)`` piece replaced by ``sub_plan`` (same order); each field
     is copied once."""
@@ -240,4 +253,4 @@ def set_rows(plan: EvasionPlan, pieces) -> EvasionPlan:
 
 
 # The plan's motion, compiled into the closed loop's held plan (sim/_fast_held.py; safety/_compile.py).
-jitable(plan_state)
+jitable(plan_state, plan_reason)

@@ -30,12 +30,13 @@ from ..params import Params
 from ..safety.evasion import plan_evasion
 from ..safety.plan import EvasionPlan
 from . import assessment as assess
-from . import stages, validation
+from . import fast_step, stages, validation
 from .command import Command, InFlight
 from .config import ShieldConfig
 from .decision import Decision
 from .monitor import Breach, Snapshot, observe_breaches
 from .policies import ASSESSMENTS, variant_flags
+from .proposals import proposal_arrays
 from .realworld import carry_worst, delay_periods, in_flight_checked, own_plan, worst_corners
 from .rules import rule_rows
 from .situation import Situation
@@ -175,7 +176,39 @@ class Shield:
         self.params = validation.shield_params(params)
         self.config = validation.shield_config(config)
         self.variant = validation.shield_variant(variant)
-        self.state: ShieldState | None = None
+        self._state: ShieldState | None = None
+        self._packed: fast_step.Packed | None = None  # the state as the compiled period keeps it (fast_step)
+        self._refused: dict[int, list[str]] = {}  # fast_step.refusals per batch size
+        self._flag_rows: dict[int, np.ndarray] = {}
+        #: Which path ran the last period: ``"compiled"`` (:mod:`.fast_step`) or ``"stages"`` (:func:`step`).
+        self.last_path: str | None = None
+
+    @property
+    def state(self) -> ShieldState | None:
+        """The :class:`ShieldState` after the last period (unpacked from the compiled path's arrays when read)."""
+        if self._state is None and self._packed is not None:
+            self._state = self._packed.state(self.params)
+        return self._state
+
+    def _flags(self, n: int):
+        """The variant's ``(B, 3)`` flags for ``n`` rows (cached: the variant is fixed)."""
+        if n not in self._flag_rows:
+            self._flag_rows[n] = np.column_stack(variant_flags(self.variant, n))
+        return self._flag_rows[n]
+
+    @state.setter
+    def state(self, value: ShieldState | None) -> None:
+        self._state, self._packed = value, None
+
+    def refusals(self, situation: Situation) -> list[str]:
+        """Why this period would not run compiled (empty: it would; :mod:`.fast_step`)."""
+        n = len(situation)
+        if n not in self._refused:  # (the kernel's presence is read once per batch size, as the refusals)
+            self._refused[n] = fast_step.refusals(self.config, self.variant, n)
+            if fast_step.kernel() is None:
+                self._refused[n] = ["numba missing or SAFELANE_NO_NUMBA=1"]
+        held = None if self._packed is not None else self._state
+        return self._refused[n] + fast_step.situation_refusals(situation, self.config, held)
 
     @classmethod
     def from_preset(cls, preset="paper", variant="CV_all", config=None) -> Shield:
@@ -189,12 +222,20 @@ class Shield:
         self.state = init(situation, self.params, self.config, self.variant)
 
     def step(self, situation: Situation, proposal) -> Decision:
-        if self.state is None:
+        if self._state is None and self._packed is None:
             raise RuntimeError("Shield.step before Shield.reset(situation): the shield needs the starting situation")
         validation.situation_arg(situation, "Shield.step").validate(self.params)
-        if len(situation) != len(self.state.completed):
-            raise ValueError(f"the situation has {len(situation)} rows; the shield was reset with "
-                             f"{len(self.state.completed)}")  # fmt: skip
+        rows = len(self._packed.count) if self._packed is not None else len(self._state.completed)
+        if len(situation) != rows:
+            raise ValueError(f"the situation has {len(situation)} rows; the shield was reset with {rows}")
         proposal = validation.batch_proposal(proposal, len(situation))
+        if not self.refusals(situation):
+            packed = self._packed if self._packed is not None else fast_step.Packed.of(self._state)
+            proposal = proposal_arrays("the nominal planner", proposal, len(situation))
+            self._packed, decision = fast_step.step(packed, situation, proposal, self.params, self.config,
+                                                    self._flags(len(situation)))  # fmt: skip
+            self._state, self.last_path = None, "compiled"
+            return decision
         self.state, decision = step(self.state, situation, proposal, self.params, self.config, self.variant)
+        self.last_path = "stages"
         return decision

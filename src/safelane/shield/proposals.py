@@ -20,6 +20,15 @@ _RANGE_TOL = 1e-9
 
 def check_proposal(planner, proposal, batch: int, prm: Params):
     """``(a_x, a_y, invalid)`` from a planner's raw answer; invalid rows hold ``0`` (see the module docstring)."""
+    out = proposal_arrays(planner, proposal, batch)
+    with np.errstate(invalid="ignore"):
+        ok, a_x, a_y = proposal_core(ARRAY, *out, prm)
+    return a_x, a_y, ~ok
+
+
+def proposal_arrays(planner, proposal, batch: int) -> list[np.ndarray]:
+    """``[a_x, a_y]`` as float arrays of shape ``(batch,)``, or the ``TypeError``/``ValueError`` naming the planner and
+    what is wrong (the module docstring); their values are :func:`proposal_core`'s to judge."""
     name = planner if isinstance(planner, str) else getattr(planner, "__name__", type(planner).__name__)
     who = name if name.startswith("the ") else f"nominal planner {name}"  # not "nominal planner the nominal planner"
     if not isinstance(proposal, tuple | list) or len(proposal) != 2:
@@ -34,9 +43,7 @@ def check_proposal(planner, proposal, batch: int, prm: Params):
         if arr.shape != (batch,):
             raise ValueError(f"{who} returned {axis} of shape {arr.shape}; expected ({batch},)")
         out.append(arr.astype(float))
-    with np.errstate(invalid="ignore"):
-        ok, a_x, a_y = proposal_core(ARRAY, *out, prm)
-    return a_x, a_y, ~ok
+    return out
 
 
 def proposal_core(xp, a_x, a_y, lim):

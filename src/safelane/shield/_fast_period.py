@@ -1,0 +1,234 @@
+"""Optional compiled control period of the shield (numba, extra ``fast``): :func:`safelane.shield.core.step`'s stages
+for every row in one compiled call, for the settings :func:`.fast_step.refusals` accepts.
+
+No rule lives here: :func:`period_kernel` is the stages' glue, row by row, calling the one source of each rule — the
+assessment's :func:`~.assessment.belief_core`, the chain scan's link (``_chain_row`` →
+:func:`~safelane.safety.chain.chain_link`), the monitor's comparisons (``_breach_row`` →
+:func:`~.monitor.braked_harder`, :func:`~.monitor.pushed_harder`), :func:`~.stages.worst_case_core`,
+:func:`~.proposals.proposal_core`, the candidate check (``_candidate`` → :func:`~.decide.candidate_row`), the
+completion guard :func:`~.decide.commit_guard_core`, :func:`~.decide.hesitate_core`, the responsible follow
+(:mod:`safelane.safety.responsible`), :func:`~.stages.lane_keep_accel`, the held plan's motion (``_plan_motion`` →
+:func:`~safelane.safety.plan.plan_state`, :func:`~.decide.plan_switches`) and :func:`~safelane.safety.plan.plan_reason`.
+It writes what the NumPy stages compute, in their order of evaluation, so a row's decision and state are the stages'
+bits (``tests/test_fast_period.py`` compares them field by field over many periods). :mod:`.fast_step` is the Python
+side (the state packed into arrays between periods, the :class:`~.decision.Decision` built from them).
+"""
+
+from __future__ import annotations
+
+import numba
+import numpy as np
+
+from ..safety import _compile
+from ..safety._backend import SCALAR, Limits, _clip
+from ..safety._fast_base import announce_compile
+from ..safety._fast_responsible import _responsible_bound
+from ..safety.plan import plan_reason
+from ..safety.responsible import responsible_accel_core, responsible_ok_core
+from ..sim._fast_held import _plan_motion
+from ..sim._fast_traffic import _chain_row
+from ._fast_decide import _candidate
+from ._fast_monitor import _breach_row
+from .assessment import belief_core
+from .decide import ABORT, COMPLETED, HESITATE, PROCEED, commit_guard_core, hesitate_core
+from .proposals import proposal_core
+from .stages import lane_keep_accel, worst_case_core
+
+_compile.register_rows()
+announce_compile(__file__)
+
+_INF = np.inf
+#: Scalars of :func:`period_kernel`'s ``prm`` vector, in order.
+PRM = (
+    "t", "dt", "a_x_a", "a_x_d", "a_y_m", "y_safe", "p_m", "p_m_human", "y_boundary", "lane_width", "a_o_d",
+    "lat_tol", "tol", "monitor_tol", "assess_threshold", "monitor",
+)  # fmt: skip
+#: Columns of the situation's per-row floats ``sf``.
+SIT_F = ("ego_x", "ego_y", "ego_vx", "ego_vy", "f_x", "f_v", "f_observed", "a_x", "a_y")
+#: Columns of the situation's per-row flags ``sb``: F trusted over V2X (connected and collaborative), a stale V2X
+#: sender, then the variant's flags (uses the chain, F's V2X, the assessment).
+SIT_B = ("f_trusted", "stale", "uses_chain", "uses_f_v2x", "uses_assessment")
+#: The held plan's columns (:class:`~safelane.safety.plan.EvasionPlan`'s fields, booleans and the reason as floats).
+PLAN = (
+    "feasible", "reason", "t_y_f", "t_y_switch", "t_x1", "t_x2", "min_gap_leader", "min_gap_follower", "ego_px",
+    "ego_py", "ego_vx", "ego_vy", "l1_p", "l1_v", "l1_decel", "v_switch", "t_brake_end", "follows_leader", "y_acc_1",
+    "y_acc_2", "t_y_end", "own_p", "own_v", "own_decel", "follows_own", "continues", "min_gap_own",
+)  # fmt: skip
+#: Per-row float state ``st``: the held plan's start, the assessment's first collaborative verdict, the breach's
+#: first instant, and the monitor's snapshot of F and the plan (F's position and speed, a responsible F's limit,
+#: the plan's L1 deceleration).
+STATE_F = (
+    "plan_t0", "first_collaborative_s", "first_breach_s", "snap_f_x", "snap_f_v", "snap_f_limit", "snap_l1_decel",
+)  # fmt: skip
+#: Per-row flag state ``sk``: the plan's F type, the assessment's latch and belief, the lane change completed, the
+#: snapshot's activity, then the breach flags (``monitor.BREACH_KINDS``).
+STATE_B = ("plan_f_aggr", "latched", "aggressive", "completed", "snap_active", "l1_decel", "leader_bound", "last_decel",
+           "follower", "stale_v2x")  # fmt: skip
+#: Per-row outputs ``of``: the commands, the proposal as checked, L1's worst case.
+OUT_F = ("a_x", "a_y", "nominal_x", "nominal_y", "l1_decel")
+#: Per-row output flags ``ob``: completing, invalid, F assumed aggressive, the chain unsafe.
+OUT_B = ("completing", "invalid", "f_aggressive", "unsafe")
+
+_PF = {name: j for j, name in enumerate(PLAN)}
+_P_FEAS, _P_REASON, _P_TX2, _P_GAPL, _P_GAPF, _P_FOLLOWS = (
+    _PF[n] for n in ("feasible", "reason", "t_x2", "min_gap_leader", "min_gap_follower", "follows_leader")
+)
+_P_OWN = _PF["own_p"]
+#: EvasionPlan's values without an own-lane leader: own_p, own_v, own_decel, follows_own, continues, min_gap_own.
+_OWN_DEFAULTS = np.array([np.inf, 0.0, 0.0, 0.0, 0.0, np.inf])
+assert PLAN[_P_OWN:] == ("own_p", "own_v", "own_decel", "follows_own", "continues", "min_gap_own")
+#: The plan columns :func:`~safelane.sim._fast_held._plan_motion` reads, in its order (``_fast_loop.PLAN``).
+_HELD = np.array([_PF[n] for n in ("ego_px", "ego_py", "ego_vx", "ego_vy", "l1_p", "l1_v", "l1_decel", "t_x1",
+                                   "v_switch", "t_brake_end", "t_y_f", "t_y_switch", "y_acc_1", "y_acc_2",
+                                   "t_y_end")])  # fmt: skip
+#: The evasion's float parts (``_fast.FLOAT_PARTS``, as :func:`._fast_decide._candidate` returns them) into the plan.
+_PARTS = np.array([_PF[n] for n in ("t_y_f", "t_y_switch", "y_acc_1", "y_acc_2", "t_y_end", "t_x1", "v_switch",
+                                    "t_brake_end")])  # fmt: skip
+
+
+@numba.njit(cache=True, nogil=True, error_model="numpy")
+def period_kernel(prm, sf, sb, chain_x, chain_v, chain_promise, chain_human, n_connected, history, count, st, sk,
+                  plan, has_last, snap_x, snap_v, snap_bounds, snap_nc, bounds, behaviour, of, ob, knots):  # fmt: skip
+    """One period of every row (see the module docstring). Reads the situation (``sf``, ``sb``, the chain), updates
+    the state in place (``history``, ``count``, ``st``, ``sk``, ``plan``; the snapshot ``snap_*`` is read, the caller
+    keeps this period's), writes ``bounds (B, M)``, ``behaviour``, ``of``, ``ob`` and the aborting rows' knots
+    ``(B, 5, 8)`` (``t, px, vx, py, vy``)."""
+    t, dt, a_a, a_d, a_ym, y_safe, p_m, p_m_h, y_bound, lane_w, a_o, lat_tol, tol, mon_tol, thr, mon = prm[:16]
+    lim = Limits(a_a, a_d, a_ym, y_safe)
+    bsz, m = chain_x.shape
+    window = history.shape[1]
+    times = np.empty(window)
+    for j in range(window):
+        times[j] = (j - (window - 1) / 2.0) * dt
+    den = times[0] * times[0]
+    for j in range(1, window):
+        den = den + times[j] * times[j]
+    x2, v2, b2 = np.empty((1, m + 1)), np.empty((1, m + 1)), np.empty((1, m + 1))
+    promise, margin = np.empty((max(m - 1, 1), 1)), np.empty((max(m - 1, 1), 1))
+    held = np.empty(_HELD.shape[0])
+    kn = np.empty((7, 8))
+    kt, kx, kv, ky, kvy, kax, kay = kn[0], kn[1], kn[2], kn[3], kn[4], kn[5], kn[6]
+    same = snap_x.shape[1] == m
+    for b in range(bsz):
+        ex, ey, evx, evy, fx, fv = sf[b, 0], sf[b, 1], sf[b, 2], sf[b, 3], sf[b, 4], sf[b, 5]
+        # --- observe: the assessment's observation (assessment.update) ---
+        for j in range(window - 1):
+            history[b, j] = history[b, j + 1]
+        history[b, window - 1] = sf[b, 6]
+        count[b] += 1
+        num = history[b, 0] * times[0]
+        for j in range(1, window):
+            num = num + history[b, j] * times[j]
+        sk[b, 1], sk[b, 2] = belief_core(SCALAR, num / den, count[b] >= window, sk[b, 1], sk[b, 2], thr)
+        if st[b, 1] != st[b, 1] and not sk[b, 2]:
+            st[b, 1] = t
+        # --- the chain analysis (stages.chain_analysis), F in slot 0 ---
+        nc = n_connected[b]
+        x2[0, 0], v2[0, 0] = fx, fv
+        for i in range(m):
+            x2[0, i + 1], v2[0, i + 1] = chain_x[b, i], chain_v[b, i]
+        for i in range(m - 1):
+            promise[i, 0] = chain_promise[b, i] if i < nc else a_o
+            margin[i, 0] = p_m_h if (chain_human[b, i] and i < nc) else p_m
+        unsafe = _chain_row(x2, v2, 0, promise, margin, 0, a_o, b2)
+        for i in range(m):
+            bounds[b, i] = b2[0, i + 1]
+        # --- the monitor's comparison of the last period (monitor.observe_breaches) ---
+        if has_last:
+            f0, f1, f2, f3 = _breach_row(snap_x, snap_v, snap_bounds, b, x2, 0, 1, snap_nc[b], st[b, 6], st[b, 3],
+                                         st[b, 4], st[b, 5], sk[b, 4], fx, same, dt, mon_tol)  # fmt: skip
+            new = (f0 and not sk[b, 5]) or (f1 and not sk[b, 6]) or (f2 and not sk[b, 7]) or (f3 and not sk[b, 8])
+            if st[b, 2] != st[b, 2] and new:
+                st[b, 2] = t
+            sk[b, 5], sk[b, 6], sk[b, 7], sk[b, 8] = sk[b, 5] or f0, sk[b, 6] or f1, sk[b, 7] or f2, sk[b, 8] or f3
+        # --- worst case (stages.worst_case) ---
+        broken = sk[b, 5] or sk[b, 6] or sk[b, 7] or sk[b, 8] or sk[b, 9]
+        broken = broken and mon > 0.0  # ShieldConfig.monitor
+        trusted = sb[b, 3] and sb[b, 0]
+        l1_decel, f_aggr = worst_case_core(SCALAR, sb[b, 2], unsafe, b2[0, 1], a_o, trusted, sb[b, 4], sk[b, 2],
+                                           broken)  # fmt: skip
+        # --- the proposal (stages.proposal) ---
+        ok, ax_ok, ay_ok = proposal_core(SCALAR, sf[b, 7], sf[b, 8], lim)
+        invalid = not ok
+        a_x, a_y = _clip(ax_ok, -a_d, a_a), _clip(ay_ok, -a_ym, a_ym)
+        # --- decide: proceed / hesitate / abort with the commit guard (stages.decide, decide.verdict_of) ---
+        a_yh = hesitate_core(SCALAR, evy, dt, a_ym)
+        active = not sk[b, 3]
+        code_b = COMPLETED
+        completing = False
+        if active:
+            code_b = ABORT
+            for code in range(2):
+                if code == 0 and invalid:
+                    continue
+                lateral = a_y if code == 0 else a_yh
+                state, period_ok, crossing, parts, bits = _candidate(
+                    ex, ey, evx, evy, a_x, lateral, chain_x[b, 0], chain_v[b, 0], l1_decel, fx, fv, f_aggr, a_a, a_d,
+                    a_ym, y_safe, p_m, dt, y_bound, lat_tol, tol,
+                )  # fmt: skip
+                if crossing:
+                    keep = period_ok and commit_guard_core(SCALAR, state[0], state[2], state[4], state[5], l1_decel,
+                                                           state[6], state[7], p_m, a_d, tol)  # fmt: skip
+                else:
+                    keep = period_ok and bits[0]
+                if keep:  # the plan from the predicted state (safety.plan.plan_from_core)
+                    code_b = PROCEED if code == 0 else HESITATE
+                    completing = crossing
+                    plan[b, _P_FEAS] = 1.0 if bits[0] else 0.0
+                    plan[b, _P_REASON] = plan_reason(SCALAR, bits[1], bits[2], bits[3])
+                    for j in range(8):
+                        plan[b, _PARTS[j]] = parts[j]
+                    plan[b, _P_TX2] = SCALAR.minimum(parts[7], parts[0])
+                    plan[b, _P_GAPL] = parts[8] + p_m
+                    plan[b, _P_GAPF] = parts[9] + p_m
+                    for j in range(6):
+                        plan[b, _HELD[j]] = state[j]
+                    plan[b, _HELD[6]] = l1_decel
+                    plan[b, _P_FOLLOWS] = 1.0 if bits[4] else 0.0
+                    for j in range(6):  # no own-lane leader: EvasionPlan's defaults
+                        plan[b, _P_OWN + j] = _OWN_DEFAULTS[j]
+                    sk[b, 0] = f_aggr
+                    st[b, 0] = t + 0.0 + dt
+                    break
+        # --- command (stages.command) ---
+        ax_cmd = a_x
+        ay_cmd = a_yh if code_b == HESITATE else a_y
+        if not active:  # after completion: centre in the target lane, follow L1 responsibly
+            slack = chain_x[b, 0] - ex - p_m
+            ax_cmd = responsible_accel_core(SCALAR, a_x, _responsible_bound(slack, evx, chain_v[b, 0], l1_decel, a_d,
+                                                                            dt), a_d)  # fmt: skip
+            if l1_decel > a_d:
+                if not responsible_ok_core(SCALAR, ax_cmd, slack, evx, chain_v[b, 0], l1_decel, a_d, dt, tol):
+                    ax_cmd = -a_d
+            ay_cmd = lane_keep_accel(SCALAR, ey, evy, lane_w, a_ym)
+        if code_b == ABORT:  # the held plan's exact motion over the period
+            for j in range(_HELD.shape[0]):
+                held[j] = plan[b, _HELD[j]]
+            age = SCALAR.maximum(t + 0.0 - st[b, 0], 0.0)
+            _plan_motion(held, plan[b, _P_FOLLOWS] > 0.0, age, dt, a_a, a_d, kt, kx, kv, ky, kvy, kax, kay)
+            for j in range(8):
+                knots[b, 0, j], knots[b, 1, j], knots[b, 2, j] = kt[j], kx[j], kv[j]
+                knots[b, 3, j], knots[b, 4, j] = ky[j], kvy[j]
+            first = 0
+            for j in range(7):
+                if kt[j + 1] - kt[j] > 0.0:
+                    first = j
+                    break
+            span = kt[first + 1] - kt[first]
+            ax_cmd = (kv[first + 1] - kv[first]) / span
+            ay_cmd = (kvy[first + 1] - kvy[first]) / span
+        # --- remember: what a responsible F may do this period, for the monitor (stages.remember) ---
+        limit = _INF
+        if active and not sk[b, 0] and ex - fx > 0.0:
+            limit = SCALAR.maximum(_responsible_bound(ex - fx - p_m, fv, evx, a_d, a_o, dt), -a_o)
+        st[b, 3], st[b, 4], st[b, 5], st[b, 6] = fx, fv, limit, plan[b, _HELD[6]]
+        sk[b, 4] = active
+        if active and sb[b, 1] and not sk[b, 9]:  # stages.with_stale
+            sk[b, 9] = True
+            if st[b, 2] != st[b, 2]:
+                st[b, 2] = t
+        completing = completing and active
+        sk[b, 3] = sk[b, 3] or completing
+        behaviour[b] = code_b
+        of[b, 0], of[b, 1], of[b, 2], of[b, 3], of[b, 4] = ax_cmd, ay_cmd, ax_ok, ay_ok, l1_decel
+        ob[b, 0], ob[b, 1], ob[b, 2], ob[b, 3] = completing, invalid and active, f_aggr, unsafe

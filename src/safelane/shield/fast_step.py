@@ -1,0 +1,220 @@
+"""The shield's period in one compiled call: :class:`Packed` state and :func:`step`, which :class:`~.core.Shield`
+runs where :func:`refusals` is empty (numba present, ``SAFELANE_NO_NUMBA`` not ``1``).
+
+A stateful :class:`~.core.Shield` keeps its state packed into arrays between periods (:class:`Packed`): one call of
+:func:`._fast_period.period_kernel` updates it, and the :class:`~.decision.Decision` is built from its arrays. The
+functional :class:`~.core.ShieldState` is unpacked only when someone reads ``Shield.state``. The decisions and the
+state are the NumPy stages' (``core.step``) bits: ``tests/test_fast_period.py``.
+
+**Dispatch never guesses.** :func:`refusals` names every reason a period cannot run compiled, from the
+configuration's own field list (:data:`COMPILED`: each :class:`~.config.ShieldConfig` field with the values the kernel
+implements; a field missing there refuses, so a new setting is never run at its default) and from what the
+situation and the state carry (own-lane leaders, sensing bounds, commands in flight, another decision rule). A
+refused period runs the stages; ``Shield.last_path`` says which ran.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..params import Params
+from ..safety._backend import FEASIBILITY_TOL_M
+from ..safety.evasion import fast_kernel
+from ..safety.lateral import LATERAL_TOL_M
+from ..safety.plan import EvasionPlan
+from .assessment import AssessmentState
+from .config import ShieldConfig
+from .decide import ABORT
+from .decision import Decision
+from .monitor import TOL_M, Breach, Snapshot
+from .rules import rule_rows
+
+#: Each :class:`ShieldConfig` field and the values the compiled period implements (``None``: every value).
+COMPILED: dict[str, tuple | None] = {
+    "assessment": ("observed",),
+    "assess_window": None,
+    "assess_threshold": None,
+    "monitor": None,
+    "completion": ("commit_guard",),
+    "assess_delay_s": None,  # read by the 'slow' assessment only
+    "assess_miss": None,  # read by the 'slow' assessment only
+    "enabled": (True,),
+    "actuation_delay_s": (0.0,),
+    "own_lane": None,  # rows with an own-lane leader refuse (situation_refusals)
+    "sensing": None,  # a situation with sensing bounds refuses where sensing is on (situation_refusals)
+}
+
+
+def kernel():
+    """The compiled period's module, or ``None`` (numba missing, or ``SAFELANE_NO_NUMBA=1``)."""
+    if fast_kernel() is None:
+        return None
+    from . import _fast_period
+
+    return _fast_period
+
+
+def refusals(config: ShieldConfig, variant, batch: int) -> list[str]:
+    """Why a period with this configuration and variant cannot run compiled (empty: it can)."""
+    out = []
+    for name in type(config).model_fields:
+        allowed = COMPILED.get(name, ())
+        value = getattr(config, name)
+        if allowed is not None and value not in allowed:
+            out.append(f"ShieldConfig.{name}={value!r}" + ("" if name in COMPILED else " (not classified)"))
+    if rule_rows(variant, batch):
+        out.append("rows decided by another rule (RSS)")
+    return out
+
+
+#: Each :class:`~.situation.Situation` field: ``"read"`` (the kernel reads it), ``"unused"`` (the compiled settings
+#: never read it: F's true type is the ``truth`` assessment's), ``"own"`` / ``"sensing"`` (refused where the
+#: configuration uses them and a row has an own-lane leader / bounds), ``"refused"`` (refused where not ``None``).
+SITUATION_FIELDS: dict[str, str] = {
+    **dict.fromkeys(("t", "ego_x", "ego_y", "ego_vx", "ego_vy", "f_x", "f_v", "f_connected", "f_collaborative",
+                     "chain_x", "chain_v", "chain_promise", "chain_human", "n_connected", "f_speed_observed",
+                     "v2x_stale"), "read"),
+    "f_aggressive_truth": "unused",
+    **dict.fromkeys(("own_x", "own_v", "own_promise", "own_n_connected"), "own"),
+    **dict.fromkeys(("err_f", "err_chain", "err_own"), "sensing"),
+}
+
+
+def situation_refusals(situation, config: ShieldConfig, state) -> list[str]:
+    """Why this situation and state cannot run compiled (empty: they can). A :class:`~.situation.Situation` field
+    that :data:`SITUATION_FIELDS` does not classify refuses wherever it is set."""
+    out = []
+    for f in dataclasses.fields(situation):
+        kind = SITUATION_FIELDS.get(f.name, "refused")
+        if kind == "refused" and getattr(situation, f.name) is not None:
+            out.append(f"Situation.{f.name}")
+    if config.own_lane and situation.has_own_lane:
+        out.append("an own-lane leader L0")
+    if config.sensing and situation.has_errors:
+        out.append("sensing-error bounds")
+    if state is not None:
+        if state.pending is not None:
+            out.append("commands in flight")
+        if state.last is not None and state.last.anchor is not None:
+            out.append("the monitor's cumulative anchor")
+        if state.plan.continues.any() or state.plan.follows_own.any():
+            out.append("a held plan with an own-lane leader")
+    return out
+
+
+@dataclass
+class Packed:
+    """A :class:`~.core.ShieldState` as the kernel's arrays (see :mod:`._fast_period` for the columns)."""
+
+    t: float
+    plan: np.ndarray  # (B, len(PLAN)), column-major
+    history: np.ndarray  # (B, window)
+    count: np.ndarray  # (B,) int64
+    st: np.ndarray  # (B, len(STATE_F))
+    sk: np.ndarray  # (B, len(STATE_B)) bool
+    snapshot: tuple | None  # (chain_x, chain_v, bounds, n_connected) of the last period, or None
+
+    @classmethod
+    def of(cls, state) -> Packed:
+        from ._fast_period import PLAN
+
+        n = len(state.completed)
+        plan = np.empty((n, len(PLAN)), order="F")
+        for j, name in enumerate(PLAN):
+            plan[:, j] = getattr(state.plan, name)
+        last, belief, breach = state.last, state.belief, state.breach
+        st = np.empty((n, 7))
+        st[:, 0], st[:, 1], st[:, 2] = state.plan_t0, belief.first_collaborative_s, breach.first_s
+        sk = np.empty((n, 10), bool)
+        sk[:, 0], sk[:, 1], sk[:, 2], sk[:, 3] = state.plan_f_aggr, belief.latched, belief.aggressive, state.completed
+        sk[:, 5:] = breach.flags
+        snapshot = None
+        if last is None:
+            st[:, 3:], sk[:, 4] = 0.0, False
+        else:
+            st[:, 3], st[:, 4], st[:, 5], st[:, 6] = last.f_x, last.f_v, last.f_limit, last.plan_l1_decel
+            sk[:, 4] = last.active
+            snapshot = (last.chain_x, last.chain_v, last.bounds, np.asarray(last.n_connected, np.int64))
+        return cls(float(state.t), plan, belief.history.copy(), np.asarray(belief.count, np.int64).copy(), st, sk,
+                   snapshot)  # fmt: skip
+
+    def plan_of(self, params: Params) -> EvasionPlan:
+        from ._fast_period import PLAN
+
+        fields = {name: self.plan[:, j] for j, name in enumerate(PLAN)}
+        for name in ("feasible", "follows_leader", "follows_own", "continues"):
+            fields[name] = fields[name] != 0.0
+        fields["reason"] = fields["reason"].astype(np.uint8)
+        return EvasionPlan(**fields, params=params)
+
+    def breach(self) -> Breach:
+        return Breach(flags=self.sk[:, 5:], first_s=self.st[:, 2])
+
+    def state(self, params: Params):
+        """The :class:`~.core.ShieldState` (copies: later periods do not change it)."""
+        from .core import ShieldState
+
+        p = dataclasses.replace(self, plan=self.plan.copy(order="F"), st=self.st.copy(), sk=self.sk.copy())
+        last = None
+        if p.snapshot is not None:
+            cx, cv, bounds, nc = p.snapshot
+            last = Snapshot(chain_x=cx, chain_v=cv, bounds=bounds, n_connected=nc, f_x=p.st[:, 3], f_v=p.st[:, 4],
+                            f_limit=p.st[:, 5], plan_l1_decel=p.st[:, 6], plan_f_aggr=p.sk[:, 0].copy(),
+                            active=p.sk[:, 4])  # fmt: skip
+        belief = AssessmentState(history=self.history.copy(), count=self.count.copy(), aggressive=p.sk[:, 2],
+                                 latched=p.sk[:, 1], first_collaborative_s=p.st[:, 1])  # fmt: skip
+        return ShieldState(t=p.t, plan=p.plan_of(params), plan_t0=p.st[:, 0], plan_f_aggr=p.sk[:, 0], belief=belief,
+                           breach=p.breach(), completed=p.sk[:, 3], last=last, pending=None)  # fmt: skip
+
+
+def step(packed: Packed, situation, proposal, params: Params, config: ShieldConfig, flags) -> tuple[Packed, Decision]:
+    """One period compiled: ``(packed, situation, proposal) -> (packed', Decision)`` — :func:`.core.step`'s result
+    for a period :func:`refusals` and :func:`situation_refusals` accept. ``proposal``: the checked ``(a_x, a_y)``
+    arrays (:func:`.validation.batch_proposal`); ``flags``: the variant's ``(B, 3)`` flags
+    (:func:`.policies.variant_flags`, stacked)."""
+    from . import _fast_period as fp
+
+    s, prm, cfg = situation, params, config
+    n, m = s.chain_x.shape
+    sf = np.empty((n, len(fp.SIT_F)))
+    sf[:, 0], sf[:, 1], sf[:, 2], sf[:, 3], sf[:, 4], sf[:, 5] = s.ego_x, s.ego_y, s.ego_vx, s.ego_vy, s.f_x, s.f_v
+    sf[:, 6], sf[:, 7], sf[:, 8] = s.observed_f_speed, proposal[0], proposal[1]
+    sb = np.empty((n, len(fp.SIT_B)), bool)
+    sb[:, 0] = s.f_connected & s.f_collaborative
+    sb[:, 1] = False if s.v2x_stale is None else s.v2x_stale
+    sb[:, 2:] = flags
+    prm_vec = np.array([s.t, prm.dt, prm.a_x_a, prm.a_x_d, prm.a_y_m, prm.y_safe, prm.p_m, prm.p_m_human,
+                        prm.y_boundary, prm.lane_width, prm.others_decel, LATERAL_TOL_M, FEASIBILITY_TOL_M, TOL_M,
+                        cfg.assess_threshold, float(cfg.monitor)])  # fmt: skip
+    out = Packed(s.t + prm.dt, packed.plan.copy(order="F"), packed.history.copy(), packed.count.copy(),
+                 packed.st.copy(), packed.sk.copy(), None)  # fmt: skip
+    snap = packed.snapshot
+    if snap is None:
+        snap = (np.zeros((n, m)), np.zeros((n, m)), np.zeros((n, m)), np.zeros(n, np.int64))
+    bounds = np.empty((n, m))
+    behaviour = np.empty(n, np.int64)
+    of, ob = np.empty((n, len(fp.OUT_F))), np.empty((n, len(fp.OUT_B)), bool)
+    knots = np.empty((n, 5, 8))
+    nc = np.asarray(s.n_connected, np.int64)
+    fp.period_kernel(prm_vec, sf, sb, np.ascontiguousarray(s.chain_x), np.ascontiguousarray(s.chain_v),
+                     np.ascontiguousarray(s.chain_promise, float).reshape(n, max(m - 1, 0)),
+                     np.ascontiguousarray(s.chain_human, bool).reshape(n, max(m - 1, 0)), nc, out.history, out.count,
+                     out.st, out.sk, out.plan, packed.snapshot is not None, *snap, bounds, behaviour, of, ob,
+                     knots)  # fmt: skip
+    out.snapshot = (s.chain_x, s.chain_v, bounds, nc)
+    rows = np.flatnonzero(behaviour == ABORT)
+    if rows.size:
+        k = knots[rows]
+        abort = (rows, k[:, 0], k[:, 1], k[:, 2], k[:, 3], k[:, 4])
+    else:
+        abort = (rows, None, None, None, None, None)
+    decision = Decision(
+        behaviour=behaviour, a_x=of[:, 0], a_y=of[:, 1], completing=ob[:, 0], invalid=ob[:, 1],
+        plan=out.plan_of(prm), plan_t0=out.st[:, 0].copy(), l1_decel=of[:, 4], f_aggressive=ob[:, 2],
+        breach=Breach(flags=out.sk[:, 5:].copy(), first_s=out.st[:, 2].copy()), nominal_x=of[:, 2],
+        nominal_y=of[:, 3], _abort=abort,
+    )  # fmt: skip
+    return out, decision

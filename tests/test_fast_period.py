@@ -1,0 +1,207 @@
+"""The compiled control period (``shield/fast_step.py``, ``shield/_fast_period.py``) against the NumPy stages
+(``shield.core.step``), field by field, over many periods of random worlds; and its dispatch, which never runs a
+setting it does not implement."""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+import pytest
+
+from safelane import Params
+from safelane.shield import Shield, ShieldConfig, Situation, fast_step
+from safelane.shield import core as shield_core
+
+pytestmark = pytest.mark.skipif(fast_step.kernel() is None, reason="numba missing or SAFELANE_NO_NUMBA=1")
+
+
+def random_world(rng: np.random.Generator, n: int, m: int, *, stale: bool, own: bool = False) -> dict:
+    """A batch of lane-change starts: ego in its lane, F behind, a chain of ``m`` ahead (random N, promises, humans)."""
+    ego_v = rng.uniform(15.0, 32.0, n)
+    gaps = rng.uniform(6.0, 30.0, (n, m))
+    world = dict(
+        ego=[np.zeros(n), rng.uniform(0.0, 1.5, n), ego_v, rng.uniform(-0.2, 0.8, n)],
+        f=[-rng.uniform(5.0, 30.0, n), ego_v + rng.uniform(-4.0, 4.0, n)],
+        lead=[np.cumsum(gaps, 1) + rng.uniform(-2.0, 2.0, (n, 1)), ego_v[:, None] + rng.uniform(-5.0, 3.0, (n, m))],
+        n_connected=rng.integers(0, m, n),
+        promise=rng.uniform(0.5, 4.0, (n, m - 1)),
+        human=rng.random((n, m - 1)) < 0.3,
+        f_connected=rng.random(n) < 0.5,
+        f_collaborative=rng.random(n) < 0.5,
+        stale=(rng.random(n) < 0.05) if stale else None,
+    )
+    world["lead"][1] = np.maximum(world["lead"][1], 0.0)
+    if own:
+        world["own"] = [np.where(rng.random(n) < 0.5, rng.uniform(10.0, 40.0, n), np.inf)[:, None], ego_v[:, None]]
+    return world
+
+
+def situation_of(world: dict, t: float, params: Params) -> Situation:
+    s = Situation.from_arrays(
+        t=t, ego=tuple(world["ego"]), follower=tuple(world["f"]), leaders=tuple(world["lead"]),
+        n_connected=world["n_connected"], promise_decel=world["promise"], human_driven=world["human"],
+        f_connected=world["f_connected"], f_collaborative=world["f_collaborative"], params=params, geometry="ignore",
+        own_leaders=None if "own" not in world else tuple(world["own"]),
+    )  # fmt: skip
+    if world["stale"] is not None:
+        s = dataclasses.replace(s, v2x_stale=world["stale"].copy())
+    return s
+
+
+def advance(world: dict, decision, rng: np.random.Generator, dt: float) -> None:
+    """The ego under the decision's command, the others at random accelerations (some beyond their bounds, so the
+    monitor fires), speeds kept at or above zero."""
+    ex, ey, evx, evy = world["ego"]
+    ax, ay = decision.a_x, decision.a_y
+    world["ego"] = [ex + evx * dt + 0.5 * ax * dt * dt, ey + evy * dt + 0.5 * ay * dt * dt,
+                    np.maximum(evx + ax * dt, 0.0), evy + ay * dt]  # fmt: skip
+    for key in ("f", "lead"):
+        x, v = world[key]
+        a = rng.uniform(-7.0, 3.0, x.shape)
+        world[key] = [x + v * dt + 0.5 * a * dt * dt, np.maximum(v + a * dt, 0.0)]
+    if world["stale"] is not None:
+        world["stale"] = rng.random(len(ex)) < 0.05
+
+
+def proposals(rng: np.random.Generator, n: int) -> tuple[np.ndarray, np.ndarray]:
+    ax, ay = rng.uniform(-6.0, 4.0, n), rng.uniform(-2.0, 2.0, n)
+    bad = rng.random(n) < 0.05
+    ax[bad] = np.where(rng.random(bad.sum()) < 0.5, np.nan, 50.0)
+    return ax, ay
+
+
+def same(a, b, where: str) -> None:
+    if isinstance(a, np.ndarray) or isinstance(b, np.ndarray):
+        a, b = np.asarray(a), np.asarray(b)
+        assert a.dtype == b.dtype or (a.dtype.kind in "iu" and b.dtype.kind in "iu"), f"{where}: {a.dtype} {b.dtype}"
+        assert a.shape == b.shape, f"{where}: shape {a.shape} vs {b.shape}"
+        assert np.array_equal(a, b, equal_nan=a.dtype.kind == "f"), f"{where}: {a} vs {b}"
+    elif dataclasses.is_dataclass(a):
+        for f in dataclasses.fields(a):
+            if f.name != "params":
+                same(getattr(a, f.name), getattr(b, f.name), f"{where}.{f.name}")
+    elif isinstance(a, tuple):
+        assert len(a) == len(b), where
+        for i, (x, y) in enumerate(zip(a, b, strict=True)):
+            same(x, y, f"{where}[{i}]")
+    else:
+        assert a == b or (a is None and b is None), f"{where}: {a!r} vs {b!r}"
+
+
+@pytest.mark.parametrize(
+    ("seed", "n", "m", "variant", "config"),
+    [
+        (0, 64, 3, "CV_all", {}),
+        (1, 40, 1, "CV_all", {}),
+        (2, 50, 4, "CV_none", {}),
+        (6, 50, 3, "No_agg_assess", {}),
+        (7, 40, 3, ("CV_follow", "CV_all", "CV_none", "No_agg_assess") * 10, {}),
+        (3, 30, 3, "CV_all", {"monitor": False}),
+        (4, 1, 3, "CV_all", {}),
+        (5, 48, 2, "CV_all", {"assess_window": 3, "assess_threshold": 0.1}),
+    ],
+)
+def test_compiled_period_is_the_stages(seed, n, m, variant, config):
+    params = Params(a_o_d=8.0) if seed % 2 else Params()
+    cfg = ShieldConfig(**config)
+    rng = np.random.default_rng(seed)
+    world = random_world(rng, n, m, stale=seed % 3 == 0)
+    shield = Shield(params, variant=variant, config=cfg)
+    start = situation_of(world, 0.0, params)
+    shield.reset(start)
+    state = shield_core.init(start, params, cfg, variant)
+    behaviours = set()
+    for k in range(60):
+        s = situation_of(world, k * params.dt, params)
+        prop = proposals(rng, n)
+        fast = shield.step(s, prop)
+        assert shield.last_path == "compiled"
+        state, ref = shield_core.step(state, s, prop, params, cfg, variant)
+        same(fast, ref, f"period {k}: decision")
+        same(shield.state, state, f"period {k}: state")
+        behaviours.update(ref.behaviour.tolist())
+        advance(world, ref, rng, params.dt)
+    if n > 1:  # the worlds reach every behaviour (the conservative variants rarely complete), so every branch ran
+        assert behaviours >= ({0, 1, 2, -1} if variant == "CV_all" else {0, 1, 2}), behaviours
+
+
+def test_switching_paths_keeps_the_state():
+    """A period the compiled path refuses (an own-lane leader appears) runs the stages from the unpacked state, and
+    the next compiled period packs the stages' state again: the same decisions as the stages throughout."""
+    params = Params()
+    rng = np.random.default_rng(7)
+    world = random_world(rng, 20, 3, stale=False)
+    shield = Shield(params)
+    start = situation_of(world, 0.0, params)
+    shield.reset(start)
+    state = shield_core.init(start, params, ShieldConfig(), "CV_all")
+    paths = []
+    for k in range(60):
+        w = dict(world)
+        if 10 <= k < 15:
+            w["own"] = [np.full((20, 1), 60.0), world["ego"][2][:, None].copy()]
+        s = situation_of(w, k * params.dt, params)
+        prop = proposals(rng, 20)
+        fast = shield.step(s, prop)
+        paths.append(shield.last_path)
+        state, ref = shield_core.step(state, s, prop, params, ShieldConfig(), "CV_all")
+        same(fast, ref, f"period {k}")
+        same(shield.state, state, f"period {k}: state")
+        advance(world, ref, rng, params.dt)
+    # Back to compiled once no row holds a plan made with L0 (a row aborting on one keeps it a while).
+    assert paths[:10] == ["compiled"] * 10 and paths[10:15] == ["stages"] * 5 and paths[-1] == "compiled", paths
+
+
+def test_every_config_field_is_classified():
+    """The dispatch is built from ShieldConfig's own fields: a new field refuses until someone classifies it."""
+    assert set(fast_step.COMPILED) == set(ShieldConfig.model_fields)
+    assert fast_step.refusals(ShieldConfig(), "CV_all", 4) == []
+
+
+@pytest.mark.parametrize(
+    ("config", "reason"),
+    [
+        ({"assessment": "truth"}, "ShieldConfig.assessment='truth'"),
+        ({"completion": "paper_evasion"}, "ShieldConfig.completion='paper_evasion'"),
+        ({"enabled": False}, "ShieldConfig.enabled=False"),
+        ({"actuation_delay_s": 0.2}, "ShieldConfig.actuation_delay_s=0.2"),
+    ],
+)
+def test_refused_settings_run_the_stages(config, reason):
+    params = Params()
+    rng = np.random.default_rng(11)
+    world = random_world(rng, 8, 3, stale=False)
+    shield = Shield(params, config=ShieldConfig(**config))
+    s = situation_of(world, 0.0, params)
+    if config.get("assessment") == "truth":
+        s = dataclasses.replace(s, f_aggressive_truth=np.ones(8, bool))
+    shield.reset(s)
+    assert reason in shield.refusals(s)
+    shield.step(s, proposals(rng, 8))
+    assert shield.last_path == "stages"
+
+
+def test_unclassified_situation_field_refuses(monkeypatch):
+    """A Situation field the compiled period does not read refuses wherever it is set (a new field too)."""
+    params = Params()
+    s = situation_of(random_world(np.random.default_rng(3), 4, 3, stale=False), 0.0, params)
+    monkeypatch.delitem(fast_step.SITUATION_FIELDS, "f_speed_observed")
+    assert fast_step.situation_refusals(s, ShieldConfig(), None) == []  # unset: nothing to refuse
+    s = dataclasses.replace(s, f_speed_observed=s.f_v.copy())
+    assert fast_step.situation_refusals(s, ShieldConfig(), None) == ["Situation.f_speed_observed"]
+
+
+def test_unclassified_field_refuses(monkeypatch):
+    monkeypatch.delitem(fast_step.COMPILED, "monitor")
+    assert fast_step.refusals(ShieldConfig(), "CV_all", 4) == ["ShieldConfig.monitor=True (not classified)"]
+
+
+def test_rss_rows_and_situations_refuse():
+    params = Params()
+    rng = np.random.default_rng(12)
+    world = random_world(rng, 6, 3, stale=False, own=True)
+    s = situation_of(world, 0.0, params)
+    assert fast_step.refusals(ShieldConfig(), "RSS", 6) == ["rows decided by another rule (RSS)"]
+    assert fast_step.situation_refusals(s, ShieldConfig(), None) == ["an own-lane leader L0"]
+    assert fast_step.situation_refusals(s, ShieldConfig(own_lane=False), None) == []
