@@ -16,7 +16,10 @@ Beyond the paper's world (all optional; absent, the shield is exactly the paper'
   ``+inf`` marks "no vehicle" (a row without ``L0``);
 * **bounded sensing error**: ``err_f (B, 2)``, ``err_chain (B, M, 2)``, ``err_own (B, K, 2)`` — the bound on the
   position error [m] and the speed error [m/s] of each measured state (the ego's own state is exact; relative
-  measurement errors belong to the others' bounds). :class:`SensingBounds` fills them from connectivity.
+  measurement errors belong to the others' bounds). :class:`SensingBounds` fills them from connectivity;
+* **other vehicles** that can enter the ego's path (in the lane beyond the target lane, on the ego's other side, or
+  straddling): ``others``, a :class:`~.world.Others` record, which the shield folds into F, the chain and the own
+  lane before anything else (:func:`safelane.shield.world.roles`; docs/safety.md, "Other vehicles' lane changes").
 """
 
 from __future__ import annotations
@@ -28,6 +31,7 @@ import numpy as np
 
 from ..params import Params
 from .geometry import order_problems, report_order
+from .world import Others
 
 
 @dataclass(frozen=True)
@@ -82,6 +86,8 @@ class Situation:
         own_n_connected: ``(B,)`` how many own-lane leaders from ``L0`` on are connected (``0``: ``L0`` brakes at
             ``a_x_d`` in the worst case).
         err_f, err_chain, err_own: sensing-error bounds ``[..., (position m, speed m/s)]`` or ``None`` (exact).
+        others: the vehicles besides F, the chain and L0 that can enter the ego's path (:class:`~.world.Others`,
+            ``(B, K)`` in this frame), or ``None`` (the paper's world: nobody else changes lanes).
     """
 
     t: float
@@ -108,6 +114,7 @@ class Situation:
     err_f: np.ndarray | None = None
     err_chain: np.ndarray | None = None
     err_own: np.ndarray | None = None
+    others: Others | None = None
 
     def __len__(self) -> int:
         return len(self.ego_x)
@@ -136,6 +143,7 @@ class Situation:
         own_promise=0.5,
         sensing: SensingBounds | None = None,
         geometry: str = "warn",
+        others: Others | tuple | None = None,
     ) -> Situation:
         """A validated batch from plain arrays (any batch size; scalars give ``B = 1``).
 
@@ -150,6 +158,9 @@ class Situation:
                 ``None`` (the original lane is empty).
             own_n_connected, own_promise: as ``n_connected`` and ``promise_decel`` for the own lane.
             sensing: error bounds filled per vehicle by connectivity, or ``None`` (exact states).
+            others: the other vehicles (:class:`~.world.Others`): a record in the shield's frame as it is, or a tuple
+                ``(x, y, vx, vy[, connected, announce_lane, announce_t])`` of ``(B, K)`` (or ``(K,)``) arrays in the
+                simulator's frame (``y``, ``vy`` mapped by ``frame``); ``x = +inf`` pads a row.
 
         Geometry (``geometry``): the lanes' order — the target lane's ``F ≤ L1 ≤ L2 ≤ … ≤ L(N+1)``, the own lane's
         ``L0`` first — is checked (:meth:`order_problems`); a break (leaders given farthest first, F and L1
@@ -196,6 +207,12 @@ class Situation:
             )  # fmt: skip
         if sensing is not None:
             situation = sensing.apply(situation)
+        if others is not None:
+            if not isinstance(others, Others):
+                others = Others.from_arrays(*others, frame=frame)
+            if others.x.ndim == 2 and others.x.shape[0] == 1 and b > 1:
+                others = Others.from_arrays(*dataclasses.astuple(others), batch=b)
+            situation = dataclasses.replace(situation, others=others)
         situation.validate(prm)
         report_order(situation, geometry)
         return situation
@@ -270,6 +287,11 @@ class Situation:
             raise ValueError(f"Situation.n_connected must lie in [0, M-1={m - 1}]")
         self._validate_own(params, b)
         self._validate_errors(b, m)
+        if self.others is not None:
+            if not isinstance(self.others, Others):
+                raise ValueError(f"Situation.others must be a safelane.shield.world.Others record or None; got "
+                                 f"{type(self.others).__name__}")  # fmt: skip
+            self.others.validate(b)
 
     def order_problems(self) -> list[tuple[str, str]]:
         """``(field, description)`` of each break of the lanes' order — the target lane's ``F ≤ L1 ≤ L2 ≤ … ≤

@@ -42,6 +42,7 @@ from .proposals import check_proposal
 from .realworld import carry_worst, chain_bounds, delay_periods, own_lane_decel, worst_corners
 from .rules import RuleInputs
 from .situation import Situation
+from .world import fold as fold_others
 
 
 @dataclass(frozen=True)
@@ -141,6 +142,7 @@ def own_leader(s: Situation, cfg: ShieldConfig, prm: Params, informed, broken):
 def observe(state, situation: Situation, prm: Params, cfg: ShieldConfig, chain=None) -> Observed:
     """Stage 1. ``state``: the :class:`~.core.ShieldState` of the last period; ``chain``: this situation's
     :func:`chain_analysis` when the caller has it already."""
+    state, situation, chain = fold_others(state, situation, prm, cfg, chain)  # others -> F, chain, L0 (world.py)
     belief = ASSESSMENTS[cfg.assessment].update(state.belief, situation, prm.dt, cfg)
     s = situation if cfg.sensing else exact(situation)
     s_eval, s_obs = worst_corners(s)
