@@ -292,3 +292,42 @@ def test_v2x_loss_falls_back_and_never_crashes():
     assert stale_seen
     with pytest.raises(ValueError, match="v2x_loss"):
         SafeLaneShield(gym.make(SCENE_ENV_ID, config=FAST), connected=True, v2x_loss=1.5)
+
+
+def campaign_highway(seed: int, others: bool):
+    """benchmarks/highway_campaign.py's "highway-v0" case (highway-env's 4 lanes and MOBIL traffic, 20 vehicles, 10 s)
+    under the shield, the reckless policy."""
+    env = gym.make("highway-v0", config={**HIGHWAY_CONFIG, **FAST, "vehicles_count": 20, "duration": 10})
+    return run(SafeLaneShield(env, others=others), seed)
+
+
+def test_the_situation_carries_every_other_vehicle_once_in_the_shields_frame():
+    env = SafeLaneShield(gym.make("highway-v0", config={**HIGHWAY_CONFIG, **FAST}))
+    env.reset(seed=3)
+    for _ in range(5):
+        env.step(reckless(env))
+    s = env.situation()
+    road, frame = env.unwrapped.road, env.frame
+    named = [v for v in road.vehicles if id(v) in env.roles and v is not env.ego]
+    present = np.isfinite(s.others.x[0])
+    assert present.sum() + len(named) == len(road.vehicles) - 1  # each vehicle once: a role or an other
+    rest = [v for v in road.vehicles if v is not env.ego and id(v) not in env.roles]
+    assert np.allclose(s.others.x[0], [v.position[0] for v in rest])
+    assert np.allclose(s.others.y[0], [float(frame.y(v.position[1], 0.0)[0]) for v in rest])  # lane i at i * w
+    assert not s.others.connected.any()
+    bare = SafeLaneShield(gym.make("highway-v0", config={**HIGHWAY_CONFIG, **FAST}), others=False)
+    bare.reset(seed=3)
+    assert bare.situation().others is None
+
+
+@pytest.mark.parametrize("seed", [88, 180])
+def test_far_lane_cut_in_of_stock_traffic_is_avoided_with_the_world_model(seed):
+    """The two crashes of the campaign's highway-v0 case before the world model: MOBIL moved a vehicle from the lane
+    beyond the target lane into it ahead of the straddling ego. Without ``others`` the side contact happens and the
+    blame rule names both (each moved laterally toward the other); with them the shield counts the vehicle in the
+    target lane from the moment its RSS lateral worst case reaches it, and no crash happens."""
+    before = campaign_highway(seed, others=False)
+    assert before["crashed"] and before["crash"]["partner"] == "L1" and before["crash"]["partner_changing_lanes"]
+    assert before["crash_blame"] in ("ego", "other", "both")
+    after = campaign_highway(seed, others=True)
+    assert not after["crashed"] and after["crash_blame"] is None

@@ -2,7 +2,9 @@
 
 ``SafeLaneShield(env)`` takes physical continuous actions ``(a_x, a_y)`` [m/s²] (``a_y > 0`` toward the target
 lane), reads the vehicles from ``env.unwrapped.road`` (not from the observation), finds F and L1 in the target lane
-(and L0 ahead of the ego in its own lane), builds a :class:`~safelane.shield.Situation` (a
+(and L0 ahead of the ego in its own lane) and every other vehicle as the Situation's ``others`` (which the shield
+folds into those roles where one can enter the ego's path: :mod:`safelane.shield.world`), builds a
+:class:`~safelane.shield.Situation` (a
 :class:`~safelane.shield.LaneFrame` maps highway-env's ``y``-to-the-right, lane-0-leftmost frame), asks
 :meth:`Shield.step <safelane.shield.Shield.step>` and moves the ego — replaced at every reset by a
 :class:`~.highway_vehicles.PointMassVehicle`, an exact point mass — by the decision. highway-env's own collision
@@ -32,6 +34,8 @@ from ..blame import PairTracker  # noqa: E402
 from ..params import Params  # noqa: E402
 from ..shield import ABORT, COMPLETED, HESITATE, PROCEED, LaneFrame, Shield, ShieldConfig, Situation  # noqa: E402
 from ..shield.command import Command, InFlight  # noqa: E402
+from ..shield.world import Others  # noqa: E402
+from ..shield.world import roles as fold_roles  # noqa: E402
 from ..v2x import MAX_AGE_S, SensedVehicle, V2XMessage, leader_arrays  # noqa: E402
 from .highway_road import (  # noqa: E402
     blame_tracks,
@@ -112,6 +116,12 @@ class SafeLaneShield(gym.Wrapper, gym.utils.RecordConstructorArgs):
             link), drawn from ``numpy.random.default_rng`` seeded by ``v2x_seed`` and the reset's seed; the latest
             received message then stands in, extrapolated, until it is older than ``safelane.v2x.MAX_AGE_S``.
         own_leaders: how many own-lane leaders to read (used once the Situation takes them; docs/real_roads.md).
+        others: pass every other vehicle on the road (not F, the chain or the own-lane leaders) as the Situation's
+            ``others`` (:mod:`safelane.shield.world`: a vehicle that straddles, or whose RSS lateral worst case reaches
+            the target or the ego's lane, takes a role), so the shield covers stock highway-v0 traffic whose MOBIL
+            moves vehicles into those lanes. highway-env's vehicles announce nothing over V2X, so every one counts as
+            non-connected there. ``False``: the paper's world (only F, the chain and L0), the wrapper before the
+            world model.
 
     Actions: ``Box([-a_x_d, -a_y_m], [a_x_a, a_y_m])``; ``a_y > 0`` points to the target lane. ``info`` adds
     ``shield`` (``proceed``/``hesitate``/``abort``/``completed``, ``off`` without the shield), ``intervened``,
@@ -133,11 +143,11 @@ class SafeLaneShield(gym.Wrapper, gym.utils.RecordConstructorArgs):
     def __init__(self, env, shield: bool = True, variant: str | None = None, params: Params | None = None,
                  config: ShieldConfig | None = None, target: str = "auto", connected: bool = False,
                  promise: float = 0.5, own_leaders: int = 1, sensing=None, v2x_loss: float = 0.0,
-                 v2x_seed: int | None = None, blame_rss: RssParams | None = None):  # fmt: skip
+                 v2x_seed: int | None = None, blame_rss: RssParams | None = None, others: bool = True):  # fmt: skip
         gym.utils.RecordConstructorArgs.__init__(self, shield=shield, variant=variant, params=params, config=config,
                                                  target=target, connected=connected, promise=promise,
                                                  own_leaders=own_leaders, sensing=sensing, v2x_loss=v2x_loss,
-                                                 v2x_seed=v2x_seed, blame_rss=blame_rss)  # fmt: skip
+                                                 v2x_seed=v2x_seed, blame_rss=blame_rss, others=others)  # fmt: skip
         gym.Wrapper.__init__(self, env)
         if target not in ("left", "right", "auto"):
             raise ValueError(f"target must be 'left', 'right' or 'auto'; got {target!r}")
@@ -165,6 +175,7 @@ class SafeLaneShield(gym.Wrapper, gym.utils.RecordConstructorArgs):
         self.inbox: dict = {}  # the latest message received from each connected vehicle (id(vehicle) -> message)
         self.chain_v2x = None  # the last LeaderChain (safelane.v2x.leader_arrays), with connected=True
         self.n_own = int(own_leaders)
+        self.with_others = bool(others)
         self.blame_rss = blame_rss or RssParams.matched(prm)
         self.blame = PairTracker(self.blame_rss)
         self.crash_blame: tuple | None = None  # (responsible, clause, blame time) of the ego's first crash
@@ -265,6 +276,8 @@ class SafeLaneShield(gym.Wrapper, gym.utils.RecordConstructorArgs):
         kwargs = {}
         if OWN_LANE_SUPPORTED:
             kwargs = {"own_leaders": (ox[None, :], ov[None, :]), "own_n_connected": 0, "own_promise": self.promise}
+        if self.with_others:
+            kwargs["others"] = self._others(road, {id(ego), *roles})
         situation = Situation.from_arrays(
             t=self.t, ego=(ex, ego.position[1], ego.speed, ego.lateral_speed), follower=(fx, fv),
             leaders=(lx[None, :], lv[None, :]), n_connected=n, promise_decel=promise[None, :] if promise.size else
@@ -274,6 +287,19 @@ class SafeLaneShield(gym.Wrapper, gym.utils.RecordConstructorArgs):
         if self.connected:
             situation = dataclasses.replace(situation, v2x_stale=np.array([stale]))
         return situation
+
+    def _others(self, road, taken) -> Others:
+        """Every road vehicle whose id is not in ``taken`` (the ego, F, the chain, the own-lane leaders) as an
+        :class:`~safelane.shield.world.Others` row in the shield's frame: centre, velocity (highway-env's ``velocity``,
+        its speed along its heading; a reversing vehicle's ``v_x`` reads as 0), not connected. At least one slot
+        (``+inf`` padding where there is no other vehicle)."""
+        rest = [v for v in road.vehicles if id(v) not in taken]
+        if not rest:
+            return Others.empty(1, 1)
+        pos = np.array([v.position for v in rest], float).reshape(-1, 2)
+        vel = np.array([v.velocity for v in rest], float).reshape(-1, 2)
+        y, vy = self.frame.y(pos[:, 1], vel[:, 1])
+        return Others.from_arrays(pos[None, :, 0], y[None, :], np.maximum(vel[None, :, 0], 0.0), vy[None, :])
 
     def reset_blame(self) -> None:
         """Start the blame rule afresh from the road as it is now (reset does; a test that rebuilds the scene after
@@ -315,7 +341,7 @@ class SafeLaneShield(gym.Wrapper, gym.utils.RecordConstructorArgs):
         self.cut_in = False
         # until the ego lies wholly in the target lane: read by NoCutInIDMVehicle, and for info["cut_in"]
         u.road.safelane_manoeuvre = (self.ego, (self.original_lane, self.target_lane))
-        self.shield.reset(self.situation())
+        self.shield.reset(fold_roles(self.situation(), self.params))  # the plan held at the start: the others folded in
         self.reset_blame()
         self.in_flight = InFlight.idle(1, self.delay_periods)  # the commands acting at the start: cruise
         obs = u.observation_type.observe()
