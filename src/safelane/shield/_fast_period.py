@@ -6,9 +6,11 @@ assessment's :func:`~.assessment.belief_core`, the chain scan's link (``_chain_r
 :func:`~safelane.safety.chain.chain_link`), the monitor's comparisons (``_breach_row`` →
 :func:`~.monitor.braked_harder`, :func:`~.monitor.pushed_harder`), :func:`~.stages.worst_case_core`,
 :func:`~.proposals.proposal_core`, the candidate check (``_candidate`` → :func:`~.decide.candidate_row`), the
-completion guard :func:`~.decide.commit_guard_core`, :func:`~.decide.hesitate_core`, the responsible follow
-(:mod:`safelane.safety.responsible`), :func:`~.stages.lane_keep_accel`, the held plan's motion (``_plan_motion`` →
-:func:`~safelane.safety.plan.plan_state`, :func:`~.decide.plan_switches`) and :func:`~safelane.safety.plan.plan_reason`.
+completion guard :func:`~.decide.commit_guard_core`, :func:`~.decide.hesitate_core`, the own-lane leader ``L0`` (its
+chain's bound through :func:`~safelane.safety.chain.chain_link`, the period with it
+:func:`~safelane.safety.own_lane.own_period`, its evasion check ``_fast_own._own_lane``), the responsible follow
+(:mod:`safelane.safety.responsible`), :func:`~.stages.lane_keep_accel`, the held plan's motion
+(:func:`~safelane.safety.plan.plan_state`, :func:`~.decide.plan_switches`) and :func:`~safelane.safety.plan.plan_reason`.
 It writes what the NumPy stages compute, in their order of evaluation, so a row's decision and state are the stages'
 bits (``tests/test_fast_period.py`` compares them field by field over many periods). :mod:`.fast_step` is the Python
 side (the state packed into arrays between periods, the :class:`~.decision.Decision` built from them).
@@ -23,14 +25,25 @@ from ..safety import _compile
 from ..safety._backend import SCALAR, Limits, _clip
 from ..safety._fast_base import announce_compile
 from ..safety._fast_responsible import _responsible_bound
-from ..safety.plan import plan_reason
+from ..safety.chain import chain_link
+from ..safety.own_lane import own_period
+from ..safety.plan import PlanRecord, plan_reason, plan_state
 from ..safety.responsible import responsible_accel_core, responsible_ok_core
-from ..sim._fast_held import _plan_motion
 from ..sim._fast_traffic import _chain_row
 from ._fast_decide import _candidate
 from ._fast_monitor import _breach_row
+from ._fast_own import _own_lane
 from .assessment import belief_core
-from .decide import ABORT, COMPLETED, HESITATE, PROCEED, commit_guard_core, hesitate_core
+from .decide import (
+    ABORT,
+    COMPLETED,
+    HESITATE,
+    PROCEED,
+    candidate_period,
+    commit_guard_core,
+    hesitate_core,
+    plan_switches,
+)
 from .proposals import proposal_core
 from .stages import lane_keep_accel, worst_case_core
 
@@ -41,7 +54,7 @@ _INF = np.inf
 #: Scalars of :func:`period_kernel`'s ``prm`` vector, in order.
 PRM = (
     "t", "dt", "a_x_a", "a_x_d", "a_y_m", "y_safe", "p_m", "p_m_human", "y_boundary", "lane_width", "a_o_d",
-    "lat_tol", "tol", "monitor_tol", "assess_threshold", "monitor",
+    "lat_tol", "tol", "monitor_tol", "assess_threshold", "monitor", "own_level", "own_margin",
 )  # fmt: skip
 #: Columns of the situation's per-row floats ``sf``.
 SIT_F = ("ego_x", "ego_y", "ego_vx", "ego_vy", "f_x", "f_v", "f_observed", "a_x", "a_y")
@@ -77,6 +90,13 @@ _P_OWN = _PF["own_p"]
 #: EvasionPlan's values without an own-lane leader: own_p, own_v, own_decel, follows_own, continues, min_gap_own.
 _OWN_DEFAULTS = np.array([np.inf, 0.0, 0.0, 0.0, 0.0, np.inf])
 assert PLAN[_P_OWN:] == ("own_p", "own_v", "own_decel", "follows_own", "continues", "min_gap_own")
+_PF_EGO_PX, _PF_EGO_PY, _PF_EGO_VX, _PF_EGO_VY, _PF_L1P, _PF_L1V, _PF_L1D = (
+    _PF[n] for n in ("ego_px", "ego_py", "ego_vx", "ego_vy", "l1_p", "l1_v", "l1_decel")
+)
+_PF_TX1, _PF_VSW, _PF_TBE, _PF_TYF, _PF_TYS, _PF_YA1, _PF_YA2, _PF_TYE = (
+    _PF[n] for n in ("t_x1", "v_switch", "t_brake_end", "t_y_f", "t_y_switch", "y_acc_1", "y_acc_2", "t_y_end")
+)
+_P_FOLLOWS_OWN, _P_CONT, _P_GAP_OWN = _PF["follows_own"], _PF["continues"], _PF["min_gap_own"]
 #: The plan columns :func:`~safelane.sim._fast_held._plan_motion` reads, in its order (``_fast_loop.PLAN``).
 _HELD = np.array([_PF[n] for n in ("ego_px", "ego_py", "ego_vx", "ego_vy", "l1_p", "l1_v", "l1_decel", "t_x1",
                                    "v_switch", "t_brake_end", "t_y_f", "t_y_switch", "y_acc_1", "y_acc_2",
@@ -86,14 +106,57 @@ _PARTS = np.array([_PF[n] for n in ("t_y_f", "t_y_switch", "y_acc_1", "y_acc_2",
                                     "t_brake_end")])  # fmt: skip
 
 
+@numba.njit(inline="always")
+def _own_decel(own_x, own_v, own_promise, nc, r, p_m, a_o):
+    """``realworld.chain_bounds`` of row ``r``'s own-lane chain (``L0`` first; exact states, no human margins):
+    ``(L0's bound, unsafe)``; an empty slot pair (``+inf`` positions) leaves the link free."""
+    a_ahead = a_o
+    unsafe = False
+    for i in range(own_x.shape[1] - 2, -1, -1):
+        slack = own_x[r, i + 1] - own_x[r, i] - p_m - (0.0 + 0.0)
+        if slack != slack:
+            slack = _INF
+        promise = own_promise[r, i] if i < nc else a_o
+        _, a_ahead, broken = chain_link(SCALAR, slack, own_v[r, i] + 0.0, SCALAR.maximum(own_v[r, i + 1] - 0.0, 0.0),
+                                        a_ahead, promise, a_o)  # fmt: skip
+        unsafe = unsafe or broken
+    return a_ahead, unsafe
+
+
+@numba.njit(inline="always")
+def _held_motion(plan, r, age, dt, a_a, a_d, kt, kx, kv, ky, kvy):
+    """``decide.plan_motion`` of row ``r`` of the held plan (:data:`PLAN` columns; with an own-lane leader too: the
+    profile follows ``L0`` where ``follows_own`` and goes on after ``t_y_f`` where it ``continues``): the 8 knots into
+    ``kt``, the samples into ``kx, kv, ky, kvy``."""
+    held = PlanRecord(plan[r, _PF_EGO_PX], plan[r, _PF_EGO_PY], plan[r, _PF_EGO_VX], plan[r, _PF_EGO_VY],
+                      plan[r, _PF_TX1], plan[r, _PF_VSW], plan[r, _PF_TBE], plan[r, _P_FOLLOWS] > 0.0,
+                      plan[r, _PF_TYF], plan[r, _PF_TYS], plan[r, _PF_YA1], plan[r, _PF_YA2], plan[r, _PF_TYE],
+                      plan[r, _P_CONT] > 0.0)  # fmt: skip
+    if plan[r, _P_FOLLOWS_OWN] > 0.0:
+        lead_p, lead_v, lead_decel = plan[r, _P_OWN], plan[r, _P_OWN + 1], plan[r, _P_OWN + 2]
+    else:
+        lead_p, lead_v, lead_decel = plan[r, _PF_L1P], plan[r, _PF_L1V], plan[r, _PF_L1D]
+    switches = plan_switches(SCALAR, held, lead_v, lead_decel, age, dt)
+    kt[0] = 0.0
+    for j in range(6):
+        kt[j + 1] = switches[j]
+    kt[7] = dt
+    kt.sort()
+    lim = Limits(a_a, a_d, 0.0, 0.0)
+    for j in range(8):
+        kx[j], ky[j], kv[j], kvy[j] = plan_state(SCALAR, held, age + kt[j], lead_p, lead_v, lead_decel, lim)
+
+
 @numba.njit(cache=True, nogil=True, error_model="numpy")
-def period_kernel(prm, sf, sb, chain_x, chain_v, chain_promise, chain_human, n_connected, history, count, st, sk,
-                  plan, has_last, snap_x, snap_v, snap_bounds, snap_nc, bounds, behaviour, of, ob, knots):  # fmt: skip
+def period_kernel(prm, sf, sb, chain_x, chain_v, chain_promise, chain_human, n_connected, own_x, own_v, own_promise,
+                  own_nc, history, count, st, sk, plan, has_last, snap_x, snap_v, snap_bounds, snap_nc, bounds,
+                  behaviour, of, ob, knots):  # fmt: skip
     """One period of every row (see the module docstring). Reads the situation (``sf``, ``sb``, the chain), updates
     the state in place (``history``, ``count``, ``st``, ``sk``, ``plan``; the snapshot ``snap_*`` is read, the caller
     keeps this period's), writes ``bounds (B, M)``, ``behaviour``, ``of``, ``ob`` and the aborting rows' knots
     ``(B, 5, 8)`` (``t, px, vx, py, vy``)."""
     t, dt, a_a, a_d, a_ym, y_safe, p_m, p_m_h, y_bound, lane_w, a_o, lat_tol, tol, mon_tol, thr, mon = prm[:16]
+    own_level, own_margin = prm[16], prm[17]
     lim = Limits(a_a, a_d, a_ym, y_safe)
     bsz, m = chain_x.shape
     window = history.shape[1]
@@ -105,9 +168,8 @@ def period_kernel(prm, sf, sb, chain_x, chain_v, chain_promise, chain_human, n_c
         den = den + times[j] * times[j]
     x2, v2, b2 = np.empty((1, m + 1)), np.empty((1, m + 1)), np.empty((1, m + 1))
     promise, margin = np.empty((max(m - 1, 1), 1)), np.empty((max(m - 1, 1), 1))
-    held = np.empty(_HELD.shape[0])
-    kn = np.empty((7, 8))
-    kt, kx, kv, ky, kvy, kax, kay = kn[0], kn[1], kn[2], kn[3], kn[4], kn[5], kn[6]
+    kn = np.empty((5, 8))
+    kt, kx, kv, ky, kvy = kn[0], kn[1], kn[2], kn[3], kn[4]
     same = snap_x.shape[1] == m
     for b in range(bsz):
         ex, ey, evx, evy, fx, fv = sf[b, 0], sf[b, 1], sf[b, 2], sf[b, 3], sf[b, 4], sf[b, 5]
@@ -147,6 +209,12 @@ def period_kernel(prm, sf, sb, chain_x, chain_v, chain_promise, chain_human, n_c
         trusted = sb[b, 3] and sb[b, 0]
         l1_decel, f_aggr = worst_case_core(SCALAR, sb[b, 2], unsafe, b2[0, 1], a_o, trusted, sb[b, 4], sk[b, 2],
                                            broken)  # fmt: skip
+        l0x, l0v, l0_decel = own_x[b, 0], own_v[b, 0], a_o  # (stages.own_leader; +inf: no L0)
+        has_l0 = l0x < _INF
+        if has_l0:
+            bound0, unsafe0 = _own_decel(own_x, own_v, own_promise, own_nc[b], b, p_m, a_o)
+            if sb[b, 2] and not unsafe0 and not broken:
+                l0_decel = bound0
         # --- the proposal (stages.proposal) ---
         ok, ax_ok, ay_ok = proposal_core(SCALAR, sf[b, 7], sf[b, 8], lim)
         invalid = not ok
@@ -162,10 +230,28 @@ def period_kernel(prm, sf, sb, chain_x, chain_v, chain_promise, chain_human, n_c
                 if code == 0 and invalid:
                     continue
                 lateral = a_y if code == 0 else a_yh
-                state, period_ok, crossing, parts, bits = _candidate(
-                    ex, ey, evx, evy, a_x, lateral, chain_x[b, 0], chain_v[b, 0], l1_decel, fx, fv, f_aggr, a_a, a_d,
-                    a_ym, y_safe, p_m, dt, y_bound, lat_tol, tol,
-                )  # fmt: skip
+                if has_l0:  # decide._with_own: the candidate with L0 (_fast_own.check_kernel's row)
+                    state, period_ok, crossing = candidate_period(
+                        SCALAR, ex, ey, evx, evy, a_x, lateral, chain_x[b, 0], chain_v[b, 0], l1_decel, fx, fv,
+                        f_aggr, lim, p_m, dt, own_level, lat_tol, tol,
+                    )  # fmt: skip
+                    period_ok, crossing, ox, ov = own_period(SCALAR, ex, evx, a_x, l0x, l0v, l0_decel, period_ok,
+                                                             crossing, state[3], p_m, dt, tol)  # fmt: skip
+                    of_, bits = _own_lane(state[0], state[1], state[2], state[3], state[4], state[5], l1_decel,
+                                          state[6], state[7], f_aggr, ox, ov, l0_decel, p_m, p_m, own_margin, lim,
+                                          tol)  # fmt: skip
+                    # as _candidate's: the plan's float parts (FLOAT_PARTS), then (exists, lead_ok, follow_ok,
+                    # nothing, follows_leader)
+                    parts = (of_[6], of_[7], of_[8], of_[9], of_[10], of_[0], of_[1], of_[2], of_[3], of_[4])
+                    bits = (bits[0], bits[1], bits[2], bits[4], bits[3], bits[5])
+                    own_gap = of_[5]
+                else:
+                    state, period_ok, crossing, parts, bits5 = _candidate(
+                        ex, ey, evx, evy, a_x, lateral, chain_x[b, 0], chain_v[b, 0], l1_decel, fx, fv, f_aggr, a_a,
+                        a_d, a_ym, y_safe, p_m, dt, y_bound, lat_tol, tol,
+                    )  # fmt: skip
+                    bits = (bits5[0], bits5[1], bits5[2], bits5[3], bits5[4], False)
+                    ox = ov = own_gap = 0.0
                 if crossing:
                     keep = period_ok and commit_guard_core(SCALAR, state[0], state[2], state[4], state[5], l1_decel,
                                                            state[6], state[7], p_m, a_d, tol)  # fmt: skip
@@ -185,8 +271,14 @@ def period_kernel(prm, sf, sb, chain_x, chain_v, chain_promise, chain_human, n_c
                         plan[b, _HELD[j]] = state[j]
                     plan[b, _HELD[6]] = l1_decel
                     plan[b, _P_FOLLOWS] = 1.0 if bits[4] else 0.0
-                    for j in range(6):  # no own-lane leader: EvasionPlan's defaults
-                        plan[b, _P_OWN + j] = _OWN_DEFAULTS[j]
+                    if has_l0:  # (plan_from_core's own-lane fields)
+                        plan[b, _P_OWN], plan[b, _P_OWN + 1], plan[b, _P_OWN + 2] = ox, ov, l0_decel
+                        plan[b, _P_FOLLOWS_OWN] = 1.0 if bits[5] else 0.0
+                        plan[b, _P_CONT] = 1.0
+                        plan[b, _P_GAP_OWN] = own_gap + own_margin
+                    else:
+                        for j in range(6):  # no own-lane leader: EvasionPlan's defaults
+                            plan[b, _P_OWN + j] = _OWN_DEFAULTS[j]
                     sk[b, 0] = f_aggr
                     st[b, 0] = t + 0.0 + dt
                     break
@@ -202,10 +294,8 @@ def period_kernel(prm, sf, sb, chain_x, chain_v, chain_promise, chain_human, n_c
                     ax_cmd = -a_d
             ay_cmd = lane_keep_accel(SCALAR, ey, evy, lane_w, a_ym)
         if code_b == ABORT:  # the held plan's exact motion over the period
-            for j in range(_HELD.shape[0]):
-                held[j] = plan[b, _HELD[j]]
             age = SCALAR.maximum(t + 0.0 - st[b, 0], 0.0)
-            _plan_motion(held, plan[b, _P_FOLLOWS] > 0.0, age, dt, a_a, a_d, kt, kx, kv, ky, kvy, kax, kay)
+            _held_motion(plan, b, age, dt, a_a, a_d, kt, kx, kv, ky, kvy)
             for j in range(8):
                 knots[b, 0, j], knots[b, 1, j], knots[b, 2, j] = kt[j], kx[j], kv[j]
                 knots[b, 3, j], knots[b, 4, j] = ky[j], kvy[j]

@@ -9,8 +9,9 @@ state are the NumPy stages' (``core.step``) bits: ``tests/test_fast_period.py``.
 **Dispatch never guesses.** :func:`refusals` names every reason a period cannot run compiled, from the
 configuration's own field list (:data:`COMPILED`: each :class:`~.config.ShieldConfig` field with the values the kernel
 implements; a field missing there refuses, so a new setting is never run at its default) and from what the
-situation and the state carry (own-lane leaders, sensing bounds, commands in flight, another decision rule). A
-refused period runs the stages; ``Shield.last_path`` says which ran.
+situation and the state carry (:data:`SITUATION_FIELDS`: sensing bounds, and any field not classified there, e.g. the
+other vehicles of the world model; commands in flight; the monitor's cumulative anchor; another decision rule). A
+refused period runs the stages; ``Shield.last_path`` says which ran, ``Shield.refusals(situation)`` why.
 """
 
 from __future__ import annotations
@@ -27,7 +28,7 @@ from ..safety.lateral import LATERAL_TOL_M
 from ..safety.plan import EvasionPlan
 from .assessment import AssessmentState
 from .config import ShieldConfig
-from .decide import ABORT
+from .decide import ABORT, own_completion_level, own_margin
 from .decision import Decision
 from .monitor import TOL_M, Breach, Snapshot
 from .rules import rule_rows
@@ -43,7 +44,7 @@ COMPILED: dict[str, tuple | None] = {
     "assess_miss": None,  # read by the 'slow' assessment only
     "enabled": (True,),
     "actuation_delay_s": (0.0,),
-    "own_lane": None,  # rows with an own-lane leader refuse (situation_refusals)
+    "own_lane": None,
     "sensing": None,  # a situation with sensing bounds refuses where sensing is on (situation_refusals)
 }
 
@@ -71,14 +72,13 @@ def refusals(config: ShieldConfig, variant, batch: int) -> list[str]:
 
 
 #: Each :class:`~.situation.Situation` field: ``"read"`` (the kernel reads it), ``"unused"`` (the compiled settings
-#: never read it: F's true type is the ``truth`` assessment's), ``"own"`` / ``"sensing"`` (refused where the
-#: configuration uses them and a row has an own-lane leader / bounds), ``"refused"`` (refused where not ``None``).
+#: never read it: F's true type is the ``truth`` assessment's), ``"sensing"`` (refused where the configuration takes
+#: the bounds into account and the situation has some), ``"refused"`` (refused where not ``None``).
 SITUATION_FIELDS: dict[str, str] = {
     **dict.fromkeys(("t", "ego_x", "ego_y", "ego_vx", "ego_vy", "f_x", "f_v", "f_connected", "f_collaborative",
                      "chain_x", "chain_v", "chain_promise", "chain_human", "n_connected", "f_speed_observed",
-                     "v2x_stale"), "read"),
+                     "v2x_stale", "own_x", "own_v", "own_promise", "own_n_connected"), "read"),
     "f_aggressive_truth": "unused",
-    **dict.fromkeys(("own_x", "own_v", "own_promise", "own_n_connected"), "own"),
     **dict.fromkeys(("err_f", "err_chain", "err_own"), "sensing"),
 }
 
@@ -91,8 +91,6 @@ def situation_refusals(situation, config: ShieldConfig, state) -> list[str]:
         kind = SITUATION_FIELDS.get(f.name, "refused")
         if kind == "refused" and getattr(situation, f.name) is not None:
             out.append(f"Situation.{f.name}")
-    if config.own_lane and situation.has_own_lane:
-        out.append("an own-lane leader L0")
     if config.sensing and situation.has_errors:
         out.append("sensing-error bounds")
     if state is not None:
@@ -100,8 +98,6 @@ def situation_refusals(situation, config: ShieldConfig, state) -> list[str]:
             out.append("commands in flight")
         if state.last is not None and state.last.anchor is not None:
             out.append("the monitor's cumulative anchor")
-        if state.plan.continues.any() or state.plan.follows_own.any():
-            out.append("a held plan with an own-lane leader")
     return out
 
 
@@ -188,7 +184,14 @@ def step(packed: Packed, situation, proposal, params: Params, config: ShieldConf
     sb[:, 2:] = flags
     prm_vec = np.array([s.t, prm.dt, prm.a_x_a, prm.a_x_d, prm.a_y_m, prm.y_safe, prm.p_m, prm.p_m_human,
                         prm.y_boundary, prm.lane_width, prm.others_decel, LATERAL_TOL_M, FEASIBILITY_TOL_M, TOL_M,
-                        cfg.assess_threshold, float(cfg.monitor)])  # fmt: skip
+                        cfg.assess_threshold, float(cfg.monitor), max(own_completion_level(prm), prm.y_boundary),
+                        own_margin(prm)])  # fmt: skip
+    if cfg.own_lane and s.own_x is not None:
+        k = s.own_x.shape[1]
+        own = (np.ascontiguousarray(s.own_x), np.ascontiguousarray(s.own_v),
+               np.ascontiguousarray(s.own_promise, float).reshape(n, k - 1), np.asarray(s.own_n_connected, np.int64))
+    else:
+        own = (np.full((n, 1), np.inf), np.zeros((n, 1)), np.zeros((n, 0)), np.zeros(n, np.int64))
     out = Packed(s.t + prm.dt, packed.plan.copy(order="F"), packed.history.copy(), packed.count.copy(),
                  packed.st.copy(), packed.sk.copy(), None)  # fmt: skip
     snap = packed.snapshot
@@ -201,7 +204,8 @@ def step(packed: Packed, situation, proposal, params: Params, config: ShieldConf
     nc = np.asarray(s.n_connected, np.int64)
     fp.period_kernel(prm_vec, sf, sb, np.ascontiguousarray(s.chain_x), np.ascontiguousarray(s.chain_v),
                      np.ascontiguousarray(s.chain_promise, float).reshape(n, max(m - 1, 0)),
-                     np.ascontiguousarray(s.chain_human, bool).reshape(n, max(m - 1, 0)), nc, out.history, out.count,
+                     np.ascontiguousarray(s.chain_human, bool).reshape(n, max(m - 1, 0)), nc, *own, out.history,
+                     out.count,
                      out.st, out.sk, out.plan, packed.snapshot is not None, *snap, bounds, behaviour, of, ob,
                      knots)  # fmt: skip
     out.snapshot = (s.chain_x, s.chain_v, bounds, nc)

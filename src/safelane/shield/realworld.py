@@ -25,7 +25,7 @@ import numpy as np
 from .._motion import advance
 from ..params import Params
 from ..safety._backend import ARRAY, FEASIBILITY_TOL_M
-from ..safety.chain import min_follow_decel
+from ..safety.chain import chain_link
 from ..safety.lateral import LATERAL_TOL_M
 from ..safety.own_lane import own_lane_core
 from ..safety.plan import EvasionPlan, plan_from_core, set_rows
@@ -80,9 +80,8 @@ def chain_bounds(x, v, promise, n_connected, human, err, prm: Params):
             slack = np.where(np.isnan(slack), np.inf, slack)  # both slots empty
             v_f = v[:, i] + e[:, i, 1]
             v_l = np.maximum(v[:, i + 1] - e[:, i + 1, 1], 0.0)
-            z = min_follow_decel(ARRAY, slack, v_f, v_l, a_ahead)
-            unsafe |= z > a_o
-            a_ahead = np.minimum(np.maximum(promise[:, i], z), a_o)
+            _, a_ahead, broken = chain_link(ARRAY, slack, v_f, v_l, a_ahead, promise[:, i], a_o)
+            unsafe |= broken
             decel.insert(0, a_ahead)
     return np.column_stack(decel), unsafe
 
