@@ -4,6 +4,7 @@ all measured in one run. The issue's target for one vehicle: ≤ 100 µs (ad-rss
 
     .venv/bin/python benchmarks/bench_shield_latency.py [--calls 2000] [--adrss-pairs 2000]
 
+The baseline beside it: the same period through the NumPy stages (``shield.core.step``), same run.
 Each figure is the best of 5 timings of a loop of calls (the median of the per-call times is printed too). Also
 prints where a batch-1 step spends its time, by stage (``safelane.shield.stages``), from cProfile. Figures swing
 with the machine's load; compare within one run.
@@ -24,7 +25,7 @@ import warnings
 import numpy as np
 
 from safelane import Params
-from safelane.shield import Shield, Situation
+from safelane.shield import Shield, Situation, core, validation
 
 
 def situation(b: int) -> Situation:
@@ -80,10 +81,21 @@ def main() -> None:
         shield_many.step(many, proposal_many)
     best1, med1 = per_call(lambda: shield1.step(one, proposal1), args.calls)
     best_b, med_b = per_call(lambda: shield_many.step(many, proposal_many), max(args.calls // 50, 5))
-    print(f"  Shield.step, one vehicle:             {best1 * 1e6:9.1f} µs per call (median of loops "
+    print(f"  Shield.step, one vehicle ({shield1.last_path}): {best1 * 1e6:9.1f} µs per call (median of loops "
           f"{med1 * 1e6:.1f})   target <= 100 µs: {'pass' if best1 <= 100e-6 else 'MISS'}")  # fmt: skip
     print(f"  Shield.step, batch 1,000, per row:    {best_b / 1000 * 1e6:9.2f} µs (median {med_b / 1000 * 1e6:.2f}); "
           f"one call {best_b * 1e3:.2f} ms")  # fmt: skip
+    # The baseline: the same period through the NumPy stages (shield.core.step, the functional API; with the
+    # Shield's own input checks, so both figures include them).
+    staged = {"state": core.init(one, prm, shield1.config, "CV_all")}
+
+    def stages_step():
+        validation.situation_arg(one, "Shield.step").validate(prm)
+        staged["state"], _ = core.step(staged["state"], one, proposal1, prm, shield1.config, "CV_all")
+
+    best_s, med_s = per_call(stages_step, max(args.calls // 4, 50))
+    print(f"  the same period, NumPy stages:        {best_s * 1e6:9.1f} µs per call (median of loops {med_s * 1e6:.1f})"
+          f"   (baseline, same run; {best_s / best1:.1f}x the compiled period)")  # fmt: skip
 
     from safelane.baselines import rss_adrss
 
@@ -115,12 +127,12 @@ def main() -> None:
     profile = cProfile.Profile()
     profile.enable()
     for _ in range(300):
-        shield1.step(one, proposal1)
+        stages_step()
     profile.disable()
     stats = pstats.Stats(profile)
-    total = max(row[3] for key, row in stats.stats.items() if key[2] == "step" and key[0].endswith("core.py"))
-    print("where one batch-1 Shield.step goes (cProfile, cumulative per stage, share of the whole call with its input "
-          "checks; profiling inflates every figure):")  # fmt: skip
+    total = max(row[3] for key, row in stats.stats.items() if key[2] == "stages_step")
+    print("where one batch-1 period goes through the NumPy stages (cProfile, cumulative per stage, share of the whole "
+          "call with its input checks; profiling inflates every figure):")  # fmt: skip
     for key, row in sorted(stats.stats.items(), key=lambda kv: -kv[1][3]):
         if key[0].endswith("stages.py") and key[2] in ("observe", "worst_case", "proposal", "frame", "decide",
                                                        "command", "remember"):  # fmt: skip

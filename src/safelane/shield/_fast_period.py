@@ -10,7 +10,8 @@ completion guard :func:`~.decide.commit_guard_core`, :func:`~.decide.hesitate_co
 chain's bound through :func:`~safelane.safety.chain.chain_link`, the period with it
 :func:`~safelane.safety.own_lane.own_period`, its evasion check ``_fast_own._own_lane``), the responsible follow
 (:mod:`safelane.safety.responsible`), :func:`~.stages.lane_keep_accel`, the held plan's motion
-(:func:`~safelane.safety.plan.plan_state`, :func:`~.decide.plan_switches`) and :func:`~safelane.safety.plan.plan_reason`.
+(:func:`~safelane.safety.plan.plan_state`, :func:`~.decide.plan_switches`) and
+:func:`~safelane.safety.plan.plan_reason`.
 It writes what the NumPy stages compute, in their order of evaluation, so a row's decision and state are the stages'
 bits (``tests/test_fast_period.py`` compares them field by field over many periods). :mod:`.fast_step` is the Python
 side (the state packed into arrays between periods, the :class:`~.decision.Decision` built from them).
@@ -97,7 +98,7 @@ _PF_TX1, _PF_VSW, _PF_TBE, _PF_TYF, _PF_TYS, _PF_YA1, _PF_YA2, _PF_TYE = (
     _PF[n] for n in ("t_x1", "v_switch", "t_brake_end", "t_y_f", "t_y_switch", "y_acc_1", "y_acc_2", "t_y_end")
 )
 _P_FOLLOWS_OWN, _P_CONT, _P_GAP_OWN = _PF["follows_own"], _PF["continues"], _PF["min_gap_own"]
-#: The plan columns :func:`~safelane.sim._fast_held._plan_motion` reads, in its order (``_fast_loop.PLAN``).
+#: The plan columns of the predicted state and L1 (``ego_px`` … ``l1_decel``), then the rest of the profile.
 _HELD = np.array([_PF[n] for n in ("ego_px", "ego_py", "ego_vx", "ego_vy", "l1_p", "l1_v", "l1_decel", "t_x1",
                                    "v_switch", "t_brake_end", "t_y_f", "t_y_switch", "y_acc_1", "y_acc_2",
                                    "t_y_end")])  # fmt: skip
@@ -148,16 +149,187 @@ def _held_motion(plan, r, age, dt, a_a, a_d, kt, kx, kv, ky, kvy):
 
 
 @numba.njit(cache=True, nogil=True, error_model="numpy")
+def monitor_row(b, t, dt, mon_tol, now, snap_x, snap_v, snap_bounds, snap_nc, st, sk):
+    """The monitor's comparison of the last period for row ``b`` (:func:`~.monitor.observe_breaches`): ``now``
+    ``(., M + 1)`` the chain as seen now with F in slot 0 (row 0), the snapshot's chain ``snap_*`` (row ``b``); the
+    breach flags and first instant into ``sk``, ``st``."""
+    same = snap_x.shape[1] == now.shape[1] - 1
+    f0, f1, f2, f3 = _breach_row(snap_x, snap_v, snap_bounds, b, now, 0, 1, snap_nc[b], st[b, 6], st[b, 3], st[b, 4],
+                                 st[b, 5], sk[b, 4], now[0, 0], same, dt, mon_tol)  # fmt: skip
+    new = (f0 and not sk[b, 5]) or (f1 and not sk[b, 6]) or (f2 and not sk[b, 7]) or (f3 and not sk[b, 8])
+    if st[b, 2] != st[b, 2] and new:
+        st[b, 2] = t
+    sk[b, 5], sk[b, 6], sk[b, 7], sk[b, 8] = sk[b, 5] or f0, sk[b, 6] or f1, sk[b, 7] or f2, sk[b, 8] or f3
+
+
+@numba.njit(cache=True, nogil=True, error_model="numpy")
+def period_row(b, prm, times, den, sf, sb, chain_x, chain_v, link_promise, link_margin, own_x, own_v, own_promise,
+               own_nc, history, count, st, sk, plan, has_last, snap_x, snap_v, snap_bounds, snap_nc, bounds, of, ob,
+               knots, x2, v2, b2, kn):  # fmt: skip
+    """One period of row ``b`` (the module docstring): the stages of :func:`~.core.step` in their order. Reads the
+    situation (``sf``, ``sb``, the chain; ``link_promise``, ``link_margin`` ``(M − 1, .)``: each link's promise and
+    margin, resolved as :func:`~.stages.chain_analysis` resolves them), updates the state in place (``history``,
+    ``count``, ``st``, ``sk``, ``plan``; the snapshot ``snap_*`` of the last period is read, the caller keeps this
+    one), writes ``bounds``, ``of``, ``ob`` and, for an abort, the held plan's knots ``knots[b] (5, 8)`` (``t, px,
+    vx, py, vy``; also left in the scratch ``kn``); returns the behaviour. ``times``, ``den``: the assessment's
+    window; ``x2, v2, b2, kn``: scratch (``b2`` holds the chain's bounds with F's slot after the call)."""
+    t, dt, a_a, a_d, a_ym, y_safe, p_m, _, y_bound, lane_w, a_o, lat_tol, tol, mon_tol, thr, mon = prm[:16]
+    own_level, own_margin = prm[16], prm[17]
+    lim = Limits(a_a, a_d, a_ym, y_safe)
+    window = times.shape[0]
+    kt, kx, kv, ky, kvy = kn[0], kn[1], kn[2], kn[3], kn[4]
+    ex, ey, evx, evy, fx, fv = sf[b, 0], sf[b, 1], sf[b, 2], sf[b, 3], sf[b, 4], sf[b, 5]
+    # --- observe: the assessment's observation (assessment.update) ---
+    for j in range(window - 1):
+        history[b, j] = history[b, j + 1]
+    history[b, window - 1] = sf[b, 6]
+    count[b] += 1
+    num = history[b, 0] * times[0]
+    for j in range(1, window):
+        num = num + history[b, j] * times[j]
+    sk[b, 1], sk[b, 2] = belief_core(SCALAR, num / den, count[b] >= window, sk[b, 1], sk[b, 2], thr)
+    if st[b, 1] != st[b, 1] and not sk[b, 2]:
+        st[b, 1] = t
+    # --- the chain analysis (stages.chain_analysis), F in slot 0 ---
+    m = chain_x.shape[1]
+    x2[0, 0], v2[0, 0] = fx, fv
+    for i in range(m):
+        x2[0, i + 1], v2[0, i + 1] = chain_x[b, i], chain_v[b, i]
+    unsafe = _chain_row(x2, v2, 0, link_promise, link_margin, b, a_o, b2)
+    for i in range(m):
+        bounds[b, i] = b2[0, i + 1]
+    # --- the monitor's comparison of the last period (monitor.observe_breaches) ---
+    if has_last:
+        monitor_row(b, t, dt, mon_tol, x2, snap_x, snap_v, snap_bounds, snap_nc, st, sk)
+    # --- worst case (stages.worst_case) ---
+    broken = sk[b, 5] or sk[b, 6] or sk[b, 7] or sk[b, 8] or sk[b, 9]
+    broken = broken and mon > 0.0  # ShieldConfig.monitor
+    trusted = sb[b, 3] and sb[b, 0]
+    l1_decel, f_aggr = worst_case_core(SCALAR, sb[b, 2], unsafe, b2[0, 1], a_o, trusted, sb[b, 4], sk[b, 2],
+                                       broken)  # fmt: skip
+    l0x, l0v, l0_decel = own_x[b, 0], own_v[b, 0], a_o  # (stages.own_leader; +inf: no L0)
+    has_l0 = l0x < _INF
+    if has_l0:
+        bound0, unsafe0 = _own_decel(own_x, own_v, own_promise, own_nc[b], b, p_m, a_o)
+        if sb[b, 2] and not unsafe0 and not broken:
+            l0_decel = bound0
+    # --- the proposal (stages.proposal) ---
+    ok, ax_ok, ay_ok = proposal_core(SCALAR, sf[b, 7], sf[b, 8], lim)
+    invalid = not ok
+    a_x, a_y = _clip(ax_ok, -a_d, a_a), _clip(ay_ok, -a_ym, a_ym)
+    # --- decide: proceed / hesitate / abort with the commit guard (stages.decide, decide.verdict_of) ---
+    a_yh = hesitate_core(SCALAR, evy, dt, a_ym)
+    active = not sk[b, 3]
+    code_b = COMPLETED
+    completing = False
+    if active:
+        code_b = ABORT
+        for code in range(2):
+            if code == 0 and invalid:
+                continue
+            lateral = a_y if code == 0 else a_yh
+            if has_l0:  # decide._with_own: the candidate with L0 (_fast_own.check_kernel's row)
+                state, period_ok, crossing = candidate_period(
+                    SCALAR, ex, ey, evx, evy, a_x, lateral, chain_x[b, 0], chain_v[b, 0], l1_decel, fx, fv,
+                    f_aggr, lim, p_m, dt, own_level, lat_tol, tol,
+                )  # fmt: skip
+                period_ok, crossing, ox, ov = own_period(SCALAR, ex, evx, a_x, l0x, l0v, l0_decel, period_ok,
+                                                         crossing, state[3], p_m, dt, tol)  # fmt: skip
+                of_, bits = _own_lane(state[0], state[1], state[2], state[3], state[4], state[5], l1_decel,
+                                      state[6], state[7], f_aggr, ox, ov, l0_decel, p_m, p_m, own_margin, lim,
+                                      tol)  # fmt: skip
+                # as _candidate's: the plan's float parts (FLOAT_PARTS), then (exists, lead_ok, follow_ok,
+                # nothing, follows_leader)
+                parts = (of_[6], of_[7], of_[8], of_[9], of_[10], of_[0], of_[1], of_[2], of_[3], of_[4])
+                bits = (bits[0], bits[1], bits[2], bits[4], bits[3], bits[5])
+                own_gap = of_[5]
+            else:
+                state, period_ok, crossing, parts, bits5 = _candidate(
+                    ex, ey, evx, evy, a_x, lateral, chain_x[b, 0], chain_v[b, 0], l1_decel, fx, fv, f_aggr, a_a,
+                    a_d, a_ym, y_safe, p_m, dt, y_bound, lat_tol, tol,
+                )  # fmt: skip
+                bits = (bits5[0], bits5[1], bits5[2], bits5[3], bits5[4], False)
+                ox = ov = own_gap = 0.0
+            if crossing:
+                keep = period_ok and commit_guard_core(SCALAR, state[0], state[2], state[4], state[5], l1_decel,
+                                                       state[6], state[7], p_m, a_d, tol)  # fmt: skip
+            else:
+                keep = period_ok and bits[0]
+            if keep:  # the plan from the predicted state (safety.plan.plan_from_core)
+                code_b = PROCEED if code == 0 else HESITATE
+                completing = crossing
+                plan[b, _P_FEAS] = 1.0 if bits[0] else 0.0
+                plan[b, _P_REASON] = plan_reason(SCALAR, bits[1], bits[2], bits[3])
+                for j in range(8):
+                    plan[b, _PARTS[j]] = parts[j]
+                plan[b, _P_TX2] = SCALAR.minimum(parts[7], parts[0])
+                plan[b, _P_GAPL] = parts[8] + p_m
+                plan[b, _P_GAPF] = parts[9] + p_m
+                for j in range(6):
+                    plan[b, _HELD[j]] = state[j]
+                plan[b, _HELD[6]] = l1_decel
+                plan[b, _P_FOLLOWS] = 1.0 if bits[4] else 0.0
+                if has_l0:  # (plan_from_core's own-lane fields)
+                    plan[b, _P_OWN], plan[b, _P_OWN + 1], plan[b, _P_OWN + 2] = ox, ov, l0_decel
+                    plan[b, _P_FOLLOWS_OWN] = 1.0 if bits[5] else 0.0
+                    plan[b, _P_CONT] = 1.0
+                    plan[b, _P_GAP_OWN] = own_gap + own_margin
+                else:
+                    for j in range(6):  # no own-lane leader: EvasionPlan's defaults
+                        plan[b, _P_OWN + j] = _OWN_DEFAULTS[j]
+                sk[b, 0] = f_aggr
+                st[b, 0] = t + 0.0 + dt
+                break
+    # --- command (stages.command) ---
+    ax_cmd = a_x
+    ay_cmd = a_yh if code_b == HESITATE else a_y
+    if not active:  # after completion: centre in the target lane, follow L1 responsibly
+        slack = chain_x[b, 0] - ex - p_m
+        ax_cmd = responsible_accel_core(SCALAR, a_x, _responsible_bound(slack, evx, chain_v[b, 0], l1_decel, a_d,
+                                                                        dt), a_d)  # fmt: skip
+        if l1_decel > a_d:
+            if not responsible_ok_core(SCALAR, ax_cmd, slack, evx, chain_v[b, 0], l1_decel, a_d, dt, tol):
+                ax_cmd = -a_d
+        ay_cmd = lane_keep_accel(SCALAR, ey, evy, lane_w, a_ym)
+    if code_b == ABORT:  # the held plan's exact motion over the period
+        age = SCALAR.maximum(t + 0.0 - st[b, 0], 0.0)
+        _held_motion(plan, b, age, dt, a_a, a_d, kt, kx, kv, ky, kvy)
+        for j in range(8):
+            knots[b, 0, j], knots[b, 1, j], knots[b, 2, j] = kt[j], kx[j], kv[j]
+            knots[b, 3, j], knots[b, 4, j] = ky[j], kvy[j]
+        first = 0
+        for j in range(7):
+            if kt[j + 1] - kt[j] > 0.0:
+                first = j
+                break
+        span = kt[first + 1] - kt[first]
+        ax_cmd = (kv[first + 1] - kv[first]) / span
+        ay_cmd = (kvy[first + 1] - kvy[first]) / span
+    # --- remember: what a responsible F may do this period, for the monitor (stages.remember) ---
+    limit = _INF
+    if active and not sk[b, 0] and ex - fx > 0.0:
+        limit = SCALAR.maximum(_responsible_bound(ex - fx - p_m, fv, evx, a_d, a_o, dt), -a_o)
+    st[b, 3], st[b, 4], st[b, 5], st[b, 6] = fx, fv, limit, plan[b, _HELD[6]]
+    sk[b, 4] = active
+    if active and sb[b, 1] and not sk[b, 9]:  # stages.with_stale
+        sk[b, 9] = True
+        if st[b, 2] != st[b, 2]:
+            st[b, 2] = t
+    completing = completing and active
+    sk[b, 3] = sk[b, 3] or completing
+    of[b, 0], of[b, 1], of[b, 2], of[b, 3], of[b, 4] = ax_cmd, ay_cmd, ax_ok, ay_ok, l1_decel
+    ob[b, 0], ob[b, 1], ob[b, 2], ob[b, 3] = completing, invalid and active, f_aggr, unsafe
+    return code_b
+
+
+@numba.njit(cache=True, nogil=True, error_model="numpy")
 def period_kernel(prm, sf, sb, chain_x, chain_v, chain_promise, chain_human, n_connected, own_x, own_v, own_promise,
                   own_nc, history, count, st, sk, plan, has_last, snap_x, snap_v, snap_bounds, snap_nc, bounds,
                   behaviour, of, ob, knots):  # fmt: skip
-    """One period of every row (see the module docstring). Reads the situation (``sf``, ``sb``, the chain), updates
-    the state in place (``history``, ``count``, ``st``, ``sk``, ``plan``; the snapshot ``snap_*`` is read, the caller
-    keeps this period's), writes ``bounds (B, M)``, ``behaviour``, ``of``, ``ob`` and the aborting rows' knots
-    ``(B, 5, 8)`` (``t, px, vx, py, vy``)."""
-    t, dt, a_a, a_d, a_ym, y_safe, p_m, p_m_h, y_bound, lane_w, a_o, lat_tol, tol, mon_tol, thr, mon = prm[:16]
-    own_level, own_margin = prm[16], prm[17]
-    lim = Limits(a_a, a_d, a_ym, y_safe)
+    """One period of every row: :func:`period_row` after resolving each link's promise and margin as
+    :func:`~.stages.chain_analysis` does (the promise of a connected leader, else ``a_o_d``; ``p_m_human`` for a
+    connected human-driven one, else ``p_m``)."""
+    dt, p_m, p_m_h, a_o = prm[1], prm[6], prm[7], prm[10]
     bsz, m = chain_x.shape
     window = history.shape[1]
     times = np.empty(window)
@@ -167,158 +339,14 @@ def period_kernel(prm, sf, sb, chain_x, chain_v, chain_promise, chain_human, n_c
     for j in range(1, window):
         den = den + times[j] * times[j]
     x2, v2, b2 = np.empty((1, m + 1)), np.empty((1, m + 1)), np.empty((1, m + 1))
-    promise, margin = np.empty((max(m - 1, 1), 1)), np.empty((max(m - 1, 1), 1))
     kn = np.empty((5, 8))
-    kt, kx, kv, ky, kvy = kn[0], kn[1], kn[2], kn[3], kn[4]
-    same = snap_x.shape[1] == m
+    link_promise, link_margin = np.empty((max(m - 1, 1), bsz)), np.empty((max(m - 1, 1), bsz))
     for b in range(bsz):
-        ex, ey, evx, evy, fx, fv = sf[b, 0], sf[b, 1], sf[b, 2], sf[b, 3], sf[b, 4], sf[b, 5]
-        # --- observe: the assessment's observation (assessment.update) ---
-        for j in range(window - 1):
-            history[b, j] = history[b, j + 1]
-        history[b, window - 1] = sf[b, 6]
-        count[b] += 1
-        num = history[b, 0] * times[0]
-        for j in range(1, window):
-            num = num + history[b, j] * times[j]
-        sk[b, 1], sk[b, 2] = belief_core(SCALAR, num / den, count[b] >= window, sk[b, 1], sk[b, 2], thr)
-        if st[b, 1] != st[b, 1] and not sk[b, 2]:
-            st[b, 1] = t
-        # --- the chain analysis (stages.chain_analysis), F in slot 0 ---
-        nc = n_connected[b]
-        x2[0, 0], v2[0, 0] = fx, fv
-        for i in range(m):
-            x2[0, i + 1], v2[0, i + 1] = chain_x[b, i], chain_v[b, i]
         for i in range(m - 1):
-            promise[i, 0] = chain_promise[b, i] if i < nc else a_o
-            margin[i, 0] = p_m_h if (chain_human[b, i] and i < nc) else p_m
-        unsafe = _chain_row(x2, v2, 0, promise, margin, 0, a_o, b2)
-        for i in range(m):
-            bounds[b, i] = b2[0, i + 1]
-        # --- the monitor's comparison of the last period (monitor.observe_breaches) ---
-        if has_last:
-            f0, f1, f2, f3 = _breach_row(snap_x, snap_v, snap_bounds, b, x2, 0, 1, snap_nc[b], st[b, 6], st[b, 3],
-                                         st[b, 4], st[b, 5], sk[b, 4], fx, same, dt, mon_tol)  # fmt: skip
-            new = (f0 and not sk[b, 5]) or (f1 and not sk[b, 6]) or (f2 and not sk[b, 7]) or (f3 and not sk[b, 8])
-            if st[b, 2] != st[b, 2] and new:
-                st[b, 2] = t
-            sk[b, 5], sk[b, 6], sk[b, 7], sk[b, 8] = sk[b, 5] or f0, sk[b, 6] or f1, sk[b, 7] or f2, sk[b, 8] or f3
-        # --- worst case (stages.worst_case) ---
-        broken = sk[b, 5] or sk[b, 6] or sk[b, 7] or sk[b, 8] or sk[b, 9]
-        broken = broken and mon > 0.0  # ShieldConfig.monitor
-        trusted = sb[b, 3] and sb[b, 0]
-        l1_decel, f_aggr = worst_case_core(SCALAR, sb[b, 2], unsafe, b2[0, 1], a_o, trusted, sb[b, 4], sk[b, 2],
-                                           broken)  # fmt: skip
-        l0x, l0v, l0_decel = own_x[b, 0], own_v[b, 0], a_o  # (stages.own_leader; +inf: no L0)
-        has_l0 = l0x < _INF
-        if has_l0:
-            bound0, unsafe0 = _own_decel(own_x, own_v, own_promise, own_nc[b], b, p_m, a_o)
-            if sb[b, 2] and not unsafe0 and not broken:
-                l0_decel = bound0
-        # --- the proposal (stages.proposal) ---
-        ok, ax_ok, ay_ok = proposal_core(SCALAR, sf[b, 7], sf[b, 8], lim)
-        invalid = not ok
-        a_x, a_y = _clip(ax_ok, -a_d, a_a), _clip(ay_ok, -a_ym, a_ym)
-        # --- decide: proceed / hesitate / abort with the commit guard (stages.decide, decide.verdict_of) ---
-        a_yh = hesitate_core(SCALAR, evy, dt, a_ym)
-        active = not sk[b, 3]
-        code_b = COMPLETED
-        completing = False
-        if active:
-            code_b = ABORT
-            for code in range(2):
-                if code == 0 and invalid:
-                    continue
-                lateral = a_y if code == 0 else a_yh
-                if has_l0:  # decide._with_own: the candidate with L0 (_fast_own.check_kernel's row)
-                    state, period_ok, crossing = candidate_period(
-                        SCALAR, ex, ey, evx, evy, a_x, lateral, chain_x[b, 0], chain_v[b, 0], l1_decel, fx, fv,
-                        f_aggr, lim, p_m, dt, own_level, lat_tol, tol,
-                    )  # fmt: skip
-                    period_ok, crossing, ox, ov = own_period(SCALAR, ex, evx, a_x, l0x, l0v, l0_decel, period_ok,
-                                                             crossing, state[3], p_m, dt, tol)  # fmt: skip
-                    of_, bits = _own_lane(state[0], state[1], state[2], state[3], state[4], state[5], l1_decel,
-                                          state[6], state[7], f_aggr, ox, ov, l0_decel, p_m, p_m, own_margin, lim,
-                                          tol)  # fmt: skip
-                    # as _candidate's: the plan's float parts (FLOAT_PARTS), then (exists, lead_ok, follow_ok,
-                    # nothing, follows_leader)
-                    parts = (of_[6], of_[7], of_[8], of_[9], of_[10], of_[0], of_[1], of_[2], of_[3], of_[4])
-                    bits = (bits[0], bits[1], bits[2], bits[4], bits[3], bits[5])
-                    own_gap = of_[5]
-                else:
-                    state, period_ok, crossing, parts, bits5 = _candidate(
-                        ex, ey, evx, evy, a_x, lateral, chain_x[b, 0], chain_v[b, 0], l1_decel, fx, fv, f_aggr, a_a,
-                        a_d, a_ym, y_safe, p_m, dt, y_bound, lat_tol, tol,
-                    )  # fmt: skip
-                    bits = (bits5[0], bits5[1], bits5[2], bits5[3], bits5[4], False)
-                    ox = ov = own_gap = 0.0
-                if crossing:
-                    keep = period_ok and commit_guard_core(SCALAR, state[0], state[2], state[4], state[5], l1_decel,
-                                                           state[6], state[7], p_m, a_d, tol)  # fmt: skip
-                else:
-                    keep = period_ok and bits[0]
-                if keep:  # the plan from the predicted state (safety.plan.plan_from_core)
-                    code_b = PROCEED if code == 0 else HESITATE
-                    completing = crossing
-                    plan[b, _P_FEAS] = 1.0 if bits[0] else 0.0
-                    plan[b, _P_REASON] = plan_reason(SCALAR, bits[1], bits[2], bits[3])
-                    for j in range(8):
-                        plan[b, _PARTS[j]] = parts[j]
-                    plan[b, _P_TX2] = SCALAR.minimum(parts[7], parts[0])
-                    plan[b, _P_GAPL] = parts[8] + p_m
-                    plan[b, _P_GAPF] = parts[9] + p_m
-                    for j in range(6):
-                        plan[b, _HELD[j]] = state[j]
-                    plan[b, _HELD[6]] = l1_decel
-                    plan[b, _P_FOLLOWS] = 1.0 if bits[4] else 0.0
-                    if has_l0:  # (plan_from_core's own-lane fields)
-                        plan[b, _P_OWN], plan[b, _P_OWN + 1], plan[b, _P_OWN + 2] = ox, ov, l0_decel
-                        plan[b, _P_FOLLOWS_OWN] = 1.0 if bits[5] else 0.0
-                        plan[b, _P_CONT] = 1.0
-                        plan[b, _P_GAP_OWN] = own_gap + own_margin
-                    else:
-                        for j in range(6):  # no own-lane leader: EvasionPlan's defaults
-                            plan[b, _P_OWN + j] = _OWN_DEFAULTS[j]
-                    sk[b, 0] = f_aggr
-                    st[b, 0] = t + 0.0 + dt
-                    break
-        # --- command (stages.command) ---
-        ax_cmd = a_x
-        ay_cmd = a_yh if code_b == HESITATE else a_y
-        if not active:  # after completion: centre in the target lane, follow L1 responsibly
-            slack = chain_x[b, 0] - ex - p_m
-            ax_cmd = responsible_accel_core(SCALAR, a_x, _responsible_bound(slack, evx, chain_v[b, 0], l1_decel, a_d,
-                                                                            dt), a_d)  # fmt: skip
-            if l1_decel > a_d:
-                if not responsible_ok_core(SCALAR, ax_cmd, slack, evx, chain_v[b, 0], l1_decel, a_d, dt, tol):
-                    ax_cmd = -a_d
-            ay_cmd = lane_keep_accel(SCALAR, ey, evy, lane_w, a_ym)
-        if code_b == ABORT:  # the held plan's exact motion over the period
-            age = SCALAR.maximum(t + 0.0 - st[b, 0], 0.0)
-            _held_motion(plan, b, age, dt, a_a, a_d, kt, kx, kv, ky, kvy)
-            for j in range(8):
-                knots[b, 0, j], knots[b, 1, j], knots[b, 2, j] = kt[j], kx[j], kv[j]
-                knots[b, 3, j], knots[b, 4, j] = ky[j], kvy[j]
-            first = 0
-            for j in range(7):
-                if kt[j + 1] - kt[j] > 0.0:
-                    first = j
-                    break
-            span = kt[first + 1] - kt[first]
-            ax_cmd = (kv[first + 1] - kv[first]) / span
-            ay_cmd = (kvy[first + 1] - kvy[first]) / span
-        # --- remember: what a responsible F may do this period, for the monitor (stages.remember) ---
-        limit = _INF
-        if active and not sk[b, 0] and ex - fx > 0.0:
-            limit = SCALAR.maximum(_responsible_bound(ex - fx - p_m, fv, evx, a_d, a_o, dt), -a_o)
-        st[b, 3], st[b, 4], st[b, 5], st[b, 6] = fx, fv, limit, plan[b, _HELD[6]]
-        sk[b, 4] = active
-        if active and sb[b, 1] and not sk[b, 9]:  # stages.with_stale
-            sk[b, 9] = True
-            if st[b, 2] != st[b, 2]:
-                st[b, 2] = t
-        completing = completing and active
-        sk[b, 3] = sk[b, 3] or completing
-        behaviour[b] = code_b
-        of[b, 0], of[b, 1], of[b, 2], of[b, 3], of[b, 4] = ax_cmd, ay_cmd, ax_ok, ay_ok, l1_decel
-        ob[b, 0], ob[b, 1], ob[b, 2], ob[b, 3] = completing, invalid and active, f_aggr, unsafe
+            connected = i < n_connected[b]
+            link_promise[i, b] = chain_promise[b, i] if connected else a_o
+            link_margin[i, b] = p_m_h if (chain_human[b, i] and connected) else p_m
+    for b in range(bsz):
+        behaviour[b] = period_row(b, prm, times, den, sf, sb, chain_x, chain_v, link_promise, link_margin, own_x, own_v,
+                                  own_promise, own_nc, history, count, st, sk, plan, has_last, snap_x, snap_v,
+                                  snap_bounds, snap_nc, bounds, of, ob, knots, x2, v2, b2, kn)  # fmt: skip
