@@ -1,5 +1,5 @@
 """The compiled control period (``shield/fast_step.py``, ``shield/_fast_period.py``) against the NumPy stages
-(``shield.core.step``), field by field, over many periods of random worlds; and its dispatch, which never runs a
+(``shield.core.stages_step``), field by field, over many periods of random worlds; and its dispatch, which never runs a
 setting it does not implement."""
 
 from __future__ import annotations
@@ -129,7 +129,7 @@ def test_compiled_period_is_the_stages(seed, n, m, variant, config, own):
         fast = shield.step(s, prop)
         assert shield.last_path == "compiled"
         held = state.plan.continues
-        state, ref = shield_core.step(state, s, prop, params, cfg, variant)
+        state, ref = shield_core.stages_step(state, s, prop, params, cfg, variant)
         own_aborts += int((held & (ref.behaviour == 2)).sum())
         same(fast, ref, f"period {k}: decision")
         same(shield.state, state, f"period {k}: state")
@@ -159,7 +159,7 @@ def test_switching_paths_keeps_the_state():
         prop = proposals(rng, 20)
         fast = shield.step(s, prop)
         paths.append(shield.last_path)
-        state, ref = shield_core.step(state, s, prop, params, ShieldConfig(), "CV_all")
+        state, ref = shield_core.stages_step(state, s, prop, params, ShieldConfig(), "CV_all")
         same(fast, ref, f"period {k}")
         same(shield.state, state, f"period {k}: state")
         advance(world, ref, rng, params.dt)
@@ -194,6 +194,39 @@ def test_refused_settings_run_the_stages(config, reason):
     assert reason in shield.refusals(s)
     shield.step(s, proposals(rng, 8))
     assert shield.last_path == "stages"
+
+
+def test_functional_step_runs_the_compiled_period(monkeypatch):
+    """shield.core.step (the functional API the simulator calls) takes the compiled period where it is implemented:
+    the same decisions and states as the stages, and the stages where it is refused (a delay)."""
+    params = Params()
+    rng = np.random.default_rng(21)
+    world = random_world(rng, 16, 3, stale=False)
+    s = situation_of(world, 0.0, params)
+    for cfg, compiled in ((ShieldConfig(), True), (ShieldConfig(actuation_delay_s=0.1), False)):
+        state = shield_core.init(s, params, cfg, "CV_all")
+        prop = proposals(rng, 16)
+        calls = []
+
+        def counted(*args, _calls=calls, _step=fast_step.step, **kwargs):
+            _calls.append(1)
+            return _step(*args, **kwargs)
+
+        with monkeypatch.context() as patch:
+            patch.setattr(fast_step, "step", counted)
+            new, decision = shield_core.step(state, s, prop, params, cfg, "CV_all")
+        ref_state, ref = shield_core.stages_step(state, s, prop, params, cfg, "CV_all")
+        assert bool(calls) == compiled
+        same(decision, ref, "decision")
+        same(new, ref_state, "state")
+    # A chain analysis given by the caller is taken as given on both paths (here a deliberately different one).
+    state = shield_core.init(s, params, ShieldConfig(), "CV_all")
+    given = (np.full((16, 3), 0.25), rng.random(16) < 0.3)
+    prop = proposals(rng, 16)
+    _, decision = shield_core.step(state, s, prop, params, chain=given)
+    _, ref = shield_core.stages_step(state, s, prop, params, chain=given)
+    same(decision, ref, "decision with a given chain")
+    np.testing.assert_array_equal(decision.l1_decel, np.where(given[1], params.others_decel, 0.25))
 
 
 def test_unclassified_situation_field_refuses(monkeypatch):

@@ -164,13 +164,14 @@ def monitor_row(b, t, dt, mon_tol, now, snap_x, snap_v, snap_bounds, snap_nc, st
 
 @numba.njit(cache=True, nogil=True, error_model="numpy")
 def period_row(b, prm, times, den, sf, sb, chain_x, chain_v, link_promise, link_margin, own_x, own_v, own_promise,
-               own_nc, history, count, st, sk, plan, has_last, snap_x, snap_v, snap_bounds, snap_nc, bounds, of, ob,
-               knots, x2, v2, b2, kn):  # fmt: skip
+               own_nc, history, count, st, sk, plan, has_last, snap_x, snap_v, snap_bounds, snap_nc, bounds,
+               given_unsafe, of, ob, knots, x2, v2, b2, kn):  # fmt: skip
     """One period of row ``b`` (the module docstring): the stages of :func:`~.core.step` in their order. Reads the
     situation (``sf``, ``sb``, the chain; ``link_promise``, ``link_margin`` ``(M − 1, .)``: each link's promise and
     margin, resolved as :func:`~.stages.chain_analysis` resolves them), updates the state in place (``history``,
     ``count``, ``st``, ``sk``, ``plan``; the snapshot ``snap_*`` of the last period is read, the caller keeps this
-    one), writes ``bounds``, ``of``, ``ob`` and, for an abort, the held plan's knots ``knots[b] (5, 8)`` (``t, px,
+    one), writes ``bounds`` (or reads them, with ``given_unsafe``, where the caller's chain analysis is given: a
+    non-empty ``given_unsafe``), ``of``, ``ob`` and, for an abort, the held plan's knots ``knots[b] (5, 8)`` (``t, px,
     vx, py, vy``; also left in the scratch ``kn``); returns the behaviour. ``times``, ``den``: the assessment's
     window; ``x2, v2, b2, kn``: scratch (``b2`` holds the chain's bounds with F's slot after the call)."""
     t, dt, a_a, a_d, a_ym, y_safe, p_m, _, y_bound, lane_w, a_o, lat_tol, tol, mon_tol, thr, mon = prm[:16]
@@ -195,9 +196,15 @@ def period_row(b, prm, times, den, sf, sb, chain_x, chain_v, link_promise, link_
     x2[0, 0], v2[0, 0] = fx, fv
     for i in range(m):
         x2[0, i + 1], v2[0, i + 1] = chain_x[b, i], chain_v[b, i]
-    unsafe = _chain_row(x2, v2, 0, link_promise, link_margin, b, a_o, b2)
-    for i in range(m):
-        bounds[b, i] = b2[0, i + 1]
+    if given_unsafe.shape[0] > 0:  # the caller's analysis of this very situation, taken as given (core.step's chain)
+        unsafe = given_unsafe[b]
+        b2[0, 0] = a_o
+        for i in range(m):
+            b2[0, i + 1] = bounds[b, i]
+    else:
+        unsafe = _chain_row(x2, v2, 0, link_promise, link_margin, b, a_o, b2)
+        for i in range(m):
+            bounds[b, i] = b2[0, i + 1]
     # --- the monitor's comparison of the last period (monitor.observe_breaches) ---
     if has_last:
         monitor_row(b, t, dt, mon_tol, x2, snap_x, snap_v, snap_bounds, snap_nc, st, sk)
@@ -325,7 +332,7 @@ def period_row(b, prm, times, den, sf, sb, chain_x, chain_v, link_promise, link_
 @numba.njit(cache=True, nogil=True, error_model="numpy")
 def period_kernel(prm, sf, sb, chain_x, chain_v, chain_promise, chain_human, n_connected, own_x, own_v, own_promise,
                   own_nc, history, count, st, sk, plan, has_last, snap_x, snap_v, snap_bounds, snap_nc, bounds,
-                  behaviour, of, ob, knots):  # fmt: skip
+                  given_unsafe, behaviour, of, ob, knots):  # fmt: skip
     """One period of every row: :func:`period_row` after resolving each link's promise and margin as
     :func:`~.stages.chain_analysis` does (the promise of a connected leader, else ``a_o_d``; ``p_m_human`` for a
     connected human-driven one, else ``p_m``)."""
@@ -349,4 +356,5 @@ def period_kernel(prm, sf, sb, chain_x, chain_v, chain_promise, chain_human, n_c
     for b in range(bsz):
         behaviour[b] = period_row(b, prm, times, den, sf, sb, chain_x, chain_v, link_promise, link_margin, own_x, own_v,
                                   own_promise, own_nc, history, count, st, sk, plan, has_last, snap_x, snap_v,
-                                  snap_bounds, snap_nc, bounds, of, ob, knots, x2, v2, b2, kn)  # fmt: skip
+                                  snap_bounds, snap_nc, bounds, given_unsafe, of, ob, knots, x2, v2, b2,
+                                  kn)  # fmt: skip

@@ -42,7 +42,7 @@ from .rules import rule_rows
 from .situation import Situation
 from .stages import chain_analysis, exact, own_leader
 
-__all__ = ["Shield", "ShieldConfig", "ShieldState", "chain_analysis", "init", "observe", "step"]
+__all__ = ["Shield", "ShieldConfig", "ShieldState", "chain_analysis", "init", "observe", "stages_step", "step"]
 
 
 @dataclass(frozen=True)
@@ -110,12 +110,40 @@ def step(
     planner_name: str = "the nominal planner",
     chain=None,
 ) -> tuple[ShieldState, Decision]:
-    """One period: ``(state, situation, proposal) -> (state', Decision)``, the stages of :mod:`.stages` in order.
+    """One period: ``(state, situation, proposal) -> (state', Decision)``.
 
-    ``proposal``: ``(a_x, a_y)`` arrays of shape ``(B,)`` in the shield's frame. ``variant``: a registered variant
-    name, or ``(B,)`` names or registry indices. ``chain``: the :func:`chain_analysis` of this very situation, when
-    the caller has it already (the simulator computes it for the traffic).
+    The compiled period (:mod:`.fast_step`, one call for every row) where it implements the configuration, the
+    variant and what the situation and state carry; else :func:`stages_step`, the stages of :mod:`.stages` in order.
+    Both give the same bits (``tests/test_fast_period.py``). ``proposal``: ``(a_x, a_y)`` arrays of shape ``(B,)``
+    in the shield's frame. ``variant``: a registered variant name, or ``(B,)`` names or registry indices. ``chain``:
+    the :func:`chain_analysis` of this very situation, when the caller has it already (the simulator computes it
+    for the traffic): taken as given on both paths.
     """
+    cfg = config or ShieldConfig()
+    n = len(situation)
+    if (fast_step.kernel() is not None and not fast_step.refusals(cfg, variant, n)
+            and not fast_step.situation_refusals(situation, cfg, state)):  # fmt: skip
+        arrays = proposal_arrays(planner_name, proposal, n)
+        packed, decision = fast_step.step(fast_step.Packed.of(state), situation, arrays, params, cfg,
+                                          np.column_stack(variant_flags(variant, n)), chain)  # fmt: skip
+        return packed.state(params, decision), decision
+    return stages_step(state, situation, proposal, params, cfg, variant, planner_name=planner_name, chain=chain)
+
+
+def stages_step(
+    state: ShieldState,
+    situation: Situation,
+    proposal,
+    params: Params,
+    config: ShieldConfig | None = None,
+    variant="CV_all",
+    *,
+    planner_name: str = "the nominal planner",
+    chain=None,
+) -> tuple[ShieldState, Decision]:
+    """One period through the stages of :mod:`.stages` in order, on NumPy arrays (the compiled parts they call
+    aside): the reference of the compiled period, and the path of every setting it does not implement. Arguments as
+    :func:`step`'s."""
     cfg = config or ShieldConfig()
     n = len(situation)
     flags = variant_flags(variant, n)
@@ -236,6 +264,6 @@ class Shield:
                                                     self._flags(len(situation)))  # fmt: skip
             self._state, self.last_path = None, "compiled"
             return decision
-        self.state, decision = step(self.state, situation, proposal, self.params, self.config, self.variant)
+        self.state, decision = stages_step(self.state, situation, proposal, self.params, self.config, self.variant)
         self.last_path = "stages"
         return decision

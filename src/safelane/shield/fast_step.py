@@ -149,8 +149,9 @@ class Packed:
     def breach(self) -> Breach:
         return Breach(flags=self.sk[:, 5:], first_s=self.st[:, 2])
 
-    def state(self, params: Params):
-        """The :class:`~.core.ShieldState` (copies: later periods do not change it)."""
+    def state(self, params: Params, decision: Decision | None = None):
+        """The :class:`~.core.ShieldState` (copies: later periods do not change it). With the period's ``decision``,
+        its plan and breach record are the state's (as the stages share them)."""
         from .core import ShieldState
 
         p = dataclasses.replace(self, plan=self.plan.copy(order="F"), st=self.st.copy(), sk=self.sk.copy())
@@ -162,15 +163,18 @@ class Packed:
                             active=p.sk[:, 4])  # fmt: skip
         belief = AssessmentState(history=self.history.copy(), count=self.count.copy(), aggressive=p.sk[:, 2],
                                  latched=p.sk[:, 1], first_collaborative_s=p.st[:, 1])  # fmt: skip
-        return ShieldState(t=p.t, plan=p.plan_of(params), plan_t0=p.st[:, 0], plan_f_aggr=p.sk[:, 0], belief=belief,
-                           breach=p.breach(), completed=p.sk[:, 3], last=last, pending=None)  # fmt: skip
+        plan, breach = (p.plan_of(params), p.breach()) if decision is None else (decision.plan, decision.breach)
+        return ShieldState(t=p.t, plan=plan, plan_t0=p.st[:, 0], plan_f_aggr=p.sk[:, 0], belief=belief, breach=breach,
+                           completed=p.sk[:, 3], last=last, pending=None)  # fmt: skip
 
 
-def step(packed: Packed, situation, proposal, params: Params, config: ShieldConfig, flags) -> tuple[Packed, Decision]:
+def step(packed: Packed, situation, proposal, params: Params, config: ShieldConfig, flags,
+         chain=None) -> tuple[Packed, Decision]:  # fmt: skip
     """One period compiled: ``(packed, situation, proposal) -> (packed', Decision)`` — :func:`.core.step`'s result
     for a period :func:`refusals` and :func:`situation_refusals` accept. ``proposal``: the checked ``(a_x, a_y)``
     arrays (:func:`.validation.batch_proposal`); ``flags``: the variant's ``(B, 3)`` flags
-    (:func:`.policies.variant_flags`, stacked)."""
+    (:func:`.policies.variant_flags`, stacked); ``chain``: ``(bounds, unsafe)``, the caller's
+    :func:`~.stages.chain_analysis` of this situation, taken as given (as :func:`.core.step` takes it), or ``None``."""
     from . import _fast_period as fp
 
     s, prm, cfg = situation, params, config
@@ -197,7 +201,11 @@ def step(packed: Packed, situation, proposal, params: Params, config: ShieldConf
     snap = packed.snapshot
     if snap is None:
         snap = (np.zeros((n, m)), np.zeros((n, m)), np.zeros((n, m)), np.zeros(n, np.int64))
-    bounds = np.empty((n, m))
+    if chain is None:
+        bounds, given_unsafe = np.empty((n, m)), np.zeros(0, np.bool_)
+    else:
+        bounds = np.array(np.broadcast_to(chain[0], (n, m)), float)
+        given_unsafe = np.array(np.broadcast_to(chain[1], (n,)), np.bool_)
     behaviour = np.empty(n, np.int64)
     of, ob = np.empty((n, len(fp.OUT_F))), np.empty((n, len(fp.OUT_B)), bool)
     knots = np.empty((n, 5, 8))
@@ -206,8 +214,8 @@ def step(packed: Packed, situation, proposal, params: Params, config: ShieldConf
                      np.ascontiguousarray(s.chain_promise, float).reshape(n, max(m - 1, 0)),
                      np.ascontiguousarray(s.chain_human, bool).reshape(n, max(m - 1, 0)), nc, *own, out.history,
                      out.count,
-                     out.st, out.sk, out.plan, packed.snapshot is not None, *snap, bounds, behaviour, of, ob,
-                     knots)  # fmt: skip
+                     out.st, out.sk, out.plan, packed.snapshot is not None, *snap, bounds, given_unsafe, behaviour,
+                     of, ob, knots)  # fmt: skip
     out.snapshot = (s.chain_x, s.chain_v, bounds, nc)
     rows = np.flatnonzero(behaviour == ABORT)
     if rows.size:
