@@ -29,6 +29,7 @@ def random_world(rng: np.random.Generator, n: int, m: int, *, stale: bool, own: 
         human=rng.random((n, m - 1)) < 0.3,
         f_connected=rng.random(n) < 0.5,
         f_collaborative=rng.random(n) < 0.5,
+        truth=rng.random(n) < 0.5,
         stale=(rng.random(n) < 0.05) if stale else None,
     )
     world["lead"][1] = np.maximum(world["lead"][1], 0.0)
@@ -52,7 +53,7 @@ def situation_of(world: dict, t: float, params: Params) -> Situation:
     )  # fmt: skip
     if world["stale"] is not None:
         s = dataclasses.replace(s, v2x_stale=world["stale"].copy())
-    return s
+    return dataclasses.replace(s, f_aggressive_truth=world["truth"].copy())
 
 
 def advance(world: dict, decision, rng: np.random.Generator, dt: float) -> None:
@@ -111,6 +112,7 @@ def same(a, b, where: str) -> None:
         (8, 64, 3, "CV_all", {}, True),
         (9, 48, 2, "CV_none", {}, True),
         (10, 40, 3, "CV_all", {"own_lane": False}, True),
+        (11, 48, 3, "CV_all", {"assessment": "truth"}, True),
     ],
 )
 def test_compiled_period_is_the_stages(seed, n, m, variant, config, own):
@@ -176,7 +178,7 @@ def test_every_config_field_is_classified():
 @pytest.mark.parametrize(
     ("config", "reason"),
     [
-        ({"assessment": "truth"}, "ShieldConfig.assessment='truth'"),
+        ({"assessment": "slow"}, "ShieldConfig.assessment='slow'"),
         ({"completion": "paper_evasion"}, "ShieldConfig.completion='paper_evasion'"),
         ({"enabled": False}, "ShieldConfig.enabled=False"),
         ({"actuation_delay_s": 0.2}, "ShieldConfig.actuation_delay_s=0.2"),
@@ -188,8 +190,6 @@ def test_refused_settings_run_the_stages(config, reason):
     world = random_world(rng, 8, 3, stale=False)
     shield = Shield(params, config=ShieldConfig(**config))
     s = situation_of(world, 0.0, params)
-    if config.get("assessment") == "truth":
-        s = dataclasses.replace(s, f_aggressive_truth=np.ones(8, bool))
     shield.reset(s)
     assert reason in shield.refusals(s)
     shield.step(s, proposals(rng, 8))

@@ -55,13 +55,13 @@ _INF = np.inf
 #: Scalars of :func:`period_kernel`'s ``prm`` vector, in order.
 PRM = (
     "t", "dt", "a_x_a", "a_x_d", "a_y_m", "y_safe", "p_m", "p_m_human", "y_boundary", "lane_width", "a_o_d",
-    "lat_tol", "tol", "monitor_tol", "assess_threshold", "monitor", "own_level", "own_margin",
+    "lat_tol", "tol", "monitor_tol", "assess_threshold", "monitor", "own_level", "own_margin", "truth",
 )  # fmt: skip
 #: Columns of the situation's per-row floats ``sf``.
 SIT_F = ("ego_x", "ego_y", "ego_vx", "ego_vy", "f_x", "f_v", "f_observed", "a_x", "a_y")
 #: Columns of the situation's per-row flags ``sb``: F trusted over V2X (connected and collaborative), a stale V2X
-#: sender, then the variant's flags (uses the chain, F's V2X, the assessment).
-SIT_B = ("f_trusted", "stale", "uses_chain", "uses_f_v2x", "uses_assessment")
+#: sender, the variant's flags (uses the chain, F's V2X, the assessment), F's true type (the ``truth`` assessment).
+SIT_B = ("f_trusted", "stale", "uses_chain", "uses_f_v2x", "uses_assessment", "f_aggressive_truth")
 #: The held plan's columns (:class:`~safelane.safety.plan.EvasionPlan`'s fields, booleans and the reason as floats).
 PLAN = (
     "feasible", "reason", "t_y_f", "t_y_switch", "t_x1", "t_x2", "min_gap_leader", "min_gap_follower", "ego_px",
@@ -212,7 +212,8 @@ def period_row(b, prm, times, den, sf, sb, chain_x, chain_v, link_promise, link_
     broken = sk[b, 5] or sk[b, 6] or sk[b, 7] or sk[b, 8] or sk[b, 9]
     broken = broken and mon > 0.0  # ShieldConfig.monitor
     trusted = sb[b, 3] and sb[b, 0]
-    l1_decel, f_aggr = worst_case_core(SCALAR, sb[b, 2], unsafe, b2[0, 1], a_o, trusted, sb[b, 4], sk[b, 2],
+    assessed = sk[b, 2] if prm[18] == 0.0 else sb[b, 5]  # the observed belief, or (the 'truth' assessment) F's type
+    l1_decel, f_aggr = worst_case_core(SCALAR, sb[b, 2], unsafe, b2[0, 1], a_o, trusted, sb[b, 4], assessed,
                                        broken)  # fmt: skip
     l0x, l0v, l0_decel = own_x[b, 0], own_v[b, 0], a_o  # (stages.own_leader; +inf: no L0)
     has_l0 = l0x < _INF

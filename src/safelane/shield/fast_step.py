@@ -35,7 +35,7 @@ from .rules import rule_rows
 
 #: Each :class:`ShieldConfig` field and the values the compiled period implements (``None``: every value).
 COMPILED: dict[str, tuple | None] = {
-    "assessment": ("observed",),
+    "assessment": ("observed", "truth"),
     "assess_window": None,
     "assess_threshold": None,
     "monitor": None,
@@ -71,14 +71,14 @@ def refusals(config: ShieldConfig, variant, batch: int) -> list[str]:
     return out
 
 
-#: Each :class:`~.situation.Situation` field: ``"read"`` (the kernel reads it), ``"unused"`` (the compiled settings
-#: never read it: F's true type is the ``truth`` assessment's), ``"sensing"`` (refused where the configuration takes
-#: the bounds into account and the situation has some), ``"refused"`` (refused where not ``None``).
+#: Each :class:`~.situation.Situation` field: ``"read"`` (the kernel reads it), ``"sensing"`` (refused where the
+#: configuration takes the bounds into account and the situation has some), ``"refused"`` (refused where not
+#: ``None``).
 SITUATION_FIELDS: dict[str, str] = {
     **dict.fromkeys(("t", "ego_x", "ego_y", "ego_vx", "ego_vy", "f_x", "f_v", "f_connected", "f_collaborative",
                      "chain_x", "chain_v", "chain_promise", "chain_human", "n_connected", "f_speed_observed",
                      "v2x_stale", "own_x", "own_v", "own_promise", "own_n_connected"), "read"),
-    "f_aggressive_truth": "unused",
+    "f_aggressive_truth": "read",
     **dict.fromkeys(("err_f", "err_chain", "err_own"), "sensing"),
 }
 
@@ -185,11 +185,18 @@ def step(packed: Packed, situation, proposal, params: Params, config: ShieldConf
     sb = np.empty((n, len(fp.SIT_B)), bool)
     sb[:, 0] = s.f_connected & s.f_collaborative
     sb[:, 1] = False if s.v2x_stale is None else s.v2x_stale
-    sb[:, 2:] = flags
+    sb[:, 2:5] = flags
+    truth = cfg.assessment == "truth"
+    if truth:
+        if s.f_aggressive_truth is None:  # the stages' error (policies.TruthAssessment)
+            raise ValueError("the 'truth' assessment needs Situation.f_aggressive_truth (a simulation study only)")
+        sb[:, 5] = s.f_aggressive_truth
+    else:
+        sb[:, 5] = False
     prm_vec = np.array([s.t, prm.dt, prm.a_x_a, prm.a_x_d, prm.a_y_m, prm.y_safe, prm.p_m, prm.p_m_human,
                         prm.y_boundary, prm.lane_width, prm.others_decel, LATERAL_TOL_M, FEASIBILITY_TOL_M, TOL_M,
                         cfg.assess_threshold, float(cfg.monitor), max(own_completion_level(prm), prm.y_boundary),
-                        own_margin(prm)])  # fmt: skip
+                        own_margin(prm), float(truth)])  # fmt: skip
     if cfg.own_lane and s.own_x is not None:
         k = s.own_x.shape[1]
         own = (np.ascontiguousarray(s.own_x), np.ascontiguousarray(s.own_v),
