@@ -319,3 +319,31 @@ def test_clicks_own_range_checks_show_the_value(args, line, tmp_path):
     assert result.exit_code == 2
     assert result.stderr.strip().splitlines()[-1] == f"Error: {line}"
     assert not (tmp_path / "o").exists()
+
+
+# -- falsify --others-decel ------------------------------------------------------------------------------------------
+@pytest.mark.parametrize("world", ["paper", "realistic"])
+def test_falsify_others_decel_reaches_the_search(monkeypatch, tmp_path, world):
+    seen = {}
+
+    def fake(scenarios, minutes, seed, method, *, setting, on_batch, **kwargs):
+        seen["setting"] = setting
+        report = fz.Report(seed=seed, methods=("random",), hooks=True, profiles=True, generated=2, simulated=2)
+        on_batch(report)
+        return report
+
+    monkeypatch.setattr(fz, "falsify", fake)
+    result = runner.invoke(app, ["falsify", "--others-decel", "9.5", "--world", world, "--minutes", "0",
+                                 "--out", str(tmp_path), "--no-progress"])  # fmt: skip
+    assert result.exit_code == 0, result.output
+    setting = seen["setting"]
+    assert setting.params.others_decel == 9.5 and setting.params.a_x_d == 8.0 and setting.world == world
+    (run,) = tmp_path.iterdir()
+    assert json.loads((run / "run.json").read_text())["others_decel"] == 9.5
+
+
+def test_falsify_others_decel_out_of_range_names_the_option(tmp_path):
+    result = runner.invoke(app, ["falsify", "--others-decel", "-1", "--out", str(tmp_path)])
+    assert result.exit_code == 2
+    assert "--others-decel" in result.stderr and "greater than or equal to 0" in result.stderr
+    assert not tmp_path.exists() or not any(tmp_path.iterdir())

@@ -23,6 +23,10 @@ def falsify(
     ray_address: str = ray_address_option(),
     world: str = typer.Option("paper", "--world", help="paper (the paper's assumptions) or realistic (plus an "
                               "own-lane leader L0, sensing errors and actuation delay; docs/real_roads.md)."),
+    others_decel: float = typer.Option(
+        None, "--others-decel", help="The others' maximum braking a_o_d [m/s², >= 0] (RSS's brakeMax): every "
+        "other vehicle may brake up to it and the search draws braking up to it; default a_x_d (the paper's)."
+    ),
     out: Path = typer.Option(
         Path("results/falsify"), "--out", "-o", help="Parent folder; the run goes to OUT/<run-id>/ (created)."
     ),
@@ -72,10 +76,11 @@ def falsify(
     from ._backend import record
     from ._runs import check_out_dir, run_folder, say
 
+    params = _params(others_decel)
     where = resolve_backend(backend, workers, ray_address)
     out = check_out_dir(out)  # before minutes of search, not after
     info = {"kind": "falsify", "world": world, "method": method, "scenarios": scenarios, "minutes": minutes,
-            "seed": seed, "batch_size": batch_size, **record(where)}
+            "seed": seed, "batch_size": batch_size, "others_decel": params.others_decel, **record(where)}
     columns = (TextColumn("{task.description}"), BarColumn(), TextColumn("{task.fields[status]}"), TimeElapsedColumn())
     latest: list[fz.Report] = []
     with session(where), run_folder(out, f"falsify-{world}-{method}-seed{seed}", info) as (run_dir, info):
@@ -90,7 +95,8 @@ def falsify(
                     status = f"{report.simulated:,} simulated, min gap/p_m {report.min_ratio:.12f}, failures {failures}"
                     bar.update(task, completed=min(report.simulated, scenarios), status=status)
 
-                setting = fz.Setting.realistic(seed=seed) if world == "realistic" else None
+                make = fz.Setting.realistic if world == "realistic" else fz.Setting
+                setting = make(seed=seed, params=params)
                 report = fz.falsify(scenarios, minutes, seed, method, batch_size=batch_size, on_batch=on_batch,
                                     workers=where, setting=setting)  # fmt: skip
         except KeyboardInterrupt:
@@ -102,6 +108,20 @@ def falsify(
     typer.echo(report.text())
     typer.echo(f"wrote {written[0]}" + (f" and {len(written) - 1} scenario dumps" if len(written) > 1 else ""))
     typer.echo(f"run folder: {run_dir}")
+
+
+def _params(others_decel: float | None):
+    """The limits of the search's world: ``Params()`` with the others' maximum braking ``--others-decel``; a bad value
+    is a :class:`typer.BadParameter` naming the option and the range."""
+    from ..params import Params
+
+    if others_decel is None:
+        return Params()
+    try:
+        return Params(a_o_d=others_decel)
+    except ValueError as exc:
+        why = exc.errors()[0]["msg"] if hasattr(exc, "errors") else str(exc)
+        raise typer.BadParameter(f"{why}; got {others_decel}", param_hint="--others-decel") from exc
 
 
 def _write(report, run_dir: Path, info: dict) -> list[Path]:
