@@ -3,10 +3,15 @@ throughput, speed, travel time (docs/traffic.md).
 
 **Responsibility** (:func:`blame`, in the spirit of RSS's "the rear vehicle keeps a safe distance"): in a collision
 SUMO names the ``collider`` (the rear vehicle of a rear-end) and the ``victim``. The collider is responsible, unless
-the victim **cut in**: it entered the collision's lane (a lane change, SUMO's or the shield's) in front of the
-collider at most ``CUT_IN_WINDOW_S`` before the collision, with a bumper gap below the collider's safe distance
+the victim **cut in**: it entered a lane (a lane change, SUMO's or the shield's) in front of the collider — the
+collider the nearest vehicle behind it in that lane — at most ``CUT_IN_WINDOW_S`` before the collision, with a bumper
+gap below the collider's safe distance
 ``v_r·τ + v_r²/(2·b_r) − v_f²/(2·b_f)`` (``τ = 0.5`` s, ``b_r = 4.5`` m/s² the rear's comfortable braking, ``b_f =
-8`` m/s² the front's hardest, ``Params.a_x_d``) at that moment. Then the victim is responsible.
+8`` m/s² the front's hardest, ``Params.a_x_d``) at that moment. Then the victim is responsible. A vehicle is in
+every lane its body overlaps (:func:`lanes_overlapped`): one across a lane boundary counts in both, entering the
+second when its body crosses the line, and as the follower of a vehicle that enters either in front of it. (SUMO's
+own drivers do not see it so — without the sublane model SUMO puts a vehicle in the lane of its centre only —, and
+its collision list registers a pair only when both centres are in one lane.)
 """
 
 from __future__ import annotations
@@ -16,7 +21,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .demand import SSM_THRESHOLDS
+from .demand import LANE_W, N_LANES, SSM_THRESHOLDS, lane_y
 
 CUT_IN_WINDOW_S = 3.0
 TAU_S, B_REAR, B_FRONT = 0.5, 4.5, 8.0
@@ -96,21 +101,39 @@ class Tally:
         return self.v_sum / self.v_n if self.v_n else np.nan
 
 
-def lane_entries(t: float, fleet, prev_lane: dict[str, int]) -> list[dict]:
-    """The vehicles whose lane (from the left) changed since the last period, each with the nearest vehicle behind
-    it in its new lane (``follower``), their bumper gap and speeds; ``prev_lane`` is updated."""
-    lane = fleet.lane
-    old = np.array([prev_lane.get(vid, -2) for vid in fleet.ids], np.int64)
-    for vid, g in zip(fleet.ids, lane.tolist(), strict=True):
-        prev_lane[vid] = g
-    moved = np.flatnonzero((old >= 0) & (lane >= 0) & (old != lane))
+def lanes_overlapped(fleet, width: float = 1.8) -> np.ndarray:
+    """``(V, N_LANES)``: the lanes (from the left) each vehicle's body overlaps — one for a vehicle inside its lane,
+    two for one across a lane boundary (an equipped vehicle changing lanes), none on the ramp. ``width``: the
+    vehicles' width [m] (``Params.vehicle_width``)."""
+    g = np.arange(N_LANES)
+    on_road = (np.asarray(fleet.lane) >= 0)[:, None]
+    centre_dist = np.abs(np.asarray(fleet.y, float)[:, None] - lane_y(g)[None, :])
+    return on_road & (centre_dist < 0.5 * (LANE_W + width) - 1e-6)
+
+
+def lane_entries(t: float, fleet, prev_lanes: dict[str, int], length: float = 4.8, width: float = 1.8) -> list[dict]:
+    """The vehicles that entered a lane (from the left) since the last period, each with the nearest vehicle behind
+    it in that lane (``follower``), their bumper gap and speeds; ``prev_lanes`` (each vehicle's lanes at the last
+    period, a bit mask) is updated. A vehicle is in every lane its body overlaps (:func:`lanes_overlapped`): one
+    across a lane boundary counts in both, as an entering vehicle and as a follower — a vehicle that moves into a
+    lane in front of it cuts in even where its centre is on the other side of the boundary. A vehicle enters a lane
+    when its body first overlaps it; a vehicle coming from the ramp enters no lane (it joins the acceleration lane
+    from its own)."""
+    over = lanes_overlapped(fleet, width)
+    mask = (over * (1 << np.arange(N_LANES))[None, :]).sum(1) if len(over) else np.zeros(0, np.int64)
+    old = np.array([prev_lanes.get(vid, -1) for vid in fleet.ids], np.int64)
+    for vid, m in zip(fleet.ids, mask.tolist(), strict=True):
+        prev_lanes[vid] = m if m else -1
     out = []
-    for i in moved.tolist():
-        same = np.flatnonzero((lane == lane[i]) & (fleet.x < fleet.x[i]))
-        if not len(same):
-            continue
-        j = same[np.argmax(fleet.x[same])]
-        out.append({"t": t, "vid": fleet.ids[i], "lane": int(lane[i]), "follower": fleet.ids[j],
-                    "gap_m": float(fleet.x[i] - fleet.x[j] - 4.8), "v_follower": float(fleet.v[j]),
-                    "v_vid": float(fleet.v[i])})  # fmt: skip
+    x = np.asarray(fleet.x, float)
+    entered = mask & ~np.maximum(old, 0)  # lanes overlapped now and not at the last period (bit masks)
+    for i in np.flatnonzero((old > 0) & (entered > 0)).tolist():
+        for g in np.flatnonzero((entered[i] >> np.arange(N_LANES)) & 1).tolist():
+            same = np.flatnonzero(over[:, g] & (x < x[i]))
+            if not len(same):
+                continue
+            j = same[np.argmax(x[same])]
+            out.append({"t": t, "vid": fleet.ids[i], "lane": int(g), "follower": fleet.ids[j],
+                        "gap_m": float(x[i] - x[j] - length), "v_follower": float(fleet.v[j]),
+                        "v_vid": float(fleet.v[i])})  # fmt: skip
     return out

@@ -21,8 +21,8 @@ CELL_COLUMNS = ("p", "main_vph", "ramp_vph", "demand_vph", "seconds", "warmup_s"
                 "throughput_vph", "mean_speed_mps", "mean_travel_time_s", "collisions", "collisions_equipped_involved",
                 "collisions_equipped_responsible", "collisions_cut_in", "ssm_conflicts", "ssm_ttc", "ssm_drac",
                 "ssm_pet", "ssm_equipped_involved", "lc_started", "lc_completed", "lc_aborted", "lc_gave_up",
-                "shield_decisions", "shield_calls", "human_lane_changes", "leader_braking_limited",
-                "leader_lag_max_m")  # fmt: skip
+                "lc_return_max_s", "lc_return_late", "shield_decisions", "shield_calls", "human_lane_changes",
+                "leader_braking_limited", "leader_lag_max_m")  # fmt: skip
 
 
 def run_cell(demand: Demand, params: Params | None = None) -> dict:
@@ -46,7 +46,7 @@ def run_cell(demand: Demand, params: Params | None = None) -> dict:
             fleet = world.read()
             tally.departed(t, departed)
             tally.speeds(t, fleet.v)
-            new = measures.lane_entries(t, fleet, prev_lane)
+            new = measures.lane_entries(t, fleet, prev_lane, prm.vehicle_length, prm.vehicle_width)
             entries = [e for e in entries if t - e["t"] <= measures.CUT_IN_WINDOW_S] + new
             if t < demand.warmup_s:
                 limited_before = world.limited_steps
@@ -83,7 +83,8 @@ def run_cell(demand: Demand, params: Params | None = None) -> dict:
         "ssm_drac": sum(r["drac"] > 3.35 for r in conflicts), "ssm_pet": sum(r["pet"] < 1.0 for r in conflicts),
         "ssm_equipped_involved": sum(cav(r["ego"]) or cav(r["foe"]) for r in conflicts),
         "lc_started": c["started"], "lc_completed": c["completed"], "lc_aborted": c["aborted"],
-        "lc_gave_up": c["gave_up"], "shield_decisions": c["decisions"], "shield_calls": c["shield_calls"],
+        "lc_gave_up": c["gave_up"], "lc_return_max_s": c["return_max_s"], "lc_return_late": c["return_late"],
+        "shield_decisions": c["decisions"], "shield_calls": c["shield_calls"],
         "human_lane_changes": human_changes, "leader_braking_limited": limited,
         "leader_lag_max_m": lag,
     }  # fmt: skip
