@@ -254,3 +254,48 @@ def test_rss_rows_and_situations_refuse():
     s = dataclasses.replace(s, err_f=np.full((6, 2), 0.1))
     assert fast_step.situation_refusals(s, ShieldConfig(), None) == ["sensing-error bounds"]
     assert fast_step.situation_refusals(s, ShieldConfig(sensing=False), None) == []
+
+
+def test_world_model_is_folded_before_the_compiled_period():
+    """With the world model's other vehicles (far-lane and other-side entrants, straddlers, a connected one that
+    announces), Shield.step folds them and runs compiled; the decisions and states are the stages' (which fold them
+    in their observe stage) over 40 periods."""
+    from safelane.shield.world import Others, roles
+
+    params = Params()
+    rng = np.random.default_rng(31)
+    n, k = 24, 4
+    world = random_world(rng, n, 3, stale=False)
+    lanes = np.array([-1.0, 0.0, 1.0, 2.0])
+    ox = rng.uniform(-30.0, 60.0, (n, k))
+    oy = lanes * params.lane_width + rng.uniform(-1.2, 1.2, (n, k))
+    ovx = world["ego"][2][:, None] + rng.uniform(-5.0, 3.0, (n, k))
+    ovy = rng.uniform(-0.8, 0.8, (n, k))
+    connected = rng.random((n, k)) < 0.3
+    announce = np.where(connected & (rng.random((n, k)) < 0.5), 1, -9)
+
+    def with_others(s, t):
+        others = Others.from_arrays(ox + ovx * t, oy + ovy * np.minimum(t, 1.0), np.maximum(ovx, 0.0), ovy,
+                                    connected, np.where(announce == 1, 1, Others.empty(1, 1).announce_lane[0, 0]),
+                                    np.where(announce == 1, 2.0, np.inf))  # fmt: skip
+        return dataclasses.replace(s, others=others)
+
+    shield = Shield(params)
+    start = with_others(situation_of(world, 0.0, params), 0.0)
+    folded = roles(start, params)  # the others do change the roles in many rows (else this test compares nothing new)
+    changed = (folded.f_x != start.f_x) | (folded.chain_x[:, 0] != start.chain_x[:, 0])
+    if folded.own_x is not None:
+        changed |= np.isfinite(folded.own_x[:, 0])
+    assert changed.sum() >= n // 4, changed.sum()
+    shield.reset(start)
+    state = shield_core.init(start, params, ShieldConfig(), "CV_all")
+    for step in range(40):
+        t = step * params.dt
+        s = with_others(situation_of(world, t, params), t)
+        prop = proposals(rng, n)
+        fast = shield.step(s, prop)
+        assert shield.last_path == "compiled"
+        state, ref = shield_core.stages_step(state, s, prop, params)
+        same(fast, ref, f"period {step}")
+        same(shield.state, state, f"period {step}: state")
+        advance(world, ref, rng, params.dt)

@@ -30,7 +30,7 @@ from ..params import Params
 from ..safety.evasion import plan_evasion
 from ..safety.plan import EvasionPlan
 from . import assessment as assess
-from . import fast_step, stages, validation
+from . import fast_step, stages, validation, world
 from .command import Command, InFlight
 from .config import ShieldConfig
 from .decision import Decision
@@ -121,13 +121,24 @@ def step(
     """
     cfg = config or ShieldConfig()
     n = len(situation)
-    if (fast_step.kernel() is not None and not fast_step.refusals(cfg, variant, n)
-            and not fast_step.situation_refusals(situation, cfg, state)):  # fmt: skip
-        arrays = proposal_arrays(planner_name, proposal, n)
-        packed, decision = fast_step.step(fast_step.Packed.of(state), situation, arrays, params, cfg,
-                                          np.column_stack(variant_flags(variant, n)), chain)  # fmt: skip
-        return packed.state(params, decision), decision
+    if fast_step.kernel() is not None and not fast_step.refusals(cfg, variant, n):
+        folded_state, folded, folded_chain = fold_world(state, situation, params, cfg, chain)
+        if not fast_step.situation_refusals(folded, cfg, folded_state):
+            arrays = proposal_arrays(planner_name, proposal, n)
+            packed, decision = fast_step.step(fast_step.Packed.of(folded_state), folded, arrays, params, cfg,
+                                              np.column_stack(variant_flags(variant, n)), folded_chain)  # fmt: skip
+            return packed.state(params, decision), decision
     return stages_step(state, situation, proposal, params, cfg, variant, planner_name=planner_name, chain=chain)
+
+
+def fold_world(state: ShieldState, situation: Situation, params: Params, config: ShieldConfig, chain=None):
+    """``(state, situation, chain)`` with the world model's other vehicles folded into F, the chain and the own lane
+    (:func:`.world.fold`, what :func:`.stages.observe` does first) and the situation's ``others`` then dropped, so
+    the compiled period (which reads the roles, not the others) can take it; unchanged without ``others``."""
+    if situation.others is None:
+        return state, situation, chain
+    state, situation, chain = world.fold(state, situation, params, config, chain)
+    return state, dataclasses.replace(situation, others=None), chain
 
 
 def stages_step(
@@ -257,6 +268,9 @@ class Shield:
         if len(situation) != rows:
             raise ValueError(f"the situation has {len(situation)} rows; the shield was reset with {rows}")
         proposal = validation.batch_proposal(proposal, len(situation))
+        if situation.others is not None and not self.refusals(dataclasses.replace(situation, others=None)):
+            # the world model folded here (as the stages' observe would), so the period can run compiled
+            self.state, situation, _ = fold_world(self.state, situation, self.params, self.config)
         if not self.refusals(situation):
             packed = self._packed if self._packed is not None else fast_step.Packed.of(self._state)
             proposal = proposal_arrays("the nominal planner", proposal, len(situation))

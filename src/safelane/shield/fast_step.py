@@ -9,8 +9,9 @@ state are the NumPy stages' (``core.step``) bits: ``tests/test_fast_period.py``.
 **Dispatch never guesses.** :func:`refusals` names every reason a period cannot run compiled, from the
 configuration's own field list (:data:`COMPILED`: each :class:`~.config.ShieldConfig` field with the values the kernel
 implements; a field missing there refuses, so a new setting is never run at its default) and from what the
-situation and the state carry (:data:`SITUATION_FIELDS`: sensing bounds, and any field not classified there, e.g. the
-other vehicles of the world model; commands in flight; the monitor's cumulative anchor; another decision rule). A
+situation and the state carry (:data:`SITUATION_FIELDS`: sensing bounds, and any field not classified there — the
+world model's other vehicles are folded into the roles first, :func:`.core.fold_world`; commands in flight; the
+monitor's cumulative anchor; another decision rule). A
 refused period runs the stages; ``Shield.last_path`` says which ran, ``Shield.refusals(situation)`` why.
 """
 
