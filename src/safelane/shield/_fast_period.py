@@ -137,6 +137,16 @@ def _held_motion(plan, r, age, dt, a_a, a_d, kt, kx, kv, ky, kvy):
         lead_p, lead_v, lead_decel = plan[r, _P_OWN], plan[r, _P_OWN + 1], plan[r, _P_OWN + 2]
     else:
         lead_p, lead_v, lead_decel = plan[r, _PF_L1P], plan[r, _PF_L1V], plan[r, _PF_L1D]
+    plan_knots(held, lead_p, lead_v, lead_decel, age, dt, a_a, a_d, kt, kx, kv, ky, kvy)
+
+
+@numba.njit(inline="always")
+def plan_knots(held, lead_p, lead_v, lead_decel, age, dt, a_a, a_d, kt, kx, kv, ky, kvy):
+    """``decide.plan_motion`` of one held plan (a :class:`~safelane.safety.plan.PlanRecord`, the profile following
+    ``(lead_p, lead_v, lead_decel)``) on ``[age, age + dt]``: the period's ends and the plan's switches inside it
+    (:func:`~.decide.plan_switches`), sorted, into ``kt``, the plan's state at each
+    (:func:`~safelane.safety.plan.plan_state`) into ``kx, kv, ky, kvy``. The shield's period and the closed loop's
+    held plan (``sim/_fast_held.py``) both call it."""
     switches = plan_switches(SCALAR, held, lead_v, lead_decel, age, dt)
     kt[0] = 0.0
     for j in range(6):

@@ -2,10 +2,10 @@
 loops and indexing only.
 
 No formula lives here. :func:`_plan_motion` is :func:`~safelane.shield.decide.plan_motion` with
-``Motion.from_samples`` for a plan held as the loop's :data:`~._fast_loop.PLAN` values: the plan's switches
-(:func:`~safelane.shield.decide.plan_switches`), sorted into knots, the plan's state at each
-(:func:`~safelane.safety.plan.plan_state`) and each segment's accelerations (:func:`~.kinematics.piece_acc`), the
-same closed forms the NumPy path evaluates on arrays, compiled on ``SCALAR``. :func:`_motion_max` is
+``Motion.from_samples`` for a plan held as the loop's :data:`~._fast_loop.PLAN` values: the knots and the plan's
+state at each from the shield's own period (:func:`safelane.shield._fast_period.plan_knots`), then each segment's
+accelerations (:func:`~.kinematics.piece_acc`), the same closed forms the NumPy path evaluates on arrays, compiled on
+``SCALAR``. :func:`_motion_max` is
 :func:`~.kinematics.extrema`' maximum, a walk over the knots with :func:`~.kinematics.vertex_extrema`. The loop's
 tables are the NumPy path's, bit for bit, aborts included (``tests/test_fast_loop.py``).
 """
@@ -16,10 +16,10 @@ import numba
 import numpy as np
 
 from ..safety import _compile
-from ..safety._backend import SCALAR, Limits
+from ..safety._backend import SCALAR
 from ..safety._fast_base import _max
-from ..safety.plan import PlanRecord, plan_state
-from ..shield.decide import plan_switches
+from ..safety.plan import PlanRecord
+from ..shield._fast_period import plan_knots
 from .kinematics import piece_acc, vertex_extrema
 
 _compile.register_rows()
@@ -34,16 +34,7 @@ def _plan_motion(plan, follows, age, dt, a_a, a_d, kt, kx, kv, ky, kvy, kax, kay
     into ``kx, kv, ky, kvy``, the segment accelerations into ``kax, kay``."""
     held = PlanRecord(plan[0], plan[1], plan[2], plan[3], plan[7], plan[8], plan[9], follows, plan[10], plan[11],
                       plan[12], plan[13], plan[14], False)  # fmt: skip
-    l1_p, l1_v, l1_decel = plan[4], plan[5], plan[6]
-    lim = Limits(a_a, a_d, 0.0, 0.0)
-    switches = plan_switches(SCALAR, held, l1_v, l1_decel, age, dt)
-    kt[0] = 0.0
-    for j in range(6):
-        kt[j + 1] = switches[j]
-    kt[7] = dt
-    kt.sort()
-    for j in range(8):
-        kx[j], ky[j], kv[j], kvy[j] = plan_state(SCALAR, held, age + kt[j], l1_p, l1_v, l1_decel, lim)
+    plan_knots(held, plan[4], plan[5], plan[6], age, dt, a_a, a_d, kt, kx, kv, ky, kvy)
     for j in range(7):
         span = kt[j + 1] - kt[j]
         kax[j] = piece_acc(SCALAR, kv[j], kv[j + 1], span)
