@@ -50,7 +50,6 @@ NOT_RUN: dict[str, str] = {
     ".venv/bin/python benchmarks/bench_backends.py": _BENCH,
     ".venv/bin/python benchmarks/bench_core.py": _BENCH,
     ".venv/bin/python benchmarks/bench_commonroad_referee.py": _BENCH,
-    ".venv/bin/python benchmarks/bench_traffic.py": _BENCH,
     ".venv/bin/python benchmarks/bench_traffic.py --sizes 100 1000 5000 --steps 10": _BENCH,
     "safelane traffic --penetration 0,0.25,0.5,0.75,1 --demand 4900 --seconds 3600 --warmup 300 --workers 2":
         "five simulated hours of SUMO with the shield in the loop (hours of CPU; docs/traffic.md)",
