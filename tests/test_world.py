@@ -290,3 +290,21 @@ def test_the_shields_first_stage_folds_the_others():
     for field in ("behaviour", "a_x", "a_y", "l1_decel"):
         assert np.array_equal(getattr(decisions["slow"], field), getattr(decisions["none"], field)), field
     assert decisions["fast"].behaviour[0] != PROCEED
+
+
+def test_init_and_observe_fold_the_others_as_every_period_does():
+    """The plan held at the start and the monitor's last look take the others' roles: init with ``others`` is init on
+    the folded situation, field by field (an entrant 9 m ahead in the target lane changes the starting plan)."""
+    s = situation(one(9.0, 1.0 * W, vx=20.0), ego_y=1.0)
+    folded = roles(s, PRM)
+    with_others, by_hand = core.init(s, PRM, ShieldConfig()), core.init(folded, PRM, ShieldConfig())
+    without = core.init(dataclasses.replace(s, others=None), PRM, ShieldConfig())
+    for f in dataclasses.fields(with_others.plan):
+        if f.name != "params":
+            a, b = getattr(with_others.plan, f.name), getattr(by_hand.plan, f.name)
+            assert np.array_equal(a, b, equal_nan=a.dtype.kind == "f"), f.name
+    assert not np.array_equal(with_others.plan.l1_p, without.plan.l1_p)  # the entrant is the plan's L1
+    state, _ = core.step(with_others, s, (np.zeros(1), np.zeros(1)), PRM)
+    later = dataclasses.replace(s, t=s.t + PRM.dt)
+    assert np.array_equal(core.observe(state, later, PRM).breach.flags, core.observe(state, roles(later, PRM),
+                                                                                  PRM).breach.flags)

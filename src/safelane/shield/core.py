@@ -62,8 +62,11 @@ class ShieldState:
 
 def init(situation: Situation, params: Params, config: ShieldConfig | None = None, variant="CV_all") -> ShieldState:
     """The shield's state for a lane change starting at ``situation``: the plan held at the start is computed under
-    the most conservative assumptions (L1 at the others' maximum ``a_o_d``, F aggressive)."""
+    the most conservative assumptions (L1 at the others' maximum ``a_o_d``, F aggressive); the world model's other
+    vehicles (``situation.others``) folded into F, the chain and the own lane first, as every period folds them."""
     cfg = config or ShieldConfig()
+    if situation.others is not None:
+        situation = world.roles(situation, params)
     n = len(situation)
     delay = delay_periods(cfg, params) * params.dt
     pending = InFlight.idle(n, delay_periods(cfg, params)) if delay > 0.0 else None
@@ -192,6 +195,8 @@ def observe(state: ShieldState, situation: Situation, params: Params) -> ShieldS
     final period, which :func:`step` would observe only at the next one)."""
     if state.last is None:
         return state
+    if situation.others is not None:  # the roles the last period's snapshot holds (world.py)
+        situation = world.roles(situation, params)
     breach = observe_breaches(state.breach, state.last, worst_corners(situation)[1], params, situation.t)
     return dataclasses.replace(state, breach=breach)
 
