@@ -34,8 +34,6 @@ from ..blame import PairTracker  # noqa: E402
 from ..params import Params  # noqa: E402
 from ..shield import ABORT, COMPLETED, HESITATE, PROCEED, LaneFrame, Shield, ShieldConfig, Situation  # noqa: E402
 from ..shield.command import Command, InFlight  # noqa: E402
-from ..shield.world import Others  # noqa: E402
-from ..shield.world import roles as fold_roles  # noqa: E402
 from ..v2x import MAX_AGE_S, SensedVehicle, V2XMessage, leader_arrays  # noqa: E402
 from .highway_road import (  # noqa: E402
     blame_tracks,
@@ -46,6 +44,7 @@ from .highway_road import (  # noqa: E402
     highway_params,
     longitudinal,
     own_lane_leaders,
+    road_others,
 )
 from .highway_vehicles import (  # noqa: E402
     NoCutInIDMVehicle,
@@ -277,7 +276,7 @@ class SafeLaneShield(gym.Wrapper, gym.utils.RecordConstructorArgs):
         if OWN_LANE_SUPPORTED:
             kwargs = {"own_leaders": (ox[None, :], ov[None, :]), "own_n_connected": 0, "own_promise": self.promise}
         if self.with_others:
-            kwargs["others"] = self._others(road, {id(ego), *roles})
+            kwargs["others"] = road_others(road, {id(ego), *roles}, self.frame)
         situation = Situation.from_arrays(
             t=self.t, ego=(ex, ego.position[1], ego.speed, ego.lateral_speed), follower=(fx, fv),
             leaders=(lx[None, :], lv[None, :]), n_connected=n, promise_decel=promise[None, :] if promise.size else
@@ -287,19 +286,6 @@ class SafeLaneShield(gym.Wrapper, gym.utils.RecordConstructorArgs):
         if self.connected:
             situation = dataclasses.replace(situation, v2x_stale=np.array([stale]))
         return situation
-
-    def _others(self, road, taken) -> Others:
-        """Every road vehicle whose id is not in ``taken`` (the ego, F, the chain, the own-lane leaders) as an
-        :class:`~safelane.shield.world.Others` row in the shield's frame: centre, velocity (highway-env's ``velocity``,
-        its speed along its heading; a reversing vehicle's ``v_x`` reads as 0), not connected. At least one slot
-        (``+inf`` padding where there is no other vehicle)."""
-        rest = [v for v in road.vehicles if id(v) not in taken]
-        if not rest:
-            return Others.empty(1, 1)
-        pos = np.array([v.position for v in rest], float).reshape(-1, 2)
-        vel = np.array([v.velocity for v in rest], float).reshape(-1, 2)
-        y, vy = self.frame.y(pos[:, 1], vel[:, 1])
-        return Others.from_arrays(pos[None, :, 0], y[None, :], np.maximum(vel[None, :, 0], 0.0), vy[None, :])
 
     def reset_blame(self) -> None:
         """Start the blame rule afresh from the road as it is now (reset does; a test that rebuilds the scene after
@@ -341,7 +327,7 @@ class SafeLaneShield(gym.Wrapper, gym.utils.RecordConstructorArgs):
         self.cut_in = False
         # until the ego lies wholly in the target lane: read by NoCutInIDMVehicle, and for info["cut_in"]
         u.road.safelane_manoeuvre = (self.ego, (self.original_lane, self.target_lane))
-        self.shield.reset(fold_roles(self.situation(), self.params))  # the plan held at the start: the others folded in
+        self.shield.reset(self.situation())  # (core.init folds the others into the roles, as every period does)
         self.reset_blame()
         self.in_flight = InFlight.idle(1, self.delay_periods)  # the commands acting at the start: cruise
         obs = u.observation_type.observe()

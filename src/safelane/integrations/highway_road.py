@@ -10,6 +10,7 @@ import numpy as np
 
 from ..params import Params
 from ..shield import LaneFrame
+from ..shield.world import Others
 
 try:
     from highway_env.road.lane import StraightLane
@@ -127,3 +128,17 @@ def classify_crash(ego, road, roles: dict, frame: LaneFrame, params: Params, ori
             "partner_changing_lanes": bool(changing),
             "dx_m": round(dx, 2), "partner_speed": round(float(partner.speed), 2),
             "ego_speed": round(float(ego.speed), 2)}  # fmt: skip
+
+
+def road_others(road, taken, frame: LaneFrame) -> Others:
+    """Every road vehicle whose id is not in ``taken`` (the ego, F, the chain, the own-lane leaders) as an
+    :class:`~safelane.shield.world.Others` row in the shield's frame (``frame``): centre, velocity (highway-env's
+    ``velocity``, its speed along its heading; a reversing vehicle's ``v_x`` reads as 0), not connected. At least one
+    slot (``+inf`` padding where there is no other vehicle)."""
+    rest = [v for v in road.vehicles if id(v) not in taken]
+    if not rest:
+        return Others.empty(1, 1)
+    pos = np.array([v.position for v in rest], float).reshape(-1, 2)
+    vel = np.array([v.velocity for v in rest], float).reshape(-1, 2)
+    y, vy = frame.y(pos[:, 1], vel[:, 1])
+    return Others.from_arrays(pos[None, :, 0], y[None, :], np.maximum(vel[None, :, 0], 0.0), vy[None, :])
