@@ -15,6 +15,14 @@ chain's bound through :func:`~safelane.safety.chain.chain_link`, the period with
 It writes what the NumPy stages compute, in their order of evaluation, so a row's decision and state are the stages'
 bits (``tests/test_fast_period.py`` compares them field by field over many periods). :mod:`.fast_step` is the Python
 side (the state packed into arrays between periods, the :class:`~.decision.Decision` built from them).
+
+**A twin of glue, not of rules.** The closed loop's shield section (``sim/_fast_loop.loop_kernel``, from the chain
+analysis to the monitor's snapshot) writes the same glue again for its default settings — the assessment's window,
+the candidate loop with the commit guard, the plan record, the abort's first segment, the snapshot — while every rule
+it calls is the one above. Making the loop call :func:`period_row` instead gave the same tables but doubled its
+kernel's CPU time (0.37 → 0.79 s for 4,000 scenarios, not understood yet; docs/architecture.md, "What is still not
+one source"), so both stay, each held bit for bit to the NumPy stages (``tests/test_fast_period.py``,
+``tests/test_fast_loop.py``). The held plan's knots are shared already (:func:`plan_knots`).
 """
 
 from __future__ import annotations
