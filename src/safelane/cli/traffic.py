@@ -30,7 +30,12 @@ def traffic(
     ray_address: str = ray_address_option(),
     out: Path = typer.Option(Path("results/traffic"), "--out", "-o", help="Parent folder: OUT/<run-id>/ (created)."),
     progress: bool = typer.Option(True, "--progress/--no-progress", help="Accepted for symmetry (one line per run)."),
-) -> None:
+    others: bool = typer.Option(False, "--others/--no-others", help="Feed the shield's world model: the vehicles in "
+                                "the lane beyond the target and on the other side, with equipped changers' "
+                                "lane-change announcements (docs/traffic.md)."),
+    lc_duration: float = typer.Option(0.0, "--lc-duration", help="SUMO's --lanechange.duration [s] for its own "
+                                      "drivers: 0 (SUMO's default) instantaneous lane changes, > 0 continuous ones."),
+) -> None:  # fmt: skip
     """Run the merge network at every penetration × demand and write the measures and a report.
 
     Example: safelane traffic --penetration 0,0.5,1 --demand 4900 --seconds 600 --warmup 120 --workers 2
@@ -49,15 +54,17 @@ def traffic(
         Demand(p=0.0, seconds=seconds, warmup_s=warmup, seed=seed)
     except ValueError as exc:
         raise typer.BadParameter(str(exc), param_hint="--seconds") from exc
+    if not (lc_duration >= 0.0 and lc_duration < float("inf")):
+        raise typer.BadParameter(f"must be a finite number >= 0 s; got {lc_duration!r}", param_hint="--lc-duration")
     if not libsumo_available():
         typer.echo(f"Error: {INSTALL_HINT}", err=True)
         raise typer.Exit(code=2)
     where = _backend.resolve_backend(backend, workers, ray_address)
     out = check_out_dir(out)
-    _run(ps, qs, seconds, warmup, seed, where, out)
+    _run(ps, qs, seconds, warmup, seed, where, out, others, lc_duration)
 
 
-def _run(ps, qs, seconds, warmup, seed, where, out) -> None:
+def _run(ps, qs, seconds, warmup, seed, where, out, others=False, lc_duration=0.0) -> None:
     import time
 
     from ..parallel import as_backend
@@ -67,10 +74,10 @@ def _run(ps, qs, seconds, warmup, seed, where, out) -> None:
     from ._runs import command_line, run_folder
 
     info = {"kind": "traffic", "penetration": ps, "demand_vph": qs, "seconds": seconds, "warmup_s": warmup,
-            "seed": seed, **_backend.record(where)}  # fmt: skip
+            "seed": seed, "others": others, "lc_duration_s": lc_duration, **_backend.record(where)}  # fmt: skip
     label = f"traffic_seed{seed}"
     with run_folder(out, label, info) as (run_dir, info), _backend.session(where):
-        jobs = cells(ps, qs, seconds=seconds, warmup_s=warmup, seed=seed)
+        jobs = cells(ps, qs, seconds=seconds, warmup_s=warmup, seed=seed, others=others, lc_duration_s=lc_duration)
         t0 = time.perf_counter()
         table, coll, walls = sweep(jobs, as_backend(where))
         wall = time.perf_counter() - t0

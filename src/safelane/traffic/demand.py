@@ -60,7 +60,9 @@ def lane_y(g) -> np.ndarray:
 @dataclass(frozen=True)
 class Demand:
     """One cell of a sweep: penetration ``p`` of equipped vehicles, mainline and ramp flows [veh/h], simulated
-    ``seconds`` (the first ``warmup_s`` not measured), ``seed``."""
+    ``seconds`` (the first ``warmup_s`` not measured), ``seed``; ``lc_duration_s``: SUMO's ``--lanechange.duration``
+    for its own drivers' lane changes (0: SUMO's default, instantaneous; > 0: continuous, the vehicle moving
+    laterally over that many seconds, its lateral position and speed reported by SUMO)."""
 
     p: float
     main_vph: float = 4200.0
@@ -68,6 +70,7 @@ class Demand:
     seconds: float = 3600.0
     warmup_s: float = 300.0
     seed: int = 0
+    lc_duration_s: float = 0.0
 
     def __post_init__(self):
         if not 0.0 <= self.p <= 1.0:
@@ -76,6 +79,8 @@ class Demand:
             raise ValueError(f"flows must be >= 0 veh/h; got {self.main_vph!r}, {self.ramp_vph!r}")
         if self.seconds <= self.warmup_s:
             raise ValueError(f"seconds ({self.seconds!r}) must exceed warmup_s ({self.warmup_s!r})")
+        if not (np.isfinite(self.lc_duration_s) and self.lc_duration_s >= 0):
+            raise ValueError(f"lc_duration_s must be a finite number >= 0 s; got {self.lc_duration_s!r}")
 
     @property
     def total_vph(self) -> float:
@@ -125,10 +130,13 @@ def routes_xml(demand: Demand, params: Params | None = None) -> str:
 SSM_THRESHOLDS = {"TTC": 1.5, "DRAC": 3.35, "PET": 1.0}
 
 
-def sumo_args(net: Path, routes: Path, ssm_file: Path | None, params: Params, seed: int, end_s: float) -> list[str]:
+def sumo_args(net: Path, routes: Path, ssm_file: Path | None, params: Params, seed: int, end_s: float,
+              lc_duration_s: float = 0.0) -> list[str]:  # fmt: skip
     """The command line of a run: 0.1 s ballistic steps (``Params.dt``), no sublane model (LC2013 needs it off;
     the shield's vehicles hold lateral offsets by ``moveToXY``), collisions by physical contact (``warn``,
-    min-gap factor 0: the vehicles go on and the list is the measure), SSM device on every vehicle."""
+    min-gap factor 0: the vehicles go on and the list is the measure), SSM device on every vehicle;
+    ``lc_duration_s > 0``: SUMO's continuous lane changes (``--lanechange.duration``; 0, SUMO's default, leaves
+    them instantaneous)."""
     args = ["-n", str(net), "-r", str(routes), "--step-length", repr(params.dt), "--step-method.ballistic", "true",
             "--collision.action", "warn", "--collision.mingap-factor", "0", "--collision.check-junctions", "true",
             "--default.action-step-length", repr(params.dt), "--seed", str(seed), "--end", repr(float(end_s)),
@@ -138,4 +146,6 @@ def sumo_args(net: Path, routes: Path, ssm_file: Path | None, params: Params, se
                  "--device.ssm.thresholds", " ".join(repr(v) for v in SSM_THRESHOLDS.values()),
                  "--device.ssm.file", str(ssm_file), "--device.ssm.trajectories", "false",
                  "--device.ssm.geo", "false"]  # fmt: skip
+    if lc_duration_s > 0:
+        args += ["--lanechange.duration", repr(float(lc_duration_s))]
     return args

@@ -22,12 +22,14 @@ CELL_COLUMNS = ("p", "main_vph", "ramp_vph", "demand_vph", "seconds", "warmup_s"
                 "collisions_equipped_responsible", "collisions_cut_in", "ssm_conflicts", "ssm_ttc", "ssm_drac",
                 "ssm_pet", "ssm_equipped_involved", "lc_started", "lc_completed", "lc_aborted", "lc_gave_up",
                 "lc_return_max_s", "lc_return_late", "shield_decisions", "shield_calls", "human_lane_changes",
-                "leader_braking_limited", "leader_lag_max_m")  # fmt: skip
+                "leader_braking_limited", "leader_lag_max_m", "others", "lc_duration_s")  # fmt: skip
 
 
-def run_cell(demand: Demand, params: Params | None = None) -> dict:
+def run_cell(demand: Demand, params: Params | None = None, *, others: bool = False) -> dict:
     """Run one cell in this process: ``{"row": {CELL_COLUMNS...}, "collisions": [...]}`` (wall time apart, in
-    ``"wall_s"``, so that the table does not depend on the machine)."""
+    ``"wall_s"``, so that the table does not depend on the machine; the lane changes' own counts in
+    ``"lane_changes"``). ``others``: the changers' situation carries the
+    world model's other vehicles (:meth:`.equipped.LaneChanges.others_record`)."""
     from .world import TrafficWorld
 
     prm = params or Params()
@@ -38,7 +40,7 @@ def run_cell(demand: Demand, params: Params | None = None) -> dict:
     human_changes = limited_before = 0
     with warnings.catch_warnings(), TrafficWorld(demand, prm) as world:
         warnings.simplefilter("ignore")  # geometry warnings of cut-ins: the situation is built with "ignore"
-        changes = LaneChanges(world, prm)
+        changes = LaneChanges(world, prm, others=others)
         steps = round(demand.seconds / prm.dt)
         for _ in range(steps):
             t = world.time()
@@ -86,11 +88,11 @@ def run_cell(demand: Demand, params: Params | None = None) -> dict:
         "lc_gave_up": c["gave_up"], "lc_return_max_s": c["return_max_s"], "lc_return_late": c["return_late"],
         "shield_decisions": c["decisions"], "shield_calls": c["shield_calls"],
         "human_lane_changes": human_changes, "leader_braking_limited": limited,
-        "leader_lag_max_m": lag,
+        "leader_lag_max_m": lag, "others": bool(others),
     }  # fmt: skip
     row = {k: row[k] for k in CELL_COLUMNS}
     return {"row": row, "collisions": [{"p": demand.p, "demand_vph": demand.total_vph, **x} for x in collisions],
-            "wall_s": time.perf_counter() - t_wall, "steps": steps}  # fmt: skip
+            "wall_s": time.perf_counter() - t_wall, "steps": steps, "lane_changes": dict(c)}  # fmt: skip
 
 
 def _cell_job(job: dict) -> dict:
@@ -104,16 +106,20 @@ def _cell_job(job: dict) -> dict:
     import multiprocessing
     from concurrent.futures import ProcessPoolExecutor
 
+    job = dict(job)
+    others = bool(job.pop("others", False))
     with ProcessPoolExecutor(max_workers=1, mp_context=multiprocessing.get_context("spawn")) as pool:
-        return pool.submit(run_cell, Demand(**job)).result()
+        return pool.submit(run_cell, Demand(**job), others=others).result()
 
 
-def cells(penetrations, demands_vph, *, seconds: float, warmup_s: float, seed: int,
-          ramp_share: float = 0.15) -> list[dict]:  # fmt: skip
+def cells(penetrations, demands_vph, *, seconds: float, warmup_s: float, seed: int, ramp_share: float = 0.15,
+          others: bool = False, lc_duration_s: float = 0.0) -> list[dict]:  # fmt: skip
     """The jobs of a sweep: every penetration × total demand (the ramp takes ``ramp_share`` of it), one seed for all
-    (the same arrivals at every penetration: common random numbers)."""
+    (the same arrivals at every penetration: common random numbers); ``others`` (the world model's feed) and
+    ``lc_duration_s`` (SUMO's continuous lane changes, :class:`.demand.Demand`) the same in every cell."""
     return [{"p": float(p), "main_vph": float(q) * (1 - ramp_share), "ramp_vph": float(q) * ramp_share,
-             "seconds": float(seconds), "warmup_s": float(warmup_s), "seed": int(seed)}
+             "seconds": float(seconds), "warmup_s": float(warmup_s), "seed": int(seed), "others": bool(others),
+             "lc_duration_s": float(lc_duration_s)}
             for q in demands_vph for p in penetrations]  # fmt: skip
 
 

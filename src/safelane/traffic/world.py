@@ -4,6 +4,8 @@ period (subscriptions), command the vehicles under the shield, and SUMO's own co
 Positions are SUMO's **front bumpers** in network coordinates; they become centres (safelane's reference points)
 here, in one place (:func:`safelane.integrations.sumo_world.front_to_centre`). The mainline runs along +x, so a
 vehicle's centre is ``x − length/2`` and its lane (from the left) follows from ``y`` (:func:`.demand.lane_of`).
+Lateral speeds are SUMO's own (``VAR_SPEED_LAT``, positive to the left, i.e. toward +y on this network): zero for
+its instantaneous lane changes, the lane change's lateral speed with ``Demand.lc_duration_s > 0``.
 """
 
 from __future__ import annotations
@@ -33,6 +35,7 @@ class Fleet:
     a: np.ndarray
     lane: np.ndarray  # lane from the left (demand.lane_of); -1 on the ramp
     equipped: np.ndarray
+    vy: np.ndarray | None = None  # SUMO's lateral speed [m/s], road frame (+y: to the left); None: zeros
 
     def __len__(self) -> int:
         return len(self.ids)
@@ -51,10 +54,10 @@ class TrafficWorld:
         self.routes.write_text(routes if routes is not None else dem.routes_xml(demand, self.params))
         self.ssm_file = tmp / "ssm.xml" if ssm else None
         args = dem.sumo_args(net or dem.net_file(), self.routes, self.ssm_file, self.params, demand.seed,
-                             demand.seconds)  # fmt: skip
+                             demand.seconds, demand.lc_duration_s)  # fmt: skip
         self.api.start(["sumo", *args])
         tc = self.api.constants
-        self._vars = (tc.VAR_POSITION, tc.VAR_SPEED, tc.VAR_ACCELERATION, tc.VAR_ROAD_ID)
+        self._vars = (tc.VAR_POSITION, tc.VAR_SPEED, tc.VAR_ACCELERATION, tc.VAR_ROAD_ID, tc.VAR_SPEED_LAT)
         self.equipped: set[str] = set()
         self.taken: set[str] = set()  # driven from Python (the shield's changers)
         self._v_now: dict[str, float] = {}  # speeds of the last read
@@ -79,20 +82,21 @@ class TrafficWorld:
                 veh.setLaneChangeMode(vid, 0)  # SUMO's LC2013 only wishes; the shield executes (equipped.py)
         res = veh.getAllSubscriptionResults()
         ids = tuple(i for i in res if res[i][self._vars[1]] >= 0.0)  # SUMO's -2^30: not on the road this step
-        pos_k, v_k, a_k, road_k = self._vars
+        pos_k, v_k, a_k, road_k, lat_k = self._vars
         if ids:
             pos = np.array([res[i][pos_k] for i in ids], float)
             v = np.array([res[i][v_k] for i in ids], float)
             a = np.array([res[i][a_k] for i in ids], float)
             on_ramp = np.array([res[i][road_k] == "ramp" for i in ids], bool)
+            vy = np.array([res[i][lat_k] for i in ids], float)
         else:
-            pos, v, a, on_ramp = np.zeros((0, 2)), np.zeros(0), np.zeros(0), np.zeros(0, bool)
+            pos, v, a, on_ramp, vy = np.zeros((0, 2)), np.zeros(0), np.zeros(0), np.zeros(0, bool), np.zeros(0)
         self._apply_floors(ids, v, a)
         self._v_now = dict(zip(ids, v.tolist(), strict=True))
         x = front_to_centre(pos[:, 0], self.params.vehicle_length)
         lane = np.where(on_ramp, -1, dem.lane_of(pos[:, 1]))
         equipped = np.array([i in self.equipped for i in ids], bool)
-        return Fleet(ids, x, pos[:, 1].copy(), v, a, lane, equipped)
+        return Fleet(ids, x, pos[:, 1].copy(), v, a, lane, equipped, vy)
 
     def collisions(self) -> list[dict]:
         """SUMO's own collision list for the last step."""
