@@ -119,7 +119,7 @@ def _decision(behaviour, invalid, flags=None):
     abort = (np.flatnonzero(np.asarray(behaviour) == ABORT), "knots", "px", "vx", "py", "vy")
     return Decision(
         behaviour=np.asarray(behaviour), a_x=z, a_y=z, completing=z.astype(bool), invalid=np.asarray(invalid),
-        plan=None, plan_t0=z, l1_decel=z, f_aggressive=z.astype(bool), breach=Breach(flags, np.full(n, np.nan)),
+        _plan=None, plan_t0=z, l1_decel=z, f_aggressive=z.astype(bool), breach=Breach(flags, np.full(n, np.nan)),
         nominal_x=z, nominal_y=z, _abort=abort,
     )  # fmt: skip
 

@@ -184,7 +184,7 @@ def stages_step(
     )  # fmt: skip
     decision = Decision(
         behaviour=verdicts.behaviour, a_x=cmd.a_x, a_y=cmd.a_y, completing=done,
-        invalid=prop.invalid & active, plan=plan, plan_t0=plan_t0, l1_decel=worst.l1_decel, f_aggressive=worst.f_aggr,
+        invalid=prop.invalid & active, _plan=plan, plan_t0=plan_t0, l1_decel=worst.l1_decel, f_aggressive=worst.f_aggr,
         breach=breach, nominal_x=prop.nominal_x, nominal_y=prop.nominal_y, _abort=cmd.abort,
     )  # fmt: skip
     return new_state, decision

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import functools
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
@@ -34,7 +36,7 @@ class Decision:
     a_y: np.ndarray
     completing: np.ndarray
     invalid: np.ndarray
-    plan: EvasionPlan
+    _plan: EvasionPlan | Callable[[], EvasionPlan]  # the plan, or what builds it when first read (the compiled path)
     plan_t0: np.ndarray
     l1_decel: np.ndarray
     f_aggressive: np.ndarray
@@ -42,6 +44,11 @@ class Decision:
     nominal_x: np.ndarray
     nominal_y: np.ndarray
     _abort: tuple  # (rows, knots, px, vx, py, vy) of the aborting rows' exact motion over the period
+
+    @functools.cached_property
+    def plan(self) -> EvasionPlan:
+        """The held plan after this decision (built from the compiled period's arrays when first read)."""
+        return self._plan() if callable(self._plan) else self._plan
 
     @property
     def intervened(self) -> np.ndarray:

@@ -18,6 +18,7 @@ refused period runs the stages; ``Shield.last_path`` says which ran, ``Shield.re
 from __future__ import annotations
 
 import dataclasses
+import functools
 from dataclasses import dataclass
 
 import numpy as np
@@ -84,14 +85,19 @@ SITUATION_FIELDS: dict[str, str] = {
 }
 
 
+@functools.lru_cache(maxsize=8)
+def _refused_fields(cls, kinds: tuple) -> tuple[str, ...]:
+    """The fields of the situation class ``cls`` that refuse wherever they are set; ``kinds``:
+    :data:`SITUATION_FIELDS`' items (the key of the cache, so that a change of the table is seen)."""
+    table = dict(kinds)
+    return tuple(f.name for f in dataclasses.fields(cls) if table.get(f.name, "refused") == "refused")
+
+
 def situation_refusals(situation, config: ShieldConfig, state) -> list[str]:
     """Why this situation and state cannot run compiled (empty: they can). A :class:`~.situation.Situation` field
     that :data:`SITUATION_FIELDS` does not classify refuses wherever it is set."""
-    out = []
-    for f in dataclasses.fields(situation):
-        kind = SITUATION_FIELDS.get(f.name, "refused")
-        if kind == "refused" and getattr(situation, f.name) is not None:
-            out.append(f"Situation.{f.name}")
+    refused = _refused_fields(type(situation), tuple(SITUATION_FIELDS.items()))
+    out = [f"Situation.{name}" for name in refused if getattr(situation, name) is not None]
     if config.sensing and situation.has_errors:
         out.append("sensing-error bounds")
     if state is not None:
@@ -141,7 +147,7 @@ class Packed:
     def plan_of(self, params: Params) -> EvasionPlan:
         from ._fast_period import PLAN
 
-        fields = {name: self.plan[:, j] for j, name in enumerate(PLAN)}
+        fields = dict(zip(PLAN, self.plan.T, strict=True))  # (column-major: each column a contiguous view)
         for name in ("feasible", "follows_leader", "follows_own", "continues"):
             fields[name] = fields[name] != 0.0
         fields["reason"] = fields["reason"].astype(np.uint8)
@@ -169,6 +175,32 @@ class Packed:
                            completed=p.sk[:, 3], last=last, pending=None)  # fmt: skip
 
 
+@functools.cache
+def _period_module():
+    """:mod:`._fast_period` (imported on first use: it compiles; a function-level import costs a step ~1 µs)."""
+    from . import _fast_period
+
+    return _fast_period
+
+
+@functools.lru_cache(maxsize=16)
+def _no_own(n: int) -> tuple:
+    """The kernel's own-lane arrays for ``n`` rows without an own-lane leader (inputs only: shared between calls)."""
+    return np.full((n, 1), np.inf), np.zeros((n, 1)), np.zeros((n, 0)), np.zeros(n, np.int64)
+
+
+@functools.lru_cache(maxsize=64)
+def _constants(prm: Params, cfg: ShieldConfig) -> np.ndarray:
+    """The kernel's parameter vector (its first entry, the period's time, is the caller's to set): the parameters,
+    the tolerances and the settings it reads (both records are frozen, so the vector is built once per pair)."""
+    out = np.array([0.0, prm.dt, prm.a_x_a, prm.a_x_d, prm.a_y_m, prm.y_safe, prm.p_m, prm.p_m_human, prm.y_boundary,
+                    prm.lane_width, prm.others_decel, LATERAL_TOL_M, FEASIBILITY_TOL_M, TOL_M, cfg.assess_threshold,
+                    float(cfg.monitor), max(own_completion_level(prm), prm.y_boundary), own_margin(prm),
+                    float(cfg.assessment == "truth")])  # fmt: skip
+    out.flags.writeable = False
+    return out
+
+
 def step(packed: Packed, situation, proposal, params: Params, config: ShieldConfig, flags,
          chain=None) -> tuple[Packed, Decision]:  # fmt: skip
     """One period compiled: ``(packed, situation, proposal) -> (packed', Decision)`` — :func:`.core.step`'s result
@@ -176,8 +208,7 @@ def step(packed: Packed, situation, proposal, params: Params, config: ShieldConf
     arrays (:func:`.validation.batch_proposal`); ``flags``: the variant's ``(B, 3)`` flags
     (:func:`.policies.variant_flags`, stacked); ``chain``: ``(bounds, unsafe)``, the caller's
     :func:`~.stages.chain_analysis` of this situation, taken as given (as :func:`.core.step` takes it), or ``None``."""
-    from . import _fast_period as fp
-
+    fp = _period_module()
     s, prm, cfg = situation, params, config
     n, m = s.chain_x.shape
     sf = np.empty((n, len(fp.SIT_F)))
@@ -194,16 +225,14 @@ def step(packed: Packed, situation, proposal, params: Params, config: ShieldConf
         sb[:, 5] = s.f_aggressive_truth
     else:
         sb[:, 5] = False
-    prm_vec = np.array([s.t, prm.dt, prm.a_x_a, prm.a_x_d, prm.a_y_m, prm.y_safe, prm.p_m, prm.p_m_human,
-                        prm.y_boundary, prm.lane_width, prm.others_decel, LATERAL_TOL_M, FEASIBILITY_TOL_M, TOL_M,
-                        cfg.assess_threshold, float(cfg.monitor), max(own_completion_level(prm), prm.y_boundary),
-                        own_margin(prm), float(truth)])  # fmt: skip
+    prm_vec = _constants(prm, cfg).copy()
+    prm_vec[0] = s.t
     if cfg.own_lane and s.own_x is not None:
         k = s.own_x.shape[1]
         own = (np.ascontiguousarray(s.own_x), np.ascontiguousarray(s.own_v),
                np.ascontiguousarray(s.own_promise, float).reshape(n, k - 1), np.asarray(s.own_n_connected, np.int64))
     else:
-        own = (np.full((n, 1), np.inf), np.zeros((n, 1)), np.zeros((n, 0)), np.zeros(n, np.int64))
+        own = _no_own(n)
     out = Packed(s.t + prm.dt, packed.plan.copy(order="F"), packed.history.copy(), packed.count.copy(),
                  packed.st.copy(), packed.sk.copy(), None)  # fmt: skip
     snap = packed.snapshot
@@ -225,7 +254,7 @@ def step(packed: Packed, situation, proposal, params: Params, config: ShieldConf
                      out.st, out.sk, out.plan, packed.snapshot is not None, *snap, bounds, given_unsafe, behaviour,
                      of, ob, knots)  # fmt: skip
     out.snapshot = (s.chain_x, s.chain_v, bounds, nc)
-    rows = np.flatnonzero(behaviour == ABORT)
+    rows = (behaviour == ABORT).nonzero()[0]
     if rows.size:
         k = knots[rows]
         abort = (rows, k[:, 0], k[:, 1], k[:, 2], k[:, 3], k[:, 4])
@@ -233,8 +262,8 @@ def step(packed: Packed, situation, proposal, params: Params, config: ShieldConf
         abort = (rows, None, None, None, None, None)
     decision = Decision(
         behaviour=behaviour, a_x=of[:, 0], a_y=of[:, 1], completing=ob[:, 0], invalid=ob[:, 1],
-        plan=out.plan_of(prm), plan_t0=out.st[:, 0].copy(), l1_decel=of[:, 4], f_aggressive=ob[:, 2],
-        breach=Breach(flags=out.sk[:, 5:].copy(), first_s=out.st[:, 2].copy()), nominal_x=of[:, 2],
-        nominal_y=of[:, 3], _abort=abort,
+        _plan=functools.partial(out.plan_of, prm), plan_t0=out.st[:, 0].copy(), l1_decel=of[:, 4],
+        f_aggressive=ob[:, 2], breach=Breach(flags=out.sk[:, 5:].copy(), first_s=out.st[:, 2].copy()),
+        nominal_x=of[:, 2], nominal_y=of[:, 3], _abort=abort,
     )  # fmt: skip
     return out, decision

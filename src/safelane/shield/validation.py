@@ -110,9 +110,9 @@ def situation_arg(situation, where: str):
 
 
 def _is_number(value) -> bool:
-    return (isinstance(value, numbers.Real | np.number) and not isinstance(value, bool | np.bool_)) or (
-        isinstance(value, np.ndarray) and value.ndim == 0 and value.dtype.kind in "fiu"
-    )
+    if isinstance(value, np.ndarray):  # (first: the common case, and cheaper than the abstract-class check)
+        return value.ndim == 0 and value.dtype.kind in "fiu"
+    return isinstance(value, numbers.Real | np.number) and not isinstance(value, bool | np.bool_)
 
 
 def batch_proposal(proposal, batch: int):
