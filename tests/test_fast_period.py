@@ -300,3 +300,26 @@ def test_world_model_is_folded_before_the_compiled_period():
         same(fast, ref, f"period {step}")
         same(shield.state, state, f"period {step}: state")
         advance(world, ref, rng, params.dt)
+
+
+def test_the_traffic_pool_goes_on_from_the_packed_state():
+    """The traffic layer's pool (safelane.traffic.shielding) keeps the shield's packed state while its rows stay the
+    same (it would unpack it to select rows that leave or join): its decisions are the stages' from one init."""
+    from safelane.traffic.shielding import ShieldPool
+
+    params = Params()
+    rng = np.random.default_rng(21)
+    world = random_world(rng, 12, 3, stale=False, own=True)
+    pool = ShieldPool(params)
+    start = situation_of(world, 0.0, params)
+    state = shield_core.init(start, params, ShieldConfig(), "CV_all")
+    for k in range(40):
+        s = situation_of(world, k * params.dt, params)
+        prop = proposals(rng, 12)
+        fast = pool.decide(s, prop, np.arange(12) if k else np.zeros(0, np.int64), 0 if k else 12)
+        assert pool.shield.last_path == "compiled"
+        assert pool.shield._state is None  # the packed state kept, never unpacked by the pool
+        state, ref = shield_core.stages_step(state, s, prop, params, ShieldConfig(), "CV_all")
+        same(fast, ref, f"period {k}")
+        advance(world, ref, rng, params.dt)
+    assert pool.calls == 40 and pool.shield.rows == 12

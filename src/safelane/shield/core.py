@@ -234,6 +234,13 @@ class Shield:
             self._state = self._packed.state(self.params)
         return self._state
 
+    @property
+    def rows(self) -> int:
+        """The batch size of the state held (0 before ``reset``), read without unpacking it."""
+        if self._packed is not None:
+            return len(self._packed.count)
+        return 0 if self._state is None else len(self._state.completed)
+
     def _flags(self, n: int):
         """The variant's ``(B, 3)`` flags for ``n`` rows (cached: the variant is fixed)."""
         if n not in self._flag_rows:
@@ -269,7 +276,7 @@ class Shield:
         if self._state is None and self._packed is None:
             raise RuntimeError("Shield.step before Shield.reset(situation): the shield needs the starting situation")
         validation.situation_arg(situation, "Shield.step").validate(self.params)
-        rows = len(self._packed.count) if self._packed is not None else len(self._state.completed)
+        rows = self.rows
         if len(situation) != rows:
             raise ValueError(f"the situation has {len(situation)} rows; the shield was reset with {rows}")
         proposal = validation.batch_proposal(proposal, len(situation))
