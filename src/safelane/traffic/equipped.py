@@ -121,7 +121,8 @@ class LaneChanges:
         self.cool: dict[str, float] = {}
         self.counts = {"started": 0, "completed": 0, "aborted": 0, "gave_up": 0, "decisions": 0, "hesitate": 0,
                        "abort_steps": 0, "shield_calls": 0, "return_max_s": 0.0, "return_late": 0,
-                       "others_slots": 0, "others_connected": 0, "others_announced": 0}  # fmt: skip
+                       "others_slots": 0, "others_connected": 0, "others_announced": 0,
+                       "left_network": 0}  # fmt: skip
         self.k = 0
 
     # -- one period -------------------------------------------------------------------------------------------------
@@ -363,6 +364,9 @@ class LaneChanges:
             self._start_return(~done & (t - self.t_abort >= self.resume_s), t)  # aborted: return from now on
         self._start_return(~done & (t - self.t0 > self.give_up_s), t)  # given up: return from now on
         home = self.ret & (np.abs(self.ey) < SETTLED_Y_M) & (np.abs(self.evy) < SETTLED_VY)
+        # at the network's end a changer is handed back to SUMO wherever it is, so that it leaves (placed by moveToXY
+        # beyond the last lane's end it stayed there, and the vehicles behind it ran into it)
+        gone = ~(settled | home) & (self.ex >= getattr(self.world, "end_x", np.inf) - self.params.vehicle_length)
         age = np.where(self.ret, t - self.t_ret, 0.0)  # how long each return has lasted so far (finished or not)
         if len(age):
             self.counts["return_max_s"] = max(self.counts["return_max_s"], float(age.max()))
@@ -371,15 +375,18 @@ class LaneChanges:
         self.late |= late
         returned = home & self.aborted
         gave_up = home & ~self.aborted
-        out = np.flatnonzero(settled | home)
+        out = np.flatnonzero(settled | home | gone)
         if not len(out):
             return
         self.counts["completed"] += int(settled.sum())
         self.counts["aborted"] += int(returned.sum())
         self.counts["gave_up"] += int(gave_up.sum())
-        y_end = np.where(settled, w, 0.0)[out]
+        self.counts["left_network"] += int(gone.sum())
+        put = np.flatnonzero(settled | home)
+        y_end = np.where(settled, w, 0.0)[put]
+        self.world.place([self.ids[i] for i in put], self.ex[put], dem.lane_y(self.g0[put]) + self.sign[put] * y_end,
+                         self.evx[put])  # fmt: skip
         vids = [self.ids[i] for i in out]
-        self.world.place(vids, self.ex[out], dem.lane_y(self.g0[out]) + self.sign[out] * y_end, self.evx[out])
         for vid in vids:
             self.world.release(vid)
             self.cool[vid] = t + self.cooldown_s

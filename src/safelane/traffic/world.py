@@ -56,6 +56,8 @@ class TrafficWorld:
         args = dem.sumo_args(net or dem.net_file(), self.routes, self.ssm_file, self.params, demand.seed,
                              demand.seconds, demand.lc_duration_s)  # fmt: skip
         self.api.start(["sumo", *args])
+        #: x of the network's end (where every vehicle leaves): the end of the last edge, ``out``
+        self.end_x = float(self.api.lane.getShape("out_0")[-1][0])
         tc = self.api.constants
         self._vars = (tc.VAR_POSITION, tc.VAR_SPEED, tc.VAR_ACCELERATION, tc.VAR_ROAD_ID, tc.VAR_SPEED_LAT)
         self.equipped: set[str] = set()
