@@ -184,7 +184,7 @@ class LaneChanges:
     def _select(self, rows) -> None:
         self.ids = [self.ids[i] for i in rows]
         for name in ("g0", "sign", "ex", "ey", "evx", "evy", "t0", "t_done", "t_ret", "t_abort", "aborted", "ret",
-                     "late"):
+                     "late"):  # fmt: skip
             setattr(self, name, getattr(self, name)[rows])
 
     def _starters(self, fleet, t, index) -> list[str]:
