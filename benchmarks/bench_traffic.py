@@ -57,6 +57,7 @@ def bench(n: int, steps: int) -> dict:
         changes.ids = [fleet.ids[i] for i in sel]
         changes.g0, changes.sign = fleet.lane[sel], np.ones(b)
         changes.ex, changes.ey, changes.evx, changes.evy = fleet.x[sel], np.zeros(b), fleet.v[sel], np.zeros(b)
+        changes.ret, changes.t_done = np.zeros(b, bool), np.full(b, np.nan)  # changes under way
         changes.situation(fleet, fleet.x, sel, world.time())  # first call: imports
         t0 = time.perf_counter()
         situation, chain = changes.situation(fleet, fleet.x, sel, world.time())

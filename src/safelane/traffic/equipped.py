@@ -217,15 +217,30 @@ class LaneChanges:
         for g in np.unique(np.concatenate([target, self.g0])):
             mem = np.flatnonzero((fleet.lane >= 0) & (np.abs(fleet.y - dem.lane_y(g)) < half))
             members[int(g)] = mem[np.argsort(x[mem], kind="stable")]
+        # F: the nearest vehicle behind in the target lane, at the highest speed of the vehicles from it back to the
+        # nearest one that stays in that lane. A changer still changing lanes is there only for now (it may abort and
+        # leave, revealing the vehicle behind it, perhaps much faster): a vehicle at the nearest one's position and
+        # the fastest one's speed is ahead of each of them at every instant (all accelerate alike in the aggressive
+        # worst case), so keeping p_m to it keeps p_m to all of them.
+        dest = np.where(self.ret, self.g0, target)
+        settled = self.ret | ~np.isnan(self.t_done)
+        lane_kept = np.full(len(fleet.ids), -2)  # the lane each changer stays in (-1: none yet); -2: not a changer
+        lane_kept[rows] = np.where(settled, dest, -1)
         for g in np.unique(target):
             r = np.flatnonzero(target == g)
             mem = members[int(g)]
             xs = x[mem]
             lo, hi = np.searchsorted(xs, self.ex[r], "left"), np.searchsorted(xs, self.ex[r], "right")
             has_f = lo > 0
-            fi = mem[np.maximum(lo - 1, 0)] if len(mem) else np.zeros(len(r), np.int64)
+            stays = (lane_kept[mem] == -2) | (lane_kept[mem] == g)
+            pos = np.arange(len(mem))
+            start = np.maximum.accumulate(np.where(stays, pos, 0))  # the nearest that stays, at or behind each one
+            near = np.maximum(lo - 1, 0)
+            span = (pos[None, :] >= start[near][:, None]) & (pos[None, :] <= near[:, None])  # (rows, members)
+            fastest = np.where(span, fleet.v[mem][None, :], -np.inf).max(1) if len(mem) else np.zeros(len(r))
+            fi = mem[near] if len(mem) else np.zeros(len(r), np.int64)
             fx[r] = np.where(has_f, x[fi] if len(mem) else 0.0, self.ex[r] - FAR_M)
-            fv[r] = np.where(has_f, fleet.v[fi] if len(mem) else 0.0, 0.0)
+            fv[r] = np.where(has_f, fastest, 0.0)
             fcon[r] = has_f & (fleet.equipped[fi] if len(mem) else False)
             slot = hi[:, None] + np.arange(m)[None, :]
             ok = slot < len(mem)

@@ -4,7 +4,7 @@ throughput, speed, travel time (docs/traffic.md).
 **Responsibility** (:func:`blame`, in the spirit of RSS's "the rear vehicle keeps a safe distance"): in a collision
 SUMO names the ``collider`` (the rear vehicle of a rear-end) and the ``victim``. The collider is responsible, unless
 the victim **cut in**: it entered a lane (a lane change, SUMO's or the shield's) in front of the collider — the
-collider the nearest vehicle behind it in that lane — at most ``CUT_IN_WINDOW_S`` before the collision, with a bumper
+collider any vehicle behind it in that lane — at most ``CUT_IN_WINDOW_S`` before the collision, with a bumper
 gap below the collider's safe distance
 ``v_r·τ + v_r²/(2·b_r) − v_f²/(2·b_f)`` (``τ = 0.5`` s, ``b_r = 4.5`` m/s² the rear's comfortable braking, ``b_f =
 8`` m/s² the front's hardest, ``Params.a_x_d``) at that moment. Then the victim is responsible. A vehicle is in
@@ -127,13 +127,18 @@ def lane_entries(t: float, fleet, prev_lanes: dict[str, int], length: float = 4.
     out = []
     x = np.asarray(fleet.x, float)
     entered = mask & ~np.maximum(old, 0)  # lanes overlapped now and not at the last period (bit masks)
+    v = np.asarray(fleet.v, float)
     for i in np.flatnonzero((old > 0) & (entered > 0)).tolist():
         for g in np.flatnonzero((entered[i] >> np.arange(N_LANES)) & 1).tolist():
             same = np.flatnonzero(over[:, g] & (x < x[i]))
             if not len(same):
                 continue
-            j = same[np.argmax(x[same])]
-            out.append({"t": t, "vid": fleet.ids[i], "lane": int(g), "follower": fleet.ids[j],
-                        "gap_m": float(x[i] - x[j] - length), "v_follower": float(fleet.v[j]),
-                        "v_vid": float(fleet.v[i])})  # fmt: skip
+            gap = x[i] - x[same] - length
+            # the nearest behind, and every other one behind whose safe distance the entry broke (RSS: a vehicle
+            # enters a lane at the safe distance of *each* vehicle of that lane, not only of the nearest one)
+            near = np.argmax(x[same])
+            for k in np.flatnonzero((np.arange(len(same)) == near) | (gap < safe_distance(v[same], v[i]))).tolist():
+                j = same[k]
+                out.append({"t": t, "vid": fleet.ids[i], "lane": int(g), "follower": fleet.ids[j],
+                            "gap_m": float(gap[k]), "v_follower": float(v[j]), "v_vid": float(v[i])})  # fmt: skip
     return out
