@@ -236,8 +236,11 @@ class LaneChanges:
             pos = np.arange(len(mem))
             start = np.maximum.accumulate(np.where(stays, pos, 0))  # the nearest that stays, at or behind each one
             near = np.maximum(lo - 1, 0)
-            span = (pos[None, :] >= start[near][:, None]) & (pos[None, :] <= near[:, None])  # (rows, members)
-            fastest = np.where(span, fleet.v[mem][None, :], -np.inf).max(1) if len(mem) else np.zeros(len(r))
+            if len(mem):
+                span = (pos[None, :] >= start[near][:, None]) & (pos[None, :] <= near[:, None])  # (rows, members)
+                fastest = np.where(span, fleet.v[mem][None, :], -np.inf).max(1)
+            else:
+                fastest = np.zeros(len(r))
             fi = mem[near] if len(mem) else np.zeros(len(r), np.int64)
             fx[r] = np.where(has_f, x[fi] if len(mem) else 0.0, self.ex[r] - FAR_M)
             fv[r] = np.where(has_f, fastest, 0.0)
