@@ -50,9 +50,9 @@ NOT_RUN: dict[str, str] = {
     ".venv/bin/python benchmarks/bench_backends.py": _BENCH,
     ".venv/bin/python benchmarks/bench_core.py": _BENCH,
     ".venv/bin/python benchmarks/bench_commonroad_referee.py": _BENCH,
-    ".venv/bin/python benchmarks/bench_traffic.py --sizes 100 1000 5000 --steps 10": _BENCH,
-    "safelane traffic --penetration 0,0.25,0.5,0.75,1 --demand 4900 --seconds 3600 --warmup 300 --workers 2":
-        "five simulated hours of SUMO with the shield in the loop (hours of CPU; docs/traffic.md)",
+    ".venv/bin/python benchmarks/bench_traffic.py --sizes 100 1000 5000 --steps 20": _BENCH,
+    "safelane traffic --penetration 0,0.25,0.5,0.75,1 --demand 4900 --seconds 3900 --warmup 300 --workers 2":
+        "five simulated hours of SUMO with the shield in the loop (about 45 minutes of CPU; docs/traffic.md)",
     "safelane traffic --penetration 0,0.25,0.5,0.75,1 --demand 4900 --seconds 300 --warmup 60 --workers 1":
         "the results table's sweep (tens of minutes of CPU; docs/traffic.md); tests/test_traffic.py runs short cells",
     ".venv/bin/python benchmarks/bench_core.py --repeat 3": _BENCH,
