@@ -74,8 +74,9 @@ _ANNOUNCED: list[bool] = []
 
 def announce_compile(source: str, stream=None) -> bool:
     """Say once per process (on stderr) that numba is compiling the kernels, when the module ``source`` has no
-    cached kernel yet: a fresh install, or a kernel source edited. Measured on the 2-core development machine: about
-    25 s for all of them, once; later starts load them from the cache in under a second. Returns whether it spoke.
+    cached kernel yet: a fresh install, or a kernel source edited. Measured on the 2-core development machine, idle: a
+    first ``simulate`` and ``Shield.step`` with an empty cache took 56 s (the same script 3.2 s once cached).
+    Returns whether it spoke.
     Silent with ``NUMBA_DISABLE_JIT=1`` (nothing is compiled) and with ``NUMBA_CACHE_DIR`` (the cache is elsewhere)."""
     if _ANNOUNCED or numba.config.DISABLE_JIT or numba.config.CACHE_DIR:
         return False
@@ -83,7 +84,7 @@ def announce_compile(source: str, stream=None) -> bool:
     if any((src.parent / "__pycache__").glob(f"{src.stem}.*.nbi")):
         return False
     _ANNOUNCED.append(True)
-    print("safelane: compiling the numba kernels on first use (about 25 s in all, once; cached for later runs)",
+    print("safelane: compiling the numba kernels on first use (about a minute, once; cached for later runs)",
           file=stream or sys.stderr, flush=True)  # fmt: skip
     return True
 
