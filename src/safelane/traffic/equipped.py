@@ -29,7 +29,7 @@ standing obstacle), and :func:`.shielding.decide` makes one ``Shield.step`` for 
 every lane its body overlaps (a vehicle across a lane boundary counts in both).
 
 **The world model** (``others``, off by default): the changers' situation also carries
-:class:`~safelane.shield.world.Others` (:meth:`LaneChanges.others_record`) — the vehicles that can enter a changer's
+:class:`~safelane.shield.world.Others` (:func:`.others.others_record`) — the vehicles that can enter a changer's
 path without being F, the chain or ``L0``: those in the lane beyond the target lane and in the lane on its other
 side (bodies overlapping neither its own nor its target lane), within :data:`OTHERS_WINDOW_M` along the road, the
 :data:`OTHERS_SLOTS` nearest. Lateral speeds are SUMO's (zero for its instantaneous lane changes), the changers'
@@ -54,9 +54,8 @@ from ..params import Params
 from ..planners.base import ExpertPlanner, Observation
 from ..shield import ABORT, HESITATE, Situation
 from ..shield.stages import chain_analysis
-from ..shield.world import NO_LANE, Others
 from . import demand as dem
-from .measures import lanes_overlapped
+from .others import OTHERS_SLOTS, OTHERS_WINDOW_M, others_record
 from .shielding import ShieldPool, decide, take_rows
 
 PROMISE_DECEL = 0.5  # [m/s²] the promise every equipped vehicle broadcasts (the SUMO integration's default)
@@ -69,12 +68,6 @@ RETURN_HEADWAY_S = 1.0  # the return's longitudinal law keeps this time gap (plu
 #: (below the DRAC conflict threshold 3.35 and SUMO's comfortable ``decel`` 4.5; the shield still brakes at up to
 #: ``a_x_d`` where safety needs it). Unlimited, it braked at 8 m/s² in the fast lane to drop back into a gap.
 BRAKE_COMFORT = 3.0
-#: [m] the world model's window: vehicles in the lanes beyond the target lane and on the other side count as others
-#: when their centre is at most this far ahead of or behind the changer's (a radar's range; at the 4,900 veh/h of
-#: the sweep a lane holds a vehicle every 20–40 m, so F and L1 are well inside it).
-OTHERS_WINDOW_M = 150.0
-#: The world model's slots per changer: the nearest others (along the road) in the window, both lanes together.
-OTHERS_SLOTS = 8
 
 
 def follow_l0(ex, evx, ox, ov, prm: Params) -> np.ndarray:
@@ -269,57 +262,9 @@ class LaneChanges:
             t=t, ego=(self.ex, self.ey, self.evx, self.evy), follower=(fx, fv), leaders=(lx, lv),
             n_connected=n_conn, promise_decel=PROMISE_DECEL, human_driven=False, f_connected=fcon,
             f_collaborative=False, params=prm, own_leaders=(ox[:, None], ov[:, None]), own_n_connected=0,
-            geometry="ignore", others=self.others_record(fleet, x, rows, t) if self.others else None,
+            geometry="ignore", others=others_record(self, fleet, x, rows, t) if self.others else None,
         )  # fmt: skip
         return situation, chain_ids
-
-    def others_record(self, fleet, x, rows, t) -> Others:
-        """The changers' :class:`~safelane.shield.world.Others` (``(B, OTHERS_SLOTS)``, shield frame; module
-        docstring): every vehicle whose body overlaps the lane beyond the target lane or the lane on the changer's
-        other side and neither its own nor its target lane — so never F, a chain member or ``L0``, which are taken
-        from those two lanes by the same body test — with its centre within ``others_window_m`` of the changer's, the
-        ``others_slots`` nearest along the road; padding ``x = +inf``. ``x``: the fleet's centres with the changers at
-        their exact states (``rows``: their fleet indices). Batched: no loop over changers or vehicles."""
-        prm = self.params
-        b, k, n_v = len(self.ids), self.others_slots, len(fleet.ids)
-        step = self.sign.astype(np.int64)  # +1: a change to the left (toward g - 1)
-        target = self.g0 - step
-        # lanes from the left, padded by two lanes of nobody on either side (the beyond/other-side lanes of a
-        # changer next to the edge of the road)
-        over = np.zeros((n_v, dem.N_LANES + 4), bool)
-        over[:, 2:-2] = lanes_overlapped(fleet, prm.vehicle_width)
-        col = lambda g: over[:, g + 2].T  # (B, V): vehicle in lane g[r] of row r  # noqa: E731
-        near = np.abs(x[None, :] - self.ex[:, None]) <= self.others_window_m
-        cand = (col(target - step) | col(self.g0 + step)) & ~col(self.g0) & ~col(target) & near
-        key = np.concatenate([np.where(cand, np.abs(x[None, :] - self.ex[:, None]), np.inf), np.full((b, k), np.inf)],
-                             axis=1)  # fmt: skip
-        idx = np.argpartition(key, k - 1, axis=1)[:, :k] if k else np.zeros((b, 0), np.int64)
-        idx = np.take_along_axis(idx, np.argsort(np.take_along_axis(key, idx, 1), axis=1, kind="stable"), 1)
-        present = np.isfinite(np.take_along_axis(key, idx, 1))
-        j = np.where(present, idx, 0)
-        sign = self.sign[:, None]
-        vy_road = np.zeros(n_v) if getattr(fleet, "vy", None) is None else np.asarray(fleet.vy, float).copy()
-        vy_road[rows] = self.sign * self.evy  # the changers: their exact lateral speeds
-        conn = present & np.asarray(fleet.equipped, bool)[j]
-        # an equipped changer announces the lane it will enter (its target; its own lane while it returns) from its
-        # start, in the receiving row's frame (lane i at y = i·w from the row's own lane's centre)
-        row_of = np.full(n_v, -1)
-        row_of[rows] = np.arange(b)
-        c = row_of[j]
-        changing = conn & (c >= 0)
-        c = np.maximum(c, 0)
-        dest = np.where(self.ret[c], self.g0[c], target[c])
-        lane = step[:, None] * (self.g0[:, None] - dest)
-        self.counts["others_slots"] += int(present.sum())  # vehicle-rows the record carried (not in cells.csv)
-        self.counts["others_connected"] += int(conn.sum())
-        self.counts["others_announced"] += int(changing.sum())
-        y = sign * (fleet.y[j] - dem.lane_y(self.g0)[:, None])
-        return Others(
-            x=np.where(present, x[j], np.inf), y=np.where(present, y, 0.0),
-            vx=np.where(present, np.maximum(fleet.v[j], 0.0), 0.0), vy=np.where(present, sign * vy_road[j], 0.0),
-            connected=conn, announce_lane=np.where(changing, lane, NO_LANE).astype(np.int64),
-            announce_t=np.where(changing, self.t0[c], np.inf),
-        )  # fmt: skip
 
     def _proposal(self, s: Situation, fleet, chain_ids, completed) -> tuple[np.ndarray, np.ndarray]:
         """The expert's proposal for the changers; :func:`return_accel` for the returning ones. The expert knows

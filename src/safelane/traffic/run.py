@@ -29,7 +29,7 @@ def run_cell(demand: Demand, params: Params | None = None, *, others: bool = Fal
     """Run one cell in this process: ``{"row": {CELL_COLUMNS...}, "collisions": [...]}`` (wall time apart, in
     ``"wall_s"``, so that the table does not depend on the machine; the lane changes' own counts in
     ``"lane_changes"``). ``others``: the changers' situation carries the
-    world model's other vehicles (:meth:`.equipped.LaneChanges.others_record`)."""
+    world model's other vehicles (:func:`.others.others_record`)."""
     from .world import TrafficWorld
 
     prm = params or Params()
