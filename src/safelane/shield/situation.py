@@ -332,18 +332,19 @@ class Situation:
             raise ValueError(f"Situation.own_promise must have shape ({b}, {k - 1}); got {self.own_promise.shape}")
         if np.shape(self.own_n_connected) != (b,):
             raise ValueError(f"Situation.own_n_connected must have shape ({b},); got {np.shape(self.own_n_connected)}")
-        if np.isnan(self.own_x).any() or np.isneginf(self.own_x).any():
+        # each rule one or two array operations (a comparison is false for NaN)
+        if not (self.own_x > -np.inf).all():
             raise ValueError("Situation.own_x must be finite, or +inf for 'no vehicle'")
-        if not np.isfinite(self.own_v).all() or (self.own_v < 0).any():
+        if not ((self.own_v >= 0) & (self.own_v < np.inf)).all():
             raise ValueError("Situation.own_v must be finite and >= 0 (vehicles do not reverse)")
-        promise = self.own_promise
-        if not np.isfinite(promise).all() or ((promise < 0) | (promise > params.a_x_d)).any():
+        if not ((self.own_promise >= 0) & (self.own_promise <= params.a_x_d)).all():
             raise ValueError(f"Situation.own_promise must lie in [0, a_x_d={params.a_x_d}]")
-        if ((self.own_n_connected < 0) | (self.own_n_connected > k - 1)).any():
+        if b and (self.own_n_connected.min() < 0 or self.own_n_connected.max() > k - 1):
             raise ValueError(f"Situation.own_n_connected must lie in [0, K-1={k - 1}]")
-        present = np.isfinite(self.own_x)
-        if (present[:, 1:] & ~present[:, :-1]).any():
-            raise ValueError("Situation.own_x: a vehicle (finite position) behind an empty slot (+inf)")
+        if k > 1:
+            present = np.isfinite(self.own_x)
+            if (present[:, 1:] & ~present[:, :-1]).any():
+                raise ValueError("Situation.own_x: a vehicle (finite position) behind an empty slot (+inf)")
 
     def _validate_errors(self, b: int, m: int) -> None:
         k = None if self.own_x is None else self.own_x.shape[1]

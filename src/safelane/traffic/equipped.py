@@ -55,6 +55,7 @@ from ..planners.base import ExpertPlanner, Observation
 from ..shield import ABORT, HESITATE, Situation
 from ..shield.stages import chain_analysis
 from . import demand as dem
+from .lanes import Memberships
 from .others import OTHERS_SLOTS, OTHERS_WINDOW_M, others_record
 from .shielding import ShieldPool, decide, take_rows
 
@@ -198,18 +199,12 @@ class LaneChanges:
     # -- the batch situation ---------------------------------------------------------------------------------------
     def situation(self, fleet, x, rows, t):
         """The changers' :class:`Situation` (shield frame: own lane ``y = 0``, target ``y = lane_width``) and the
-        fleet index of each chain slot (``-1`` where padded)."""
+        fleet index of each chain slot (``-1`` where padded). Built from the fleet's arrays for the whole batch at
+        once (:class:`.lanes.Memberships`) and validated by the ``Shield.step`` it is for."""
         prm = self.params
         b, m = len(self.ids), CHAIN_SLOTS
         target = self.g0 - self.sign.astype(np.int64)
-        half = 0.5 * (prm.lane_width + prm.vehicle_width) - 1e-6
-        lx, lv, fx, fv, fcon = (np.zeros((b, m)), np.zeros((b, m)), np.zeros(b), np.zeros(b), np.zeros(b, bool))
-        chain_ids = np.full((b, m), -1)
-        ox, ov = np.full(b, np.inf), np.zeros(b)
-        members = {}
-        for g in np.unique(np.concatenate([target, self.g0])):
-            mem = np.flatnonzero((fleet.lane >= 0) & (np.abs(fleet.y - dem.lane_y(g)) < half))
-            members[int(g)] = mem[np.argsort(x[mem], kind="stable")]
+        lanes = Memberships.of(fleet.lane, fleet.y, x, 0.5 * (prm.lane_width + prm.vehicle_width) - 1e-6)
         # F: the nearest vehicle behind in the target lane, at the highest speed of the vehicles from it back to the
         # nearest one that stays in that lane. A changer still changing lanes is there only for now (it may abort and
         # leave, revealing the vehicle behind it, perhaps much faster): a vehicle at the nearest one's position and
@@ -219,50 +214,39 @@ class LaneChanges:
         settled = self.ret | ~np.isnan(self.t_done)
         lane_kept = np.full(len(fleet.ids), -2)  # the lane each changer stays in (-1: none yet); -2: not a changer
         lane_kept[rows] = np.where(settled, dest, -1)
-        for g in np.unique(target):
-            r = np.flatnonzero(target == g)
-            mem = members[int(g)]
-            xs = x[mem]
-            lo, hi = np.searchsorted(xs, self.ex[r], "left"), np.searchsorted(xs, self.ex[r], "right")
-            has_f = lo > 0
-            stays = (lane_kept[mem] == -2) | (lane_kept[mem] == g)
-            pos = np.arange(len(mem))
-            start = np.maximum.accumulate(np.where(stays, pos, 0))  # the nearest that stays, at or behind each one
-            near = np.maximum(lo - 1, 0)
-            if len(mem):
-                span = (pos[None, :] >= start[near][:, None]) & (pos[None, :] <= near[:, None])  # (rows, members)
-                fastest = np.where(span, fleet.v[mem][None, :], -np.inf).max(1)
-            else:
-                fastest = np.zeros(len(r))
-            fi = mem[near] if len(mem) else np.zeros(len(r), np.int64)
-            fx[r] = np.where(has_f, x[fi] if len(mem) else 0.0, self.ex[r] - FAR_M)
-            fv[r] = np.where(has_f, fastest, 0.0)
-            fcon[r] = has_f & (fleet.equipped[fi] if len(mem) else False)
-            slot = hi[:, None] + np.arange(m)[None, :]
-            ok = slot < len(mem)
-            li = mem[np.minimum(slot, max(len(mem) - 1, 0))] if len(mem) else np.zeros_like(slot)
-            pad = self.ex[r, None] + FAR_M * (1.0 + np.arange(m)[None, :])
-            lx[r] = np.where(ok, x[li], pad)
-            lv[r] = np.where(ok, fleet.v[li], self.evx[r, None])
-            chain_ids[r] = np.where(ok, li, -1)
-        for g in np.unique(self.g0):
-            r = np.flatnonzero(self.g0 == g)
-            mem = members[int(g)]
-            hi = np.searchsorted(x[mem], self.ex[r], "right")
-            ok = hi < len(mem)
-            oi = mem[np.minimum(hi, max(len(mem) - 1, 0))] if len(mem) else np.zeros(len(r), np.int64)
-            ox[r] = np.where(ok, x[oi] if len(mem) else np.inf, np.inf)
-            ov[r] = np.where(ok, fleet.v[oi] if len(mem) else 0.0, 0.0)
-            if g == dem.ACCEL_LANE:  # the lane's end: a standing obstacle its rear bumper at the end
-                end = dem.ACCEL_X[1] + 0.5 * prm.vehicle_length
-                ox[r], ov[r] = np.where(ox[r] < end, ox[r], end), np.where(ox[r] < end, ov[r], 0.0)
+        kept = lane_kept[lanes.veh]
+        fastest = lanes.fastest_back(fleet.v, (kept == -2) | (kept == lanes.lane))
+        lo, hi = lanes.search(target, rows, "left"), lanes.search(target, rows, "right")
+        has_f = lo > lanes.start[target]
+        near = np.maximum(lo - 1, 0)
+        fi = lanes.vehicle(near)
+        fx = np.where(has_f, x[fi], self.ex - FAR_M)
+        fv = np.where(has_f, fastest[near], 0.0) if len(fastest) else np.zeros(b)  # near < P where there is any
+        fcon = has_f & fleet.equipped[fi]
+        # the chain L1..L(M): the vehicles ahead in the target lane
+        slot = hi[:, None] + np.arange(m)[None, :]
+        ok = slot < lanes.start[target + 1][:, None]
+        li = lanes.vehicle(slot)
+        lx = np.where(ok, x[li], self.ex[:, None] + FAR_M * (1.0 + np.arange(m)[None, :]))
+        lv = np.where(ok, fleet.v[li], self.evx[:, None])
+        chain_ids = np.where(ok, li, -1)
+        # L0: the nearest ahead in the own lane; the acceleration lane's end, a standing obstacle (its rear bumper
+        # at the end), where that is nearer
+        own = lanes.search(self.g0, rows, "right")
+        ok = own < lanes.start[self.g0 + 1]
+        oi = lanes.vehicle(own)
+        ox, ov = np.where(ok, x[oi], np.inf), np.where(ok, fleet.v[oi], 0.0)
+        end = np.where(self.g0 == dem.ACCEL_LANE, dem.ACCEL_X[1] + 0.5 * prm.vehicle_length, np.inf)
+        ox, ov = np.where(ox < end, ox, end), np.where(ox < end, ov, 0.0)
         equipped = np.where(chain_ids >= 0, fleet.equipped[np.maximum(chain_ids, 0)], False)
         n_conn = np.cumprod(equipped[:, : m - 1], axis=1).sum(1)
-        situation = Situation.from_arrays(
-            t=t, ego=(self.ex, self.ey, self.evx, self.evy), follower=(fx, fv), leaders=(lx, lv),
-            n_connected=n_conn, promise_decel=PROMISE_DECEL, human_driven=False, f_connected=fcon,
-            f_collaborative=False, params=prm, own_leaders=(ox[:, None], ov[:, None]), own_n_connected=0,
-            geometry="ignore", others=others_record(self, fleet, x, rows, t) if self.others else None,
+        others = others_record(self, fleet, x, rows, t) if self.others else None
+        situation = Situation(
+            t=float(t), ego_x=self.ex.copy(), ego_y=self.ey.copy(), ego_vx=self.evx.copy(), ego_vy=self.evy.copy(),
+            f_x=fx, f_v=fv, f_connected=fcon, f_collaborative=np.zeros(b, bool), chain_x=lx, chain_v=lv,
+            chain_promise=np.full((b, m - 1), PROMISE_DECEL), chain_human=np.zeros((b, m - 1), bool),
+            n_connected=n_conn, own_x=ox[:, None], own_v=ov[:, None], own_promise=np.zeros((b, 0)),
+            own_n_connected=np.zeros(b, np.int64), others=others,
         )  # fmt: skip
         return situation, chain_ids
 

@@ -83,16 +83,14 @@ class TrafficWorld:
                 self.equipped.add(vid)
                 veh.setLaneChangeMode(vid, 0)  # SUMO's LC2013 only wishes; the shield executes (equipped.py)
         res = veh.getAllSubscriptionResults()
-        ids = tuple(i for i in res if res[i][self._vars[1]] >= 0.0)  # SUMO's -2^30: not on the road this step
         pos_k, v_k, a_k, road_k, lat_k = self._vars
-        if ids:
-            pos = np.array([res[i][pos_k] for i in ids], float)
-            v = np.array([res[i][v_k] for i in ids], float)
-            a = np.array([res[i][a_k] for i in ids], float)
-            on_ramp = np.array([res[i][road_k] == "ramp" for i in ids], bool)
-            vy = np.array([res[i][lat_k] for i in ids], float)
-        else:
-            pos, v, a, on_ramp, vy = np.zeros((0, 2)), np.zeros(0), np.zeros(0), np.zeros(0, bool), np.zeros(0)
+        # one pass over SUMO's results: (x, y, v, a, on the ramp, lateral speed) per vehicle
+        table = np.array([(*r[pos_k], r[v_k], r[a_k], r[road_k] == "ramp", r[lat_k]) for r in res.values()],
+                         float).reshape(-1, 6)  # fmt: skip
+        on = table[:, 2] >= 0.0  # SUMO's -2^30: not on the road this step
+        ids = tuple(i for i, k in zip(res, on.tolist(), strict=True) if k)
+        table = table[on]
+        pos, v, a, on_ramp, vy = table[:, :2], table[:, 2].copy(), table[:, 3].copy(), table[:, 4] > 0, table[:, 5]
         self._apply_floors(ids, v, a)
         self._v_now = dict(zip(ids, v.tolist(), strict=True))
         x = front_to_centre(pos[:, 0], self.params.vehicle_length)
