@@ -9,13 +9,22 @@
   over it after ``init``, each the mean over ``--steps`` periods; decisions per second = rows / (situation + step);
   ``shield/SUMO`` = (situation + step) over SUMO's step.
 
+``--live D [D ...]``: the study's own runs instead — the shipped merge network (SSM device on, SUMO's lane changing
+and the ramp's merges) at each total demand ``D`` [veh/h] and penetration ``--p``, ``--seconds`` simulated after
+``--warmup``, every component timed in place over the run's periods: SUMO's step, the read, the changers'
+``Situation``, ``Shield.step`` (with the pool's bookkeeping) and the rest of the traffic layer's period (wishes,
+planner, placing the changers, the leaders' braking limit); the mean vehicles in the network and changers per period.
+
     .venv/bin/python benchmarks/bench_traffic.py [--sizes 100 1000 5000] [--steps 20]
+    .venv/bin/python benchmarks/bench_traffic.py --live 2500 4900 [--p 1] [--seconds 200] [--warmup 100]
 """
 
 from __future__ import annotations
 
 import argparse
+import multiprocessing
 import time
+from concurrent.futures import ProcessPoolExecutor
 
 import numpy as np
 
@@ -75,11 +84,79 @@ def bench(n: int, steps: int) -> dict:
             "decisions_per_s": b / (t_sit + t_shield), "ratio": (t_sit + t_shield) / (t_sumo / steps)}  # fmt: skip
 
 
+def live(demand_vph: float, p: float, seconds: float, warmup: float) -> dict:
+    """One run of the study (:func:`safelane.traffic.run.run_cell`) with its components timed in place (wrapped);
+    the means are per period after ``warmup``."""
+    from safelane.traffic import equipped, run, world
+    from safelane.traffic.demand import Demand
+
+    wall = {"sumo": 0.0, "read": 0.0, "situation": 0.0, "shield": 0.0, "period": 0.0}
+    tally = {"periods": 0, "vehicles": 0, "changers": 0}
+    clock = {"t": 0.0}
+
+    def timed(name, fn, after=None):
+        def wrapper(*a, **k):
+            t0 = time.perf_counter()
+            out = fn(*a, **k)
+            if clock["t"] >= warmup:
+                wall[name] += time.perf_counter() - t0
+                if after:
+                    after(a, out)
+            return out
+
+        return wrapper
+
+    def read_counted(a, fleet):
+        tally["periods"] += 1
+        tally["vehicles"] += len(fleet)
+
+    def decided(a, decision):
+        tally["changers"] += len(decision.a_x)
+
+    saved = (world.TrafficWorld.step, world.TrafficWorld.read, equipped.LaneChanges.situation, equipped.decide,
+             equipped.LaneChanges.period)  # fmt: skip
+
+    def read(self):
+        clock["t"] = self.time()
+        return timed("read", saved[1], read_counted)(self)
+
+    world.TrafficWorld.step = timed("sumo", saved[0])
+    world.TrafficWorld.read = read
+    equipped.LaneChanges.situation = timed("situation", saved[2])
+    equipped.decide = timed("shield", saved[3], decided)
+    equipped.LaneChanges.period = timed("period", saved[4])
+    try:
+        run.run_cell(Demand(p=p, main_vph=0.85 * demand_vph, ramp_vph=0.15 * demand_vph, seconds=warmup + seconds,
+                            warmup_s=warmup, seed=0))  # fmt: skip
+    finally:
+        (world.TrafficWorld.step, world.TrafficWorld.read, equipped.LaneChanges.situation, equipped.decide,
+         equipped.LaneChanges.period) = saved  # fmt: skip
+    n = max(tally["periods"], 1)
+    ms = {k: 1e3 * v / n for k, v in wall.items()}
+    rest = ms["period"] - ms["situation"] - ms["shield"]
+    return {"demand": demand_vph, "vehicles": tally["vehicles"] / n, "changers": tally["changers"] / n, **ms,
+            "rest": rest, "ratio": (ms["situation"] + ms["shield"]) / ms["sumo"]}  # fmt: skip
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--sizes", type=int, nargs="+", default=[100, 1000, 5000])
     ap.add_argument("--steps", type=int, default=20)
+    ap.add_argument("--live", type=float, nargs="+", help="total demands [veh/h]: time the study's own runs")
+    ap.add_argument("--p", type=float, default=1.0)
+    ap.add_argument("--seconds", type=float, default=200.0)
+    ap.add_argument("--warmup", type=float, default=100.0)
     args = ap.parse_args()
+    if args.live:
+        print(f"{'veh/h':>6} {'vehicles':>8} {'changers':>8} {'SUMO step ms':>12} {'read ms':>8} {'situation ms':>12} "
+              f"{'shield step ms':>14} {'rest ms':>8} {'shield/SUMO':>11}")  # fmt: skip
+        for q in args.live:  # each run in a fresh interpreter, as the sweep's (libsumo keeps state past close)
+            with ProcessPoolExecutor(max_workers=1, mp_context=multiprocessing.get_context("spawn")) as pool:
+                r = pool.submit(live, q, args.p, args.seconds, args.warmup).result()
+            print(f"{r['demand']:>6.0f} {r['vehicles']:>8.0f} {r['changers']:>8.1f} {r['sumo']:>12.2f} "
+                  f"{r['read']:>8.2f} {r['situation']:>12.2f} {r['shield']:>14.2f} {r['rest']:>8.2f} "
+                  f"{r['ratio']:>11.2f}")  # fmt: skip
+        return
     print(f"{'vehicles':>8} {'SUMO step ms':>12} {'read ms':>8} {'situation ms':>12} {'batch':>6} "
           f"{'shield step ms':>14} {'decisions/s':>11} {'shield/SUMO':>11}")  # fmt: skip
     for n in args.sizes:

@@ -1,5 +1,5 @@
-"""The changers' batch situation of the traffic co-simulation (``LaneChanges.situation``, built for all changers
-at once from one sorted array of lane memberships, :mod:`safelane.traffic.lanes`) against a plain reference written
+"""The changers' batch situation of the traffic co-simulation (``LaneChanges.situation``: the neighbour search of
+:mod:`safelane.traffic.lanes`, compiled where numba is and as Python where not) against a plain reference written
 here changer by changer and lane by lane from the rules of docs/traffic.md: random fleets with ties in position,
 vehicles across lane boundaries, the ramp, changers that completed, that return and that are still changing."""
 
@@ -12,8 +12,8 @@ import pytest
 
 from safelane import Params
 from safelane.traffic import demand as dem
+from safelane.traffic import lanes
 from safelane.traffic.equipped import CHAIN_SLOTS, FAR_M, PROMISE_DECEL, LaneChanges
-from safelane.traffic.lanes import Memberships
 
 PRM = Params()
 HALF = 0.5 * (PRM.lane_width + PRM.vehicle_width) - 1e-6
@@ -89,8 +89,13 @@ def reference(fleet, ch, rows):
     return out
 
 
+@pytest.mark.parametrize("compiled", [True, False], ids=["compiled", "python"])
 @pytest.mark.parametrize("seed", range(12))
-def test_the_batch_situation_follows_the_rules_changer_by_changer(seed):
+def test_the_batch_situation_follows_the_rules_changer_by_changer(monkeypatch, seed, compiled):
+    if compiled and lanes._kernel() is None:
+        pytest.skip("numba missing or SAFELANE_NO_NUMBA=1")
+    if not compiled:
+        monkeypatch.setattr(lanes, "_kernel", lambda: None)
     fleet, ch, rows = random_scene(seed, n=[3, 20, 80][seed % 3])
     s, chain_ids = ch.situation(fleet, fleet.x.copy(), rows, 7.0)
     s.validate(PRM)
@@ -103,18 +108,18 @@ def test_the_batch_situation_follows_the_rules_changer_by_changer(seed):
     assert (s.ego_x == ch.ex).all() and (s.ego_y == ch.ey).all() and s.others is None
 
 
-def test_the_memberships_of_an_empty_road_and_of_the_ramp_only():
-    nobody = Memberships.of(np.zeros(0, np.int64), np.zeros(0), np.zeros(0), HALF)
-    assert len(nobody.veh) == 0 and nobody.start.tolist() == [0] * (dem.N_LANES + 1)
-    assert nobody.fastest_back(np.zeros(0), np.zeros(0, bool)).shape == (0,)
-    ramp = Memberships.of(np.array([-1, -1]), dem.lane_y(np.array([3, 3])), np.array([5.0, 9.0]), HALF)
-    assert len(ramp.veh) == 0 and ramp.vehicle(np.array([0, 1])).tolist() == [0, 0]
-
-
-def test_the_fastest_back_restarts_at_each_one_that_stays_and_at_each_lane():
-    # lane 0: speeds 10, 30, 20, 5 (positions ascending), the third stays; lane 1: 7, 3
-    y = dem.lane_y(np.array([0, 0, 0, 0, 1, 1]))
-    lanes = Memberships.of(np.array([0, 0, 0, 0, 1, 1]), y, np.array([1.0, 2.0, 3.0, 4.0, 1.0, 2.0]), HALF)
-    stays = np.array([False, False, True, False, False, False])
-    got = lanes.fastest_back(np.array([10.0, 30.0, 20.0, 5.0, 7.0, 3.0]), stays)
-    assert got.tolist() == [10.0, 30.0, 20.0, 20.0, 7.0, 7.0]
+def test_an_empty_lane_and_a_changer_alone():
+    # the changer alone on the road: no F, no chain, no L0 (padded); in the acceleration lane, its end is L0
+    for g0, sign in ((1, 1.0), (dem.ACCEL_LANE, 1.0)):
+        fleet = SimpleNamespace(ids=("cav.0",), x=np.array([1000.0]), y=dem.lane_y(np.array([g0])), a=np.zeros(1),
+                                v=np.array([20.0]), lane=np.array([g0]), equipped=np.array([True]))  # fmt: skip
+        ch = LaneChanges(None, PRM)
+        ch.ids, ch.g0, ch.sign = ["cav.0"], np.array([g0]), np.array([sign])
+        ch.ex, ch.evx, ch.ey, ch.evy = np.array([1000.0]), np.array([20.0]), np.zeros(1), np.zeros(1)
+        ch.t_done, ch.ret = np.full(1, np.nan), np.zeros(1, bool)
+        s, chain_ids = ch.situation(fleet, fleet.x.copy(), np.array([0]), 0.0)
+        assert s.f_x[0] == 1000.0 - FAR_M and s.f_v[0] == 0.0 and not s.f_connected[0]
+        assert s.chain_x[0].tolist() == [1000.0 + FAR_M * (1 + k) for k in range(CHAIN_SLOTS)]
+        assert (chain_ids == -1).all() and s.n_connected[0] == 0
+        end = dem.ACCEL_X[1] + 0.5 * PRM.vehicle_length
+        assert (s.own_x[0, 0], s.own_v[0, 0]) == ((end, 0.0) if g0 == dem.ACCEL_LANE else (np.inf, 0.0))

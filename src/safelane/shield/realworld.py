@@ -30,7 +30,7 @@ from ..safety.lateral import LATERAL_TOL_M
 from ..safety.own_lane import own_lane_core
 from ..safety.plan import EvasionPlan, plan_from_core, set_rows
 from ..safety.responsible import pair_min_gap
-from .decide import lateral_max, own_margin
+from .decide import lateral_max, own_kernel, own_margin
 from .situation import Situation
 
 
@@ -129,13 +129,16 @@ def in_flight_checked(plan: EvasionPlan, s: Situation, own, delay: float, prm: P
 
 
 def own_plan(plan: EvasionPlan, args, own, prm: Params) -> EvasionPlan:
-    """``plan`` with the rows that have an own-lane leader replanned with it (:mod:`safelane.safety.own_lane`)."""
+    """``plan`` with the rows that have an own-lane leader replanned with it (:mod:`safelane.safety.own_lane`; its
+    rows compiled where the kernels are, :func:`._fast_own.own_lane_rows`, the same bits)."""
     rows = np.flatnonzero(np.isfinite(own[0]))
     sub = tuple(np.broadcast_to(a, plan.feasible.shape)[rows] for a in args)
     own_r = tuple(np.broadcast_to(a, plan.feasible.shape)[rows] for a in own)
+    kernel = own_kernel()
+    core = own_lane_core if kernel is None else kernel.own_lane_rows
     with np.errstate(all="ignore"):
         margin = own_margin(prm)
-        exists, parts = own_lane_core(*sub, *own_r, prm.p_m, prm.p_m, margin, prm)
+        exists, parts = core(*sub, *own_r, prm.p_m, prm.p_m, margin, prm)
         piece = plan_from_core(ARRAY, rows.shape, (*sub, prm.p_m, prm.p_m), exists, parts, prm.p_m, prm.p_m, prm,
                                own=(*own_r, margin))  # fmt: skip
     return set_rows(plan, [(rows, piece)])

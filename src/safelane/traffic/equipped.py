@@ -55,7 +55,7 @@ from ..planners.base import ExpertPlanner, Observation
 from ..shield import ABORT, HESITATE, Situation
 from ..shield.stages import chain_analysis
 from . import demand as dem
-from .lanes import Memberships
+from .lanes import neighbours
 from .others import OTHERS_SLOTS, OTHERS_WINDOW_M, others_record
 from .shielding import ShieldPool, decide, take_rows
 
@@ -200,11 +200,10 @@ class LaneChanges:
     def situation(self, fleet, x, rows, t):
         """The changers' :class:`Situation` (shield frame: own lane ``y = 0``, target ``y = lane_width``) and the
         fleet index of each chain slot (``-1`` where padded). Built from the fleet's arrays for the whole batch at
-        once (:class:`.lanes.Memberships`) and validated by the ``Shield.step`` it is for."""
+        once (:func:`.lanes.neighbours`) and validated by the ``Shield.step`` it is for."""
         prm = self.params
         b, m = len(self.ids), CHAIN_SLOTS
         target = self.g0 - self.sign.astype(np.int64)
-        lanes = Memberships.of(fleet.lane, fleet.y, x, 0.5 * (prm.lane_width + prm.vehicle_width) - 1e-6)
         # F: the nearest vehicle behind in the target lane, at the highest speed of the vehicles from it back to the
         # nearest one that stays in that lane. A changer still changing lanes is there only for now (it may abort and
         # leave, revealing the vehicle behind it, perhaps much faster): a vehicle at the nearest one's position and
@@ -214,32 +213,12 @@ class LaneChanges:
         settled = self.ret | ~np.isnan(self.t_done)
         lane_kept = np.full(len(fleet.ids), -2)  # the lane each changer stays in (-1: none yet); -2: not a changer
         lane_kept[rows] = np.where(settled, dest, -1)
-        kept = lane_kept[lanes.veh]
-        fastest = lanes.fastest_back(fleet.v, (kept == -2) | (kept == lanes.lane))
-        lo, hi = lanes.search(target, rows, "left"), lanes.search(target, rows, "right")
-        has_f = lo > lanes.start[target]
-        near = np.maximum(lo - 1, 0)
-        fi = lanes.vehicle(near)
-        fx = np.where(has_f, x[fi], self.ex - FAR_M)
-        fv = np.where(has_f, fastest[near], 0.0) if len(fastest) else np.zeros(b)  # near < P where there is any
-        fcon = has_f & fleet.equipped[fi]
-        # the chain L1..L(M): the vehicles ahead in the target lane
-        slot = hi[:, None] + np.arange(m)[None, :]
-        ok = slot < lanes.start[target + 1][:, None]
-        li = lanes.vehicle(slot)
-        lx = np.where(ok, x[li], self.ex[:, None] + FAR_M * (1.0 + np.arange(m)[None, :]))
-        lv = np.where(ok, fleet.v[li], self.evx[:, None])
-        chain_ids = np.where(ok, li, -1)
-        # L0: the nearest ahead in the own lane; the acceleration lane's end, a standing obstacle (its rear bumper
-        # at the end), where that is nearer
-        own = lanes.search(self.g0, rows, "right")
-        ok = own < lanes.start[self.g0 + 1]
-        oi = lanes.vehicle(own)
-        ox, ov = np.where(ok, x[oi], np.inf), np.where(ok, fleet.v[oi], 0.0)
-        end = np.where(self.g0 == dem.ACCEL_LANE, dem.ACCEL_X[1] + 0.5 * prm.vehicle_length, np.inf)
-        ox, ov = np.where(ox < end, ox, end), np.where(ox < end, ov, 0.0)
-        equipped = np.where(chain_ids >= 0, fleet.equipped[np.maximum(chain_ids, 0)], False)
-        n_conn = np.cumprod(equipped[:, : m - 1], axis=1).sum(1)
+        # the chain L1..L(M) ahead in the target lane; L0 the nearest ahead in the own lane, or the acceleration
+        # lane's end (a standing obstacle, its rear bumper at the end) where that is nearer
+        fx, fv, fcon, lx, lv, chain_ids, n_conn, ox, ov = neighbours(
+            fleet, x, lane_kept, rows, target, self.g0, self.ex, self.evx, m, FAR_M,
+            0.5 * (prm.lane_width + prm.vehicle_width) - 1e-6, dem.ACCEL_X[1] + 0.5 * prm.vehicle_length,
+        )  # fmt: skip
         others = others_record(self, fleet, x, rows, t) if self.others else None
         situation = Situation(
             t=float(t), ego_x=self.ex.copy(), ego_y=self.ey.copy(), ego_vx=self.evx.copy(), ego_vy=self.evy.copy(),

@@ -1,0 +1,14 @@
+"""Optional compiled kernel of the changers' neighbour search (numba, extra ``fast``): :func:`.lanes.neighbour_rows`
+itself, given to ``numba.njit`` (no rule lives here; ``tests/test_traffic_situation.py`` runs both and the
+reference). Imported only where numba imports and ``SAFELANE_NO_NUMBA`` is not ``1`` (:func:`.lanes._kernel`)."""
+
+from __future__ import annotations
+
+import numba
+
+from ..safety._fast_base import announce_compile
+from . import lanes
+
+announce_compile(__file__)
+numba.extending.register_jitable(lanes._first)
+neighbour_kernel = numba.njit(cache=True, nogil=True)(lanes.neighbour_rows)
