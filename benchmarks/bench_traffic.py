@@ -2,12 +2,15 @@
 (safelane.traffic; docs/traffic.md). Same run, same process, for each size:
 
 * SUMO: ``simulationStep`` of the long merge network (``merge3_long.net.xml``) holding that many vehicles (half of
-  them equipped, spread over the 40 km downstream section at 20 m/s), the mean over ``--steps`` steps;
+  them equipped, spread over the 40 km downstream section at 20 m/s), the mean over ``--steps`` steps; ``+SSM``: the
+  same with SUMO's SSM device on every vehicle, as ``safelane traffic`` runs it (for its conflicts);
 * reading the fleet (subscriptions), which any TraCI client pays, shielded or not;
 * the shield's share of a period, for every equipped vehicle in lanes 1–2 treated as changing left (a batch of about
   a third of the fleet): building the changers' batch ``Situation`` from the fleet's arrays, and ``Shield.step``
-  over it after ``init``, each the mean over ``--steps`` periods; decisions per second = rows / (situation + step);
-  ``shield/SUMO`` = (situation + step) over SUMO's step.
+  over it after ``init``, each the mean over ``--steps`` periods, interleaved with SUMO's steps (each period: SUMO's
+  step, the read, the situation, the shield's step) so that all see the same state of the machine; decisions per
+  second = rows / (situation + step);
+  ``shield/SUMO`` = (situation + step) over SUMO's step without the SSM device (the cheaper one).
 
 ``--live D [D ...]``: the study's own runs instead — the shipped merge network (SSM device on, SUMO's lane changing
 and the ramp's merges) at each total demand ``D`` [veh/h] and penetration ``--p``, ``--seconds`` simulated after
@@ -41,6 +44,26 @@ def routes(n: int, seed: int = 0) -> str:
     return "\n".join([*lines, "</routes>"]) + "\n"
 
 
+def sumo_with_ssm_ms(n: int, steps: int) -> float:
+    """SUMO's step as the study runs it (its SSM device on every vehicle, ``safelane traffic``'s conflicts): the mean
+    over ``steps`` steps of the same network and vehicles, nobody shielded."""
+    from safelane import Params
+    from safelane.traffic.demand import Demand, net_file
+    from safelane.traffic.world import TrafficWorld
+
+    with TrafficWorld(Demand(p=0.5, seconds=600, warmup_s=1), Params(), net=net_file(long=True), routes=routes(n),
+                      ssm=True) as world:  # fmt: skip
+        world.step()
+        world.read()
+        t = 0.0
+        for _ in range(steps):
+            t0 = time.perf_counter()
+            world.step()
+            t += time.perf_counter() - t0
+            world.read()
+    return 1e3 * t / steps
+
+
 def bench(n: int, steps: int) -> dict:
     from safelane import Params
     from safelane.traffic.demand import Demand, net_file
@@ -53,14 +76,6 @@ def bench(n: int, steps: int) -> dict:
                       ssm=False) as world:  # fmt: skip
         world.step()
         fleet = world.read()
-        t_sumo = t_read = 0.0
-        for _ in range(steps):
-            t0 = time.perf_counter()
-            world.step()
-            t1 = time.perf_counter()
-            fleet = world.read()
-            t_read += time.perf_counter() - t1
-            t_sumo += t1 - t0
         changes = LaneChanges(world, prm)
         sel = np.flatnonzero(fleet.equipped & (fleet.lane >= 1) & (fleet.lane <= 2))
         b = len(sel)
@@ -68,20 +83,28 @@ def bench(n: int, steps: int) -> dict:
         changes.g0, changes.sign = fleet.lane[sel], np.ones(b)
         changes.ex, changes.ey, changes.evx, changes.evy = fleet.x[sel], np.zeros(b), fleet.v[sel], np.zeros(b)
         changes.ret, changes.t_done = np.zeros(b, bool), np.full(b, np.nan)  # changes under way
-        changes.situation(fleet, fleet.x, sel, world.time())  # first call: imports
-        t0 = time.perf_counter()
-        for _ in range(steps):
-            situation, chain = changes.situation(fleet, fleet.x, sel, world.time())
-        t_sit = (time.perf_counter() - t0) / steps
+        situation, chain = changes.situation(fleet, fleet.x, sel, world.time())  # first call: imports, compiles
         proposal = changes.planner(changes._observation(situation, fleet, chain, np.zeros(b, bool)), prm)
         decide(changes.pool, situation, proposal, np.zeros(0, np.int64), b)  # init + first step
-        t0 = time.perf_counter()
-        for _ in range(steps):  # the same changers, period after period (the mean, as SUMO's step)
+        snapshot = fleet
+        t_sumo = t_read = t_sit = t_shield = 0.0
+        # interleaved, period by period as in a run, so that both sides see the same state of the machine: SUMO steps
+        # and is read; the shield's changers stay the same, their situation rebuilt and decided every period
+        for _ in range(steps):
+            t0 = time.perf_counter()
+            world.step()
+            t1 = time.perf_counter()
+            fleet = world.read()
+            t2 = time.perf_counter()
+            situation, chain = changes.situation(snapshot, snapshot.x, sel, world.time())
+            t3 = time.perf_counter()
             decide(changes.pool, situation, proposal, np.arange(b), 0)
-        t_shield = (time.perf_counter() - t0) / steps
-    return {"vehicles": len(fleet), "sumo_step_ms": 1e3 * t_sumo / steps, "read_ms": 1e3 * t_read / steps,
+            t4 = time.perf_counter()
+            t_sumo, t_read, t_sit, t_shield = t_sumo + t1 - t0, t_read + t2 - t1, t_sit + t3 - t2, t_shield + t4 - t3
+        t_sumo, t_read, t_sit, t_shield = (t / steps for t in (t_sumo, t_read, t_sit, t_shield))
+    return {"vehicles": len(fleet), "sumo_step_ms": 1e3 * t_sumo, "read_ms": 1e3 * t_read,
             "situation_ms": 1e3 * t_sit, "batch": b, "shield_step_ms": 1e3 * t_shield,
-            "decisions_per_s": b / (t_sit + t_shield), "ratio": (t_sit + t_shield) / (t_sumo / steps)}  # fmt: skip
+            "decisions_per_s": b / (t_sit + t_shield), "ratio": (t_sit + t_shield) / t_sumo}  # fmt: skip
 
 
 def live(demand_vph: float, p: float, seconds: float, warmup: float) -> dict:
@@ -157,12 +180,13 @@ def main() -> None:
                   f"{r['read']:>8.2f} {r['situation']:>12.2f} {r['shield']:>14.2f} {r['rest']:>8.2f} "
                   f"{r['ratio']:>11.2f}")  # fmt: skip
         return
-    print(f"{'vehicles':>8} {'SUMO step ms':>12} {'read ms':>8} {'situation ms':>12} {'batch':>6} "
+    print(f"{'vehicles':>8} {'SUMO step ms':>12} {'+SSM ms':>8} {'read ms':>8} {'situation ms':>12} {'batch':>6} "
           f"{'shield step ms':>14} {'decisions/s':>11} {'shield/SUMO':>11}")  # fmt: skip
     for n in args.sizes:
         r = bench(n, args.steps)
-        print(f"{r['vehicles']:>8} {r['sumo_step_ms']:>12.2f} {r['read_ms']:>8.2f} {r['situation_ms']:>12.2f} "
-              f"{r['batch']:>6} {r['shield_step_ms']:>14.2f} {r['decisions_per_s']:>11.0f} "
+        ssm = sumo_with_ssm_ms(n, args.steps)
+        print(f"{r['vehicles']:>8} {r['sumo_step_ms']:>12.2f} {ssm:>8.2f} {r['read_ms']:>8.2f} "
+              f"{r['situation_ms']:>12.2f} {r['batch']:>6} {r['shield_step_ms']:>14.2f} {r['decisions_per_s']:>11.0f} "
               f"{r['ratio']:>11.2f}")  # fmt: skip
 
 

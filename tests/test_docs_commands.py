@@ -50,7 +50,8 @@ NOT_RUN: dict[str, str] = {
     ".venv/bin/python benchmarks/bench_backends.py": _BENCH,
     ".venv/bin/python benchmarks/bench_core.py": _BENCH,
     ".venv/bin/python benchmarks/bench_commonroad_referee.py": _BENCH,
-    ".venv/bin/python benchmarks/bench_traffic.py --sizes 100 1000 5000 --steps 20": _BENCH,
+    ".venv/bin/python benchmarks/bench_traffic.py --sizes 100 1000 5000 --steps 50": _BENCH,
+    ".venv/bin/python benchmarks/bench_traffic.py --live 2500 4900 --seconds 100 --warmup 100": _BENCH,
     "safelane traffic --penetration 0,0.25,0.5,0.75,1 --demand 4900 --seconds 3900 --warmup 300 --workers 2":
         "five simulated hours of SUMO with the shield in the loop (about 45 minutes of CPU; docs/traffic.md)",
     "safelane traffic --penetration 0,0.25,0.5,0.75,1 --demand 4900 --seconds 300 --warmup 60 --workers 1":

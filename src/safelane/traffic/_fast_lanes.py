@@ -9,6 +9,6 @@ import numba
 from ..safety._fast_base import announce_compile
 from . import lanes
 
-announce_compile(__file__)
+announce_compile(lanes.__file__)  # numba caches the kernel under the source it compiles: lanes.py
 numba.extending.register_jitable(lanes._first)
 neighbour_kernel = numba.njit(cache=True, nogil=True)(lanes.neighbour_rows)
