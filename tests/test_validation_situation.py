@@ -5,6 +5,7 @@ fallback; ``safelane check`` refuses a lateral position outside the two lanes an
 
 from __future__ import annotations
 
+import dataclasses
 import warnings
 
 import numpy as np
@@ -139,3 +140,51 @@ def test_check_accepts_both_lane_edges_and_refuses_swapped_vehicles():
     chain = _cli("--chain-p", "10", "--chain-v", "30")
     text = " ".join(chain.output.split())
     assert chain.exit_code == 2 and "--chain-p" in text and "L2 at 10 m is behind L1 at 20 m" in text
+
+
+# -- the fast check of the value rules (Situation._values_pass) against the rules one by one
+_VALUE_FIELDS = ("ego_x", "ego_y", "ego_vx", "ego_vy", "f_x", "f_v", "chain_x", "chain_v", "chain_promise",
+                 "n_connected")  # fmt: skip
+_SPEEDS = ("ego_vx", "f_v", "chain_v")
+
+
+def _batch(b=6, m=4):
+    rng = np.random.default_rng(b * 10 + m)
+    lx = np.sort(rng.uniform(10.0, 90.0, (b, m)), axis=1)
+    return Situation.from_arrays(
+        t=0.0, ego=(rng.uniform(-5, 5, b), rng.uniform(0, 3, b), rng.uniform(0, 30, b), rng.uniform(-1, 1, b)),
+        follower=(rng.uniform(-60, -10, b), rng.uniform(0, 30, b)), leaders=(lx, rng.uniform(0, 30, (b, m))),
+        n_connected=rng.integers(0, m, b), promise_decel=rng.uniform(0, PRM.a_x_d, (b, m - 1)), params=PRM,
+    )  # fmt: skip
+
+
+def _bad_values(name):
+    """Values each field must refuse (every field: NaN and ±inf; speeds: below 0; promises: outside [0, a_x_d];
+    N: outside [0, M − 1])."""
+    if name == "n_connected":
+        return [-1, 4]
+    out = [np.nan, np.inf, -np.inf]
+    if name in _SPEEDS:
+        out.append(-1e-9)
+    if name == "chain_promise":
+        out += [-1e-9, PRM.a_x_d + 1e-9]
+    return out
+
+
+@pytest.mark.parametrize("name", _VALUE_FIELDS)
+def test_the_fast_check_fails_exactly_where_a_rule_refuses_and_the_rule_names_the_field(name):
+    ok = _batch()
+    assert ok._values_pass(PRM, 4)
+    edge = {"n_connected": 3, "chain_promise": PRM.a_x_d}.get(name, 0.0)  # the limits themselves are accepted
+    for value in [*_bad_values(name), edge]:
+        for row in (0, 5):
+            arr = getattr(ok, name).copy()
+            arr[row] = value
+            s = dataclasses.replace(ok, **{name: arr})
+            accepted = value is edge
+            assert s._values_pass(PRM, 4) == accepted, (name, value, row)
+            if accepted:
+                s.validate(PRM)
+            else:
+                with pytest.raises(ValueError, match=f"Situation.{name}"):
+                    s.validate(PRM)
