@@ -127,3 +127,22 @@ def test_realistic_worst_scenario_replays_exactly():
     assert "l0_present" in record["spec"] and "delay_periods" in record["spec"]
     assert row["ratio"] == record["outcome"]["ratio"]
     assert not row[list(fz.OUTCOMES)].any()
+
+
+def test_scenarios_with_a_flagged_breach_are_kept_and_replay_to_the_flag(tmp_path):
+    """Outside the assumptions (L(N+1) braking beyond a_x_d) the monitor flags breaches; each flagged scenario is
+    dumped (``breach_<i>.json``), replays to a flag of its own, and merging streams keeps them."""
+    import json
+
+    from safelane.experiments.falsify import merge
+
+    setting = Setting(sim=SHORT, decel_last_max=3 * PRM.a_x_d)
+    report = falsify(200, seed=0, method="random", batch_size=512, setting=setting)
+    assert 0 < len(report.breaches) <= min(20, report.counts["assumption_breach"])
+    for record in report.breaches[:3]:
+        assert record["outcome"]["assumption_breach"] > 0
+        assert replay(record).iloc[0]["assumption_breach"] == record["outcome"]["assumption_breach"]
+    written = [p.name for p in report.write(tmp_path)]
+    assert [f"breach_{i}.json" for i in range(len(report.breaches))] == [n for n in written if n.startswith("breach")]
+    assert json.loads((tmp_path / "breach_0.json").read_text()) == report.breaches[0]
+    assert merge([report, report]).breaches == (report.breaches * 2)[:20]

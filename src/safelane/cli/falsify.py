@@ -43,7 +43,8 @@ def falsify(
     and knife-edge families. Runs until both --minutes and --scenarios are reached, then prints the report and
     writes the run folder OUT/<run-id>/ (run-id = UTC start time, world, method and seed): report.json,
     worst.json (the scenario with the smallest gap over p_m), failure_<i>.json for each collision or violation
-    found (replay with --replay) and run.json. Ctrl-C keeps the report of what was simulated so far.
+    found and breach_<i>.json for each scenario in which the monitor flagged a breach (replay with --replay), and
+    run.json. Ctrl-C keeps the report of what was simulated so far.
 
     Example: safelane falsify --minutes 10 --scenarios 1000000 --seed 0 --out results/falsify
 
@@ -135,7 +136,7 @@ def _write(report, run_dir: Path, info: dict) -> list[Path]:
     return written
 
 
-_DUMP = "give a scenario dump of a falsify run folder (worst.json or failure_<i>.json)"
+_DUMP = "give a scenario dump of a falsify run folder (worst.json, failure_<i>.json or breach_<i>.json)"
 
 
 def _read_dump(path: Path) -> dict:

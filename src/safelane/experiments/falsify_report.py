@@ -40,6 +40,7 @@ class Report:
     min_lane_ratio_sampled: float = np.inf
     worst: dict | None = None
     failures: list = field(default_factory=list)
+    breaches: list = field(default_factory=list)  # scenarios in which the monitor flagged a breach (the first 20)
 
     def add(self, method: str, generated: int, outcome: pd.DataFrame, spec: dict, setting: Setting) -> None:
         self.generated += generated
@@ -57,6 +58,10 @@ class Report:
         m["failures"] += int(bad.any(1).sum())
         for i in np.flatnonzero(bad.any(1))[: max(0, 20 - len(self.failures))]:
             self.failures.append(scenario_record(spec, i, outcome.iloc[i], setting, method))
+        if "assumption_breach" in outcome:  # inside the assumptions a flag is the monitor's false alarm: keep it
+            flagged = np.flatnonzero(outcome["assumption_breach"].to_numpy() > 0)
+            for i in flagged[: max(0, 20 - len(self.breaches))]:
+                self.breaches.append(scenario_record(spec, i, outcome.iloc[i], setting, method))
         ratios = outcome["ratio"].to_numpy(float)
         self.min_ratio_l1 = float(np.fmin(self.min_ratio_l1, np.nanmin(outcome["ratio_l1"], initial=np.inf)))
         self.min_ratio_f = float(np.fmin(self.min_ratio_f, np.nanmin(outcome["ratio_f"], initial=np.inf)))
@@ -104,13 +109,14 @@ class Report:
         return "\n".join(lines)
 
     def write(self, out: Path) -> list[Path]:
-        """``report.json`` (summary), ``worst.json`` (replayable), ``failure_<i>.json`` for each failure."""
+        """``report.json`` (summary), ``worst.json`` (replayable), ``failure_<i>.json`` for each failure,
+        ``breach_<i>.json`` for each scenario in which the monitor flagged a breach (the first 20 of each)."""
         out.mkdir(parents=True, exist_ok=True)
         written = [out / "report.json"]
         written[0].write_text(json.dumps(self.summary(), indent=2, default=float) + "\n")
         dumps = ([("worst.json", self.worst)] if self.worst else []) + [
             (f"failure_{i}.json", rec) for i, rec in enumerate(self.failures)
-        ]
+        ] + [(f"breach_{i}.json", rec) for i, rec in enumerate(self.breaches)]
         for name, rec in dumps:
             (out / name).write_text(json.dumps(rec, indent=1) + "\n")
             written.append(out / name)
@@ -158,4 +164,5 @@ def merge(reports: list[Report]) -> Report:
         if r.min_ratio < out.min_ratio:
             out.min_ratio, out.worst = r.min_ratio, r.worst
         out.failures.extend(r.failures[: max(0, 20 - len(out.failures))])
+        out.breaches.extend(r.breaches[: max(0, 20 - len(out.breaches))])
     return out
