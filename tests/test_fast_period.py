@@ -323,3 +323,49 @@ def test_the_traffic_pool_goes_on_from_the_packed_state():
         same(fast, ref, f"period {k}")
         advance(world, ref, rng, params.dt)
     assert pool.calls == 40 and pool.shield.rows == 12
+
+
+def test_regrouping_rows_that_leave_and_join_keeps_the_packed_state_and_the_stages_decisions():
+    """``Shield.regroup`` (vehicles that come and go, the traffic pool's use) on the compiled path's packed state:
+    rows leave, new rows join (with a neutral monitor snapshot), and every period's decision and the state read
+    back are the stages' on the unpacked state selected and joined row by row (:mod:`safelane.shield.rows`); the
+    packed state is never unpacked on the way."""
+    from safelane.shield import rows as rws
+
+    params = Params()
+    rng = np.random.default_rng(33)
+    world = random_world(rng, 16, 3, stale=False, own=True)
+    active = np.arange(10)
+    shield = Shield(params)
+    shield.regroup(np.zeros(0, np.int64), rws.take_rows(situation_of(world, 0.0, params), active), 0.0)
+    state = shield_core.init(rws.take_rows(situation_of(world, 0.0, params), active), params, ShieldConfig(), "CV_all")
+    changes = {8: ([0, 2, 3, 5, 6, 7, 8, 9], []), 12: ([1, 2, 3, 4, 5, 6, 7], [10, 11, 12]),
+               20: ([0, 1, 2, 3, 4, 5, 6, 7, 8, 9], [13, 14, 15])}  # fmt: skip
+    for k in range(30):
+        t = k * params.dt
+        full = situation_of(world, t, params)
+        if k in changes:
+            keep, new = changes[k]
+            keep = np.array(keep, np.int64)
+            joined = rws.take_rows(full, np.array(new, np.int64)) if new else None
+            shield.regroup(keep, joined, t)
+            assert shield._state is None  # regrouped packed
+            state = rws.take_rows(state, keep)
+            if new:
+                fresh = shield_core.init(joined, params, ShieldConfig(), "CV_all")
+                fresh = dataclasses.replace(fresh, last=rws.neutral_snapshot(len(new), 3, params))
+                state = rws.join_rows(state, fresh)
+            state = dataclasses.replace(state, t=t)
+            active = np.concatenate([active[keep], new]).astype(np.int64)
+        s = rws.take_rows(full, active)
+        prop = proposals(rng, len(active))
+        fast = shield.step(s, prop)
+        assert shield.last_path == "compiled"
+        state, ref = shield_core.stages_step(state, s, prop, params, ShieldConfig(), "CV_all")
+        same(fast, ref, f"period {k}")
+        same(shield.completed, state.completed, f"period {k}: completed")
+        a_x, a_y = np.zeros(16), np.zeros(16)
+        a_x[active], a_y[active] = ref.a_x, ref.a_y
+        advance(world, dataclasses.replace(ref, a_x=a_x, a_y=a_y), rng, params.dt)
+    same(shield.state, state, "the state read back")
+    assert shield.rows == 13

@@ -69,7 +69,7 @@ def test_ssm_parser_counts_conflicts_past_the_thresholds(tmp_path):
 def test_take_and_join_rows_keep_the_shield_state_aligned():
     from safelane import Params
     from safelane.shield import Situation, init
-    from safelane.traffic.shielding import join_rows, take_rows
+    from safelane.shield.rows import join_rows, take_rows
 
     prm = Params()
     s = Situation.from_arrays(t=0.0, ego=(np.array([0.0, 1.0, 2.0]), 0.0, 30.0, 0.0), follower=(-30.0, 30.0),

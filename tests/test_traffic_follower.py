@@ -11,8 +11,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from safelane.shield.rows import take_rows
 from safelane.traffic.demand import lane_y
-from safelane.traffic.shielding import take_rows
 from test_traffic_others import PRM, changes, fleet
 
 

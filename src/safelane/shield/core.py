@@ -30,7 +30,7 @@ from ..params import Params
 from ..safety.evasion import plan_evasion
 from ..safety.plan import EvasionPlan
 from . import assessment as assess
-from . import fast_step, stages, validation, world
+from . import fast_step, rows, stages, validation, world
 from .command import Command, InFlight
 from .config import ShieldConfig
 from .decision import Decision
@@ -240,6 +240,48 @@ class Shield:
         if self._packed is not None:
             return len(self._packed.count)
         return 0 if self._state is None else len(self._state.completed)
+
+    @property
+    def completed(self) -> np.ndarray | None:
+        """``(B,)`` whether each row's lane change has completed (``None`` before ``reset``), read without unpacking
+        the compiled path's arrays."""
+        if self._packed is not None:
+            return self._packed.sk[:, 3].copy()
+        return None if self._state is None else np.asarray(self._state.completed, bool).copy()
+
+    def regroup(self, keep, situation: Situation | None = None, t: float | None = None) -> None:
+        """A batch whose vehicles come and go: hold the rows ``keep`` of the state (in that order), then new rows
+        started at ``situation`` (:func:`init`, with a neutral monitor snapshot where the kept rows have one:
+        :func:`.rows.neutral_snapshot`); ``t``: the state's time from now (default: unchanged). The compiled
+        path's state stays packed. No rows at all: nothing held (``reset`` or ``regroup`` with a situation next)."""
+        keep = np.asarray(keep, np.int64)
+        fresh = None if situation is None or not len(situation) else init(situation, self.params, self.config,
+                                                                           self.variant)  # fmt: skip
+        packed = self._packed
+        held = self.rows > 0 and len(keep) > 0
+        if not held and fresh is None:
+            self.state = None
+            return
+        if packed is not None and held:
+            out = packed if len(keep) == self.rows and (keep == np.arange(len(keep))).all() else packed.take(keep)
+            if fresh is not None:
+                if out.snapshot is not None:
+                    fresh = dataclasses.replace(fresh, last=rows.neutral_snapshot(len(fresh.completed),
+                                                                                  situation.chain_x.shape[1],
+                                                                                  self.params))  # fmt: skip
+                out = out.join(fast_step.Packed.of(fresh))
+            self._packed, self._state = dataclasses.replace(out, t=out.t if t is None else float(t)), None
+            return
+        state = None if not held else self.state
+        if state is not None and not (len(keep) == len(state.completed) and (keep == np.arange(len(keep))).all()):
+            state = rows.take_rows(state, keep)
+        if fresh is not None:
+            if state is not None and state.last is not None:
+                fresh = dataclasses.replace(fresh, last=rows.neutral_snapshot(len(fresh.completed),
+                                                                              situation.chain_x.shape[1],
+                                                                              self.params))  # fmt: skip
+            state = fresh if state is None else rows.join_rows(state, fresh)
+        self.state = dataclasses.replace(state, t=state.t if t is None else float(t))
 
     def _flags(self, n: int):
         """The variant's ``(B, 3)`` flags for ``n`` rows (cached: the variant is fixed)."""

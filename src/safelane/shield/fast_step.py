@@ -144,6 +144,22 @@ class Packed:
         return cls(float(state.t), plan, belief.history.copy(), np.asarray(belief.count, np.int64).copy(), st, sk,
                    snapshot)  # fmt: skip
 
+    def take(self, rows) -> Packed:
+        """The rows ``rows`` only, in that order (copies)."""
+        snapshot = None if self.snapshot is None else tuple(a[rows] for a in self.snapshot)
+        return Packed(self.t, np.asfortranarray(self.plan[rows]), self.history[rows], self.count[rows],
+                      self.st[rows], self.sk[rows], snapshot)  # fmt: skip
+
+    def join(self, other: Packed) -> Packed:
+        """These rows, then ``other``'s (its time is this one's; both have a snapshot, or neither)."""
+        if (self.snapshot is None) != (other.snapshot is None):
+            raise ValueError("Packed.join: one state has a monitor snapshot and the other has none")
+        snapshot = None if self.snapshot is None else tuple(
+            np.concatenate([a, b]) for a, b in zip(self.snapshot, other.snapshot, strict=True))  # fmt: skip
+        return Packed(self.t, np.asfortranarray(np.concatenate([self.plan, other.plan])),
+                      np.concatenate([self.history, other.history]), np.concatenate([self.count, other.count]),
+                      np.concatenate([self.st, other.st]), np.concatenate([self.sk, other.sk]), snapshot)  # fmt: skip
+
     def plan_of(self, params: Params) -> EvasionPlan:
         from ._fast_period import PLAN
 

@@ -57,7 +57,7 @@ from ..shield.stages import chain_analysis
 from . import demand as dem
 from .lanes import neighbours
 from .others import OTHERS_SLOTS, OTHERS_WINDOW_M, others_record
-from .shielding import ShieldPool, decide, take_rows
+from .shielding import ShieldPool, decide
 
 PROMISE_DECEL = 0.5  # [m/s²] the promise every equipped vehicle broadcasts (the SUMO integration's default)
 CHAIN_SLOTS = 4  # L1..L4 in the situation: up to N = 3 connected leaders
@@ -158,8 +158,9 @@ class LaneChanges:
         x[rows] = self.ex  # the changers at their exact states
         situation, chain_ids = self.situation(fleet, x, rows, t)
         completed_before = np.zeros(len(self.ids), bool)
-        if self.pool.shield.state is not None and len(keep):
-            completed_before[: len(keep)] = self.pool.shield.state.completed[keep]
+        held = self.pool.shield.completed
+        if held is not None and len(keep):
+            completed_before[: len(keep)] = held[keep]
         proposal = self._proposal(situation, fleet, chain_ids, completed_before)
         d = decide(self.pool, situation, proposal, keep, n_new)
         self.counts["shield_calls"] = self.pool.calls
@@ -172,7 +173,7 @@ class LaneChanges:
         self.aborted |= aborting
         self.t_abort = np.where(aborting & np.isnan(self.t_abort), t, self.t_abort)
         self._move(d)
-        self._cap_chains(situation, chain_ids)
+        self._cap_chains(situation, chain_ids, rows)
         self._finish(t)
 
     def _select(self, rows) -> None:
@@ -270,7 +271,7 @@ class LaneChanges:
         if len(rows):
             nx[rows], nv[rows], ny[rows], nvy[rows] = px[:, -1], vx[:, -1], py[:, -1], vy[:, -1]
         self.ex, self.evx, self.ey, self.evy = nx, nv, ny, nvy
-        done = np.asarray(self.pool.shield.state.completed, bool)
+        done = self.pool.shield.completed
         self.t_done = np.where(done & np.isnan(self.t_done), self.world.time() + dt, self.t_done)
         self.ret &= ~done  # a change the shield completed (an abort that ended past the completion level) completes
         self.world.place(self.ids, self.ex, dem.lane_y(self.g0) + self.sign * self.ey, self.evx)
@@ -318,16 +319,19 @@ class LaneChanges:
             self.cool[vid] = t + self.cooldown_s
         stay = np.setdiff1d(np.arange(len(self.ids)), out)
         self._select(stay)
-        self.pool.shield.state = None if not len(stay) else take_rows(self.pool.shield.state, stay)
+        self.pool.shield.regroup(stay)
 
-    def _cap_chains(self, situation, chain_ids) -> None:
+    def _cap_chains(self, situation, chain_ids, rows) -> None:
+        """Each equipped leader in a changer's connected chain (not itself changing lanes, ``rows``: the changers'
+        fleet indices) brakes at most at ``max(promise, bound)`` in the next step, the smallest over its chains."""
         bounds, _ = chain_analysis(situation, self.params)
-        slots = np.arange(chain_ids.shape[1] - 1)[None, :] < situation.n_connected[:, None]
-        caps: dict[str, float] = {}
-        changing = set(self.ids)
-        fleet_ids = self._fleet_ids
-        for r, k in zip(*np.nonzero(slots), strict=True):
-            vid = fleet_ids[chain_ids[r, k]]
-            if vid not in changing:
-                caps[vid] = min(caps.get(vid, np.inf), max(PROMISE_DECEL, float(bounds[r, k])))
-        self.world.limit_braking(list(caps), list(caps.values()))
+        m1 = chain_ids.shape[1] - 1
+        slots = np.arange(m1)[None, :] < situation.n_connected[:, None]
+        vid, bound = chain_ids[:, :m1][slots], bounds[:, :m1][slots]
+        changer = np.zeros(len(self._fleet_ids), bool)
+        changer[rows] = True
+        vid, bound = vid[~changer[vid]], bound[~changer[vid]]
+        caps = np.full(len(self._fleet_ids), np.inf)
+        np.minimum.at(caps, vid, np.where(bound > PROMISE_DECEL, bound, PROMISE_DECEL))
+        capped = np.flatnonzero(caps < np.inf)
+        self.world.limit_braking([self._fleet_ids[i] for i in capped], caps[capped].tolist())
