@@ -331,3 +331,18 @@ def test_far_lane_cut_in_of_stock_traffic_is_avoided_with_the_world_model(seed):
     assert before["crash_blame"] in ("ego", "other", "both")
     after = campaign_highway(seed, others=True)
     assert not after["crashed"] and after["crash_blame"] is None
+
+
+def test_a_decision_rule_that_responds_without_a_held_plan_is_executed_as_accelerations():
+    """The RSS baseline's rule (variant ``RSS_matched``) answers a dangerous situation with a proper response —
+    braking — coded as an abort but with no held plan to follow (``Decision.abort_motion`` has no rows): the wrapper
+    executes its accelerations. It indexed the missing plan's knots and failed, on stock ``highway-v0``, seed 0,
+    at its 15th step."""
+    env = SafeLaneShield(gym.make("highway-v0", config={**HIGHWAY_CONFIG, **FAST}), variant="RSS_matched")
+    env.reset(seed=0)
+    for _ in range(40):
+        _, _, terminated, truncated, info = env.step(reckless(env))
+        if info["shield"] == "abort" or terminated or truncated:
+            break
+    assert info["shield"] == "abort", "the RSS rule did not respond here: the test needs a step where it does"
+    assert info["executed_action"][0] < 0.0  # the proper response brakes

@@ -353,7 +353,7 @@ class SafeLaneShield(gym.Wrapper, gym.utils.RecordConstructorArgs):
                 nx, ny, nv, nvy = acting.carry(*ego1, prm.dt)
                 ysim = frame.origin_y + frame.sign * float(ny[0])
                 ego.command = ("state", float(nx[0]), float(nv[0]), ysim, frame.sign * float(nvy[0]))
-            elif code == ABORT:
+            elif code == ABORT and decision.abort_motion()[0].size:  # the held plan's exact motion over the period
                 _, _, px, vx, py, vy = decision.abort_motion()
                 ysim = frame.origin_y + frame.sign * float(py[0, -1])
                 ego.command = ("state", float(px[0, -1]), float(vx[0, -1]), ysim, frame.sign * float(vy[0, -1]))
