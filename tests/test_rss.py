@@ -244,3 +244,28 @@ def test_rss_baseline_experiment_table_and_paragraph():
     assert len(view) == 3 * len(VARIANT_NAMES) and (view["samples"] == 4).all()
     text = paragraph(view)
     assert "CV_all completes" in text and "ad-rss's default parameters" in text and "%" in text
+
+
+@pytest.mark.parametrize("name", ["RSS_matched", "RSS"])
+def test_the_rss_rule_keeps_its_distance_to_the_own_lanes_leader(name):
+    """RSS's longitudinal rule holds toward L0, the leader in the ego's own lane, until the change completes: with L0
+    7 m ahead (a 2.2 m bumper gap, far inside any RSS safe distance at 25 m/s) a full-throttle proposal gets the
+    proper response (braking at brake_min or more); with L0 300 m ahead, or none, it proceeds. (The rule ignored L0:
+    on stock highway-v0 6 of the first 16 episodes ran into it.)"""
+    from safelane.shield import ABORT, PROCEED, Shield, Situation
+
+    prm = Params()
+
+    def decide(own):
+        s = Situation.from_arrays(t=0.0, ego=(0.0, 0.0, 25.0, 0.0), follower=(-150.0, 25.0),
+                                  leaders=([150.0, 170.0], [25.0, 25.0]), n_connected=0, params=prm,
+                                  own_leaders=own)  # fmt: skip
+        shield = Shield(prm, variant=name)
+        shield.reset(s)
+        return shield.step(s, (np.array([prm.a_x_a]), np.array([0.0])))
+
+    near = decide(([7.0], [25.0]))
+    assert near.behaviour[0] == ABORT and near.a_x[0] < 0.0
+    for own in (([300.0], [25.0]), ([np.inf], [0.0]), None):
+        d = decide(own)
+        assert d.behaviour[0] == PROCEED and d.a_x[0] == prm.a_x_a

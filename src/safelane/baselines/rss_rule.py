@@ -3,14 +3,16 @@ shield (registered as the shield's decision rules ``rss`` and ``rss_matched``; :
 
 Every control period, for the rows of an RSS variant:
 
-1. **proceed** if, after applying the proposal for one period, the ego is RSS-safe towards L1 and towards F: for
-   each of them the longitudinal safe distance holds (towards L1 with the ego behind, towards F with the ego in
+1. **proceed** if, after applying the proposal for one period, the ego is RSS-safe towards L1, towards F and,
+   where the own lane has a leader L0 (``RuleInputs.own_x``), towards L0 until the change completes: for each of
+   them the longitudinal safe distance holds (towards L1 and L0 with the ego behind, towards F with the ego in
    front) *or* the lateral safe distance does (:func:`.rss.pair_check`; the others predicted at the worst RSS
-   allows them over the period: L1 braking at its ``brake_max``, F accelerating at ``accel_max``);
+   allows them over the period: L1 and L0 braking at their ``brake_max``, F accelerating at ``accel_max``);
 2. **hesitate** (the lateral speed driven to zero) if that is RSS-safe instead;
 3. otherwise RSS's **proper response** (counted as an abort): lateral return towards the original lane, braking
-   laterally at least at ``lat_brake_min`` while still moving out, and, when the longitudinal distance to L1 (ahead)
-   is unsafe, braking at ``brake_min`` or more.
+   laterally at least at ``lat_brake_min`` while still moving out, and, when the longitudinal distance to L1 or L0
+   (ahead) is unsafe, braking at ``brake_min`` or more. (Before L0 was checked, the rule let the ego run into its
+   own lane's leader: on stock ``highway-v0`` 6 of the first 16 episodes crashed into L0.)
 
 Once the lane change is complete (the ego's centre across the boundary) the ego follows L1 by RSS: the proposal while
 the longitudinal safe distance holds after the period, braking at ``brake_min`` or more otherwise; laterally it
@@ -56,8 +58,9 @@ class RssRule:
         return np.maximum(out, 1e-9)
 
     def safe_after(self, inp, a_x, a_y, params: Params):
-        """After one period of ``(a_x, a_y)``: ``(safe towards every target-lane vehicle ahead, safe towards F,
-        longitudinally safe towards every vehicle ahead)``, each ``(k,)``.
+        """After one period of ``(a_x, a_y)``: ``(safe towards every vehicle ahead — the target lane's and, until the
+        change completes, the own lane's L0 —, safe towards F, longitudinally safe towards every vehicle ahead)``,
+        each ``(k,)``.
 
         The others are predicted at the worst RSS allows them over the period (the chain braking at its
         ``brake_max``, F accelerating at ``accel_max``), so the state checked is RSS-safe whatever they do within
@@ -77,7 +80,15 @@ class RssRule:
             chain = pair_check(*col, cx, lane, cv, 0.0, rss, params, brake)
             to_f = pair_check(ex, ey, evx, evy, fx, lane, fv, 0.0, rss, params)
         ahead = cx > ex[:, None]
-        return chain[0].all(1), to_f[0], (chain[1] | ~ahead).all(1)
+        ok_ahead, lon_ok = chain[0].all(1), (chain[1] | ~ahead).all(1)
+        if inp.own_x is not None:  # L0 in the own lane (y = 0), braking at brake_max, until the change completes
+            has = np.isfinite(inp.own_x) & ~inp.completed
+            ox, ov = advance(np.where(has, inp.own_x, ex), np.where(has, inp.own_v, 0.0), -rss.brake_max, dt)
+            with np.errstate(all="ignore"):
+                own = pair_check(ex, ey, evx, evy, ox, 0.0, ov, 0.0, rss, params)
+            ok_ahead &= ~has | own[0]
+            lon_ok &= ~has | own[1] | ~(ox > ex)
+        return ok_ahead, to_f[0], lon_ok
 
     def decide(self, inp, params: Params):
         """``(proceed, hesitate, respond, a_x, a_y, completing)`` for the rule's rows (see the module docstring;

@@ -52,7 +52,8 @@ _RULE_CODE = np.array([_RULE_NAMES.index(v.rule) for v in VARIANTS.values()])  #
 @dataclass(frozen=True)
 class RuleInputs:
     """What a rule sees for its rows (``(k,)`` arrays unless noted, shield frame): the ego, the chain ``L1, L2, …``
-    (``(k, M)``) and F, the checked and clipped proposal (``invalid`` rows hold zeros), the lateral hesitation, L1's
+    (``(k, M)``), F and the own lane's leader ``L0`` (``own_x = +inf`` where there is none; ``None``: the paper's empty
+    own lane), the checked and clipped proposal (``invalid`` rows hold zeros), the lateral hesitation, L1's
     worst-case deceleration from the information the variant uses (``uses_chain``: from the connected chain;
     otherwise ``a_x_d``), every chain vehicle's bound from the chain analysis (``(k, M)``; meaningful where
     ``uses_chain`` and for the ``n_connected`` connected leaders), and whether the lane change was complete before
@@ -75,6 +76,8 @@ class RuleInputs:
     completed: np.ndarray
     chain_bounds: np.ndarray
     n_connected: np.ndarray
+    own_x: np.ndarray | None = None  # L0, the ego's own-lane leader (+inf: none), at the frame's state; None: no L0
+    own_v: np.ndarray | None = None
 
 
 def rule_rows(variant, n: int) -> list[tuple[object, np.ndarray]]:
