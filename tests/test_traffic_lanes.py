@@ -243,3 +243,22 @@ def test_a_change_that_never_gets_its_gap_is_given_up_and_returns():
     assert changes.counts["gave_up"] == 1 and changes.counts["aborted"] == 0 and changes.counts["completed"] == 0
     assert changes.counts["hesitate"] > 0 and changes.counts["abort_steps"] == 0
     assert 0.0 < changes.counts["return_max_s"] <= 8.0 and changes.counts["return_late"] == 0
+
+
+def test_a_collision_is_judged_with_the_lane_change_made_in_its_own_step():
+    """The seed-1 sweep's p = 0.75 case (t = 954.3 s): ``human.1151`` changed from lane 2 into lane 1 in one SUMO
+    step, its rear 1.7 m behind the front of ``cav.1149``, which straddled lanes 0 and 1; SUMO listed the collision
+    after that step with ``cav.1149`` as the collider. Judged with the entries read before the step, the cut-in was
+    unseen and ``cav.1149`` blamed (rule "rear"); the referee judges it at the next read, with the entry."""
+    referee = measures.Referee(PRM.vehicle_length, PRM.vehicle_width)
+    before = fleet([("cav.1149", 2054.6, -3.49, 22.3), ("human.1151", 2057.3, lane_y(2), 28.2)])
+    assert referee.observe(954.2, before) == []
+    crash = {"t": 954.3, "collider": "cav.1149", "victim": "human.1151", "type": "collision"}
+    referee.collided([crash])
+    assert referee.judged == []  # not yet: the step's lane entries are read with the next period
+    after = fleet([("cav.1149", 2057.05, -3.56, 22.3), ("human.1151", 2060.16, lane_y(1), 28.4)])
+    new = referee.observe(954.3, after)
+    assert [(e["vid"], e["lane"], e["follower"]) for e in new] == [("human.1151", 1, "cav.1149")]
+    assert [(j["responsible"], j["rule"]) for j in referee.judged] == [("human.1151", "cut-in")]
+    # judged at once, with the entries before the step (the old order): the rear vehicle
+    assert measures.blame([crash], [])[0]["responsible"] == "cav.1149"

@@ -47,6 +47,32 @@ def blame(collisions: list[dict], entries: list[dict]) -> list[dict]:
     return out
 
 
+class Referee:
+    """The blame as a run goes. Each period :meth:`observe` reads the fleet's lane entries; :meth:`collided` takes a
+    step's new collisions, which the next :meth:`observe` judges (:func:`blame`) with the lane entries that step made:
+    a lane change and the collision it causes happen in the same step, and the entry is seen only in the state the
+    step left (judged at once, the cut-in was missed and the rear vehicle blamed). ``judged``: the collisions so
+    far, with ``responsible`` and ``rule``."""
+
+    def __init__(self, length: float = 4.8, width: float = 1.8):
+        self.length, self.width = length, width
+        self.entries: list[dict] = []
+        self.pending: list[dict] = []
+        self.judged: list[dict] = []
+        self.prev_lanes: dict = {}
+
+    def observe(self, t: float, fleet) -> list[dict]:
+        """The lane entries since the last period (also returned); the pending collisions judged with them."""
+        new = lane_entries(t, fleet, self.prev_lanes, self.length, self.width)
+        self.entries = [e for e in self.entries if t - e["t"] <= CUT_IN_WINDOW_S] + new
+        self.judged += blame(self.pending, self.entries)
+        self.pending = []
+        return new
+
+    def collided(self, collisions: list[dict]) -> None:
+        self.pending += collisions
+
+
 def ssm_conflicts(path: Path | None, warmup_s: float = 0.0) -> list[dict]:
     """The conflicts of SUMO's SSM output with at least one measure past its threshold (:data:`SSM_THRESHOLDS`),
     begun after ``warmup_s``: ``ego``, ``foe``, ``begin``, ``ttc``, ``drac``, ``pet`` (nan where not measured)."""

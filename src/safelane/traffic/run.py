@@ -35,8 +35,7 @@ def run_cell(demand: Demand, params: Params | None = None, *, others: bool = Fal
     prm = params or Params()
     t_wall = time.perf_counter()
     tally = measures.Tally(demand.warmup_s)
-    entries, collisions, seen = [], [], set()
-    prev_lane: dict[str, int] = {}
+    referee, seen = measures.Referee(prm.vehicle_length, prm.vehicle_width), set()
     human_changes = limited_before = 0
     with warnings.catch_warnings(), TrafficWorld(demand, prm) as world:
         warnings.simplefilter("ignore")  # geometry warnings of cut-ins: the situation is built with "ignore"
@@ -48,8 +47,7 @@ def run_cell(demand: Demand, params: Params | None = None, *, others: bool = Fal
             fleet = world.read()
             tally.departed(t, departed)
             tally.speeds(t, fleet.v)
-            new = measures.lane_entries(t, fleet, prev_lane, prm.vehicle_length, prm.vehicle_width)
-            entries = [e for e in entries if t - e["t"] <= measures.CUT_IN_WINDOW_S] + new
+            new = referee.observe(t, fleet)  # (and the last step's collisions judged with the entries it made)
             if t < demand.warmup_s:
                 limited_before = world.limited_steps
             else:
@@ -63,9 +61,12 @@ def run_cell(demand: Demand, params: Params | None = None, *, others: bool = Fal
                 if pair not in seen:
                     seen.add(pair)
                     if c["t"] >= demand.warmup_s:
-                        collisions.append(measures.blame([c], entries)[0])
+                        referee.collided([c])
             if world.api.simulation.getMinExpectedNumber() == 0 and t > demand.warmup_s:
                 break
+        if referee.pending:  # a collision in the last step: judged with the state it left
+            referee.observe(world.time(), world.read())
+        collisions = referee.judged
         inserted, limited, lag = tally.inserted, world.limited_steps - limited_before, world.max_lag_m
         world.close()
         conflicts = measures.ssm_conflicts(world.ssm_file, demand.warmup_s)
