@@ -23,9 +23,10 @@ is placed symmetric to the other (:meth:`LaneChanges._observation`), its braking
 leader (``l0_aware``).
 
 All changers of a period are one batch: their :class:`~safelane.shield.Situation` is built from the fleet's arrays
-lane by lane (F the nearest behind in the target lane, the chain ``L1…L(M)`` ahead of it, the connected ones the
-equipped vehicles at its head, ``L0`` the nearest ahead in the own lane — or the end of the acceleration lane, a
-standing obstacle), and :func:`.shielding.decide` makes one ``Shield.step`` for all of them. A vehicle belongs to
+by one neighbour search (:func:`.lanes.neighbours`, compiled: F the nearest behind in the target lane, the chain
+``L1…L(M)`` ahead of it, the connected ones the equipped vehicles at its head, ``L0`` the nearest ahead in the own
+lane — or the end of the acceleration lane, a standing obstacle), and :func:`.shielding.decide` makes one
+``Shield.step`` for all of them. A vehicle belongs to
 every lane its body overlaps (a vehicle across a lane boundary counts in both).
 
 **The world model** (``others``, off by default): the changers' situation also carries
