@@ -257,30 +257,24 @@ class Shield:
         keep = np.asarray(keep, np.int64)
         fresh = None if situation is None or not len(situation) else init(situation, self.params, self.config,
                                                                            self.variant)  # fmt: skip
-        packed = self._packed
-        held = self.rows > 0 and len(keep) > 0
+        held = self.rows > 0 and len(keep) > 0  # (then the state is packed, or unpacked in _state)
         if not held and fresh is None:
             self.state = None
             return
-        if packed is not None and held:
-            out = packed if len(keep) == self.rows and (keep == np.arange(len(keep))).all() else packed.take(keep)
-            if fresh is not None:
-                if out.snapshot is not None:
-                    fresh = dataclasses.replace(fresh, last=rows.neutral_snapshot(len(fresh.completed),
-                                                                                  situation.chain_x.shape[1],
-                                                                                  self.params))  # fmt: skip
-                out = out.join(fast_step.Packed.of(fresh))
-            self._packed, self._state = dataclasses.replace(out, t=out.t if t is None else float(t)), None
-            return
-        state = None if not held else self.state
-        if state is not None and not (len(keep) == len(state.completed) and (keep == np.arange(len(keep))).all()):
-            state = rows.take_rows(state, keep)
-        if fresh is not None:
-            if state is not None and state.last is not None:
+        same = held and len(keep) == self.rows and (keep == np.arange(len(keep))).all()
+        if fresh is not None and held:
+            last = self._packed.snapshot if self._packed is not None else self._state.last
+            if last is not None:
                 fresh = dataclasses.replace(fresh, last=rows.neutral_snapshot(len(fresh.completed),
                                                                               situation.chain_x.shape[1],
                                                                               self.params))  # fmt: skip
-            state = fresh if state is None else rows.join_rows(state, fresh)
+        if held and self._packed is not None:
+            out = self._packed if same else self._packed.take(keep)
+            out = out if fresh is None else out.join(fast_step.Packed.of(fresh))
+            self._packed, self._state = dataclasses.replace(out, t=out.t if t is None else float(t)), None
+            return
+        state = None if not held else self._state if same else rows.take_rows(self._state, keep)
+        state = fresh if state is None else state if fresh is None else rows.join_rows(state, fresh)
         self.state = dataclasses.replace(state, t=state.t if t is None else float(t))
 
     def _flags(self, n: int):
