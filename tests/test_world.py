@@ -165,6 +165,31 @@ def test_own_lane_merge_keeps_l0_first():
     r.validate(PRM)
 
 
+def test_a_vehicle_counted_by_reach_or_announcement_alone_hides_no_vehicle_ahead():
+    """Found by the multi-lane falsifier: a vehicle in the lane beside, counted in the ego's lane by its announcement
+    (or its reach) but not in it, was merged as L0 and the slower, physically present L0 ahead of it was dropped.
+    The slot now takes the lowest speed of the two (the nearest position is the virtual one's): by hand, the worst
+    case (both braking at a_o_d) of a vehicle at the lower position and the lower speed stays behind both."""
+    own = ([[36.0, np.inf]], [[29.5, 0.0]])
+    announced = one(24.0, -W, vx=30.8, connected=True, announce_lane=0, announce_t=0.0)  # lane -1, announced lane 0
+    r = roles(situation(announced, own=own), PRM)
+    assert r.own_x[0, 0] == 24.0 and r.own_v[0, 0] == 29.5 and r.own_n_connected[0] == 0
+    inside = one(24.0, 0.0, vx=30.8)  # physically in the ego's lane: it shields L0, as before
+    assert roles(situation(inside, own=own), PRM).own_v[0, 0] == 30.8
+    # the target lane: an announced entrant nearer than L1 (connected, 25 m/s) takes L1's lower speed, N = 0
+    fast = one(30.0, 2 * W, vx=28.0, connected=True, announce_lane=1, announce_t=0.0)
+    rc = roles(situation(fast), PRM)
+    assert rc.chain_x[0, 0] == 30.0 and rc.chain_v[0, 0] == 25.0 and rc.n_connected[0] == 0
+    assert roles(situation(one(30.0, W, vx=28.0)), PRM).chain_v[0, 0] == 28.0  # physically there
+    # behind: an announced entrant nearer than F but slower takes F's higher speed (F's worst case is ahead of both)
+    slow = one(-20.0, 2 * W, vx=20.0, connected=True, announce_lane=1, announce_t=0.0)
+    rf = roles(situation(slow), PRM)
+    assert (rf.f_x[0], rf.f_v[0]) == (-20.0, 25.0)
+    assert (roles(situation(one(-20.0, W, vx=20.0)), PRM).f_v[0]) == 20.0  # physically there: it is F
+    for folded in (r, rc, rf):
+        folded.validate(PRM)
+
+
 def test_padding_and_vehicles_without_a_role_change_nothing():
     s = situation()
     pad = Others.empty(1, 3)

@@ -21,8 +21,10 @@ def falsify(
     backend: str = backend_option(),
     workers: int = workers_option("Parallel search streams: processes, or Ray tasks (default: the cluster's CPUs)."),
     ray_address: str = ray_address_option(),
-    world: str = typer.Option("paper", "--world", help="paper (the paper's assumptions) or realistic (plus an "
-                              "own-lane leader L0, sensing errors and actuation delay; docs/real_roads.md)."),
+    world: str = typer.Option("paper", "--world", help="paper (the paper's assumptions), realistic (plus an "
+                              "own-lane leader L0, sensing errors and actuation delay; docs/real_roads.md) or lanes "
+                              "(four lanes, other vehicles changing lanes inside the world model's assumptions; "
+                              "docs/falsification.md)."),
     others_decel: float = typer.Option(
         None, "--others-decel", help="The others' maximum braking a_o_d [m/s², >= 0] (RSS's brakeMax): every "
         "other vehicle may brake up to it and the search draws braking up to it; default a_x_d (the paper's)."
@@ -65,8 +67,12 @@ def falsify(
         return
     if not math.isfinite(minutes):
         raise typer.BadParameter(f"must be a finite number of minutes >= 0; got {minutes}", param_hint="--minutes")
+    if world == "lanes":
+        _lanes(minutes, scenarios, seed, min(batch_size, 4096), workers, others_decel, out)
+        return
     if world not in fz.space.WORLDS:
-        raise typer.BadParameter(f"must be one of {', '.join(fz.space.WORLDS)}; got {world!r}", param_hint="--world")
+        raise typer.BadParameter(f"must be one of {', '.join((*fz.space.WORLDS, 'lanes'))}; got {world!r}",
+                                 param_hint="--world")  # fmt: skip
     if method not in (*fz.METHODS, "all"):
         raise typer.BadParameter(
             f"must be one of {', '.join((*fz.METHODS, 'all'))}; got {method!r}", param_hint="--method"
@@ -108,6 +114,29 @@ def falsify(
         written = _write(report, run_dir, info)
     typer.echo(report.text())
     typer.echo(f"wrote {written[0]}" + (f" and {len(written) - 1} scenario dumps" if len(written) > 1 else ""))
+    typer.echo(f"run folder: {run_dir}")
+
+
+def _lanes(minutes, scenarios, seed, batch_size, workers, others_decel, out: Path) -> None:
+    """``--world lanes``: the multi-lane falsifier (:mod:`safelane.experiments.falsify_lanes`), its report printed and
+    written as OUT/<run-id>/report.json."""
+    import json
+
+    from ..experiments import falsify_lanes as fl
+    from ._runs import check_out_dir, run_folder
+
+    params = _params(others_decel)
+    out = check_out_dir(out)
+    info = {"kind": "falsify", "world": "lanes", "scenarios": scenarios, "minutes": minutes, "seed": seed,
+            "batch_size": batch_size, "workers": workers or 1, "others_decel": params.others_decel}  # fmt: skip
+    with run_folder(out, f"falsify-lanes-seed{seed}", info) as (run_dir, info):
+        report = fl.run_streams(scenarios, seed, batch_size, fl.LaneWorld(params=params), minutes, workers or 1)
+        summary = {"scenarios": report.generated, "not_started": report.not_started, "seconds": report.seconds,
+                   **report.counts,
+                   "min_ratio_inside": report.min_ratio_inside}  # fmt: skip
+        (run_dir / "report.json").write_text(json.dumps(summary, indent=1))
+        info["files"] = ["report.json", "run.json"]
+    typer.echo(report.text())
     typer.echo(f"run folder: {run_dir}")
 
 

@@ -140,6 +140,16 @@ def _first_bad(where: str, name: str, arr, bad, allowed: str) -> None:
         raise ValueError(f"{where}.{name}[{row}, {col}] must be {allowed}; got {np.asarray(arr)[row, col].item()!r}")
 
 
+def body_lanes(others: Others, prm: Params) -> np.ndarray:
+    """``(B, K, 2)``: whether each vehicle's body overlaps lane 0 and lane 1 now (rule 1 alone: the vehicle is
+    *physically* in the lane; padding is in none)."""
+    half = 0.5 * prm.vehicle_width
+    y = others.y[..., None]
+    lanes = np.asarray(ROLE_LANES, float)
+    inside = (y + half > (lanes - 0.5) * prm.lane_width) & (y - half < (lanes + 0.5) * prm.lane_width)
+    return inside & np.isfinite(others.x)[..., None]
+
+
 def lane_reach(others: Others, t: float, prm: Params, rss: RssParams | None = None,
                horizon_s: float = ANNOUNCE_HORIZON_S) -> np.ndarray:  # fmt: skip
     """``(B, K, 2)``: whether each vehicle counts in lane 0 (the ego's original lane) and lane 1 (the target lane)
@@ -181,6 +191,25 @@ def _merge(keys, payload, conn, width: int):
     return {name: take(a) for name, a in payload.items()}, valid, lead
 
 
+def _window_min(got, valid, n_new, keep):
+    """The first non-connected slot ``n_new`` of a merged, sorted lane as the vehicles it cannot hide: its speed
+    becomes the lowest of the slots from it up to and including the first vehicle *physically* in the lane (a
+    vehicle counted by its reach or announcement alone is not there to shield the ones ahead; docs/safety.md).
+    Positions are sorted, so the slot's position is already the lowest. ``keep``: the payload keys to combine
+    (speed by its minimum, an error bound by its maximum)."""
+    slots = np.arange(valid.shape[1])[None, :]
+    later = valid & got["phys"] & (slots >= n_new[:, None])
+    first_phys = np.where(later.any(1), np.argmax(later, axis=1), valid.shape[1] - 1)
+    window = valid & (slots >= n_new[:, None]) & (slots <= first_phys[:, None])
+    rows = np.arange(valid.shape[0])
+    at = np.minimum(n_new, valid.shape[1] - 1)
+    got["v"][rows, at] = np.where(window.any(1), np.where(window, got["v"], np.inf).min(1), got["v"][rows, at])
+    if "err" in keep:
+        err = np.where(window[..., None], got["err"], -np.inf).max(1)
+        got["err"][rows, at] = np.where(window.any(1)[:, None], err, got["err"][rows, at])
+    return got
+
+
 def _with_column(a, value, dtype=None):
     """``a (B, J)`` with one more column of ``value`` (the last slot's promise/flag, which the chain does not hold)."""
     return np.concatenate([a, np.full((a.shape[0], 1), value, dtype or a.dtype)], axis=1)
@@ -196,24 +225,32 @@ def roles(situation, params: Params, rss: RssParams | None = None, horizon_s: fl
         return s
     b, m = s.chain_x.shape
     inside = lane_reach(o, s.t, params, rss, horizon_s)
+    body = body_lanes(o, params)
     ahead = o.x > s.ego_x[:, None]
     target_ahead, target_behind = inside[..., 1] & ahead, inside[..., 1] & ~ahead
     own_ahead = inside[..., 0] & ahead
     loose = _loosest(s)
     out = {"others": None}
 
-    # F: the nearest target-lane vehicle behind the ego, where it is nearer than F (non-connected, aggressive).
-    behind_x = np.where(target_behind, o.x, -np.inf)
-    nearest = np.argmax(behind_x, axis=1)
+    # F: the nearest target-lane vehicle behind the ego physically in the lane (F or an entrant), and the vehicles
+    # counted there by reach or announcement alone that are nearer still: the nearest position and the highest speed
+    # of them (non-connected, aggressive).
     rows = np.arange(b)
-    new_f = behind_x[rows, nearest] > s.f_x
+    phys_x = np.where(target_behind & body[..., 1], o.x, -np.inf).max(1)
+    near_x = np.maximum(s.f_x, phys_x)
+    virtual = target_behind & ~body[..., 1] & (o.x > near_x[:, None])
+    phys_v = np.where(s.f_x >= phys_x, s.f_v, o.vx[rows, np.argmax(np.where(target_behind & body[..., 1], o.x,
+                                                                             -np.inf), axis=1)])  # fmt: skip
+    f_x_new = np.maximum(near_x, np.where(virtual, o.x, -np.inf).max(1))
+    f_v_new = np.maximum(phys_v, np.where(virtual, o.vx, -np.inf).max(1))
+    new_f = (f_x_new != s.f_x) | (f_v_new != s.f_v)
     if new_f.any():
         out.update(
-            f_x=np.where(new_f, o.x[rows, nearest], s.f_x), f_v=np.where(new_f, o.vx[rows, nearest], s.f_v),
+            f_x=np.where(new_f, f_x_new, s.f_x), f_v=np.where(new_f, f_v_new, s.f_v),
             f_connected=s.f_connected & ~new_f, f_collaborative=s.f_collaborative & ~new_f,
         )  # fmt: skip
         if s.f_speed_observed is not None:
-            out["f_speed_observed"] = np.where(new_f, o.vx[rows, nearest], s.f_speed_observed)
+            out["f_speed_observed"] = np.where(new_f, f_v_new, s.f_speed_observed)
         if s.f_aggressive_truth is not None:
             out["f_aggressive_truth"] = s.f_aggressive_truth | new_f
         if s.err_f is not None:
@@ -230,11 +267,13 @@ def roles(situation, params: Params, rss: RssParams | None = None, horizon_s: fl
             "x": np.concatenate([s.chain_x, o.x], 1), "v": np.concatenate([s.chain_v, o.vx], 1),
             "promise": np.concatenate([_with_column(s.chain_promise, 0.0), np.zeros((b, k))], 1),
             "human": np.concatenate([_with_column(s.chain_human, False, bool), np.zeros((b, k), bool)], 1),
+            "phys": np.concatenate([np.ones((b, m), bool), body[..., 1]], 1),
         }  # fmt: skip
         if s.err_chain is not None:
             payload["err"] = np.concatenate([s.err_chain, np.broadcast_to(loose[:, None, :], (b, k, 2))], 1)
         conn = np.concatenate([slots < s.n_connected[:, None], np.zeros((b, k), bool)], axis=1)
-        got, _, n_new = _merge(keys, payload, conn, m)
+        got, valid, n_new = _merge(keys, payload, conn, m + k)
+        got = {name: a[:, :m] for name, a in _window_min(got, valid, n_new, payload).items()}
         # Beyond the new L(N+1): padding far ahead, at its speed (links there never bind).
         last_x = np.take_along_axis(got["x"], n_new[:, None], 1)
         last_v = np.take_along_axis(got["v"], n_new[:, None], 1)
@@ -269,11 +308,14 @@ def roles(situation, params: Params, rss: RssParams | None = None, horizon_s: fl
         payload = {
             "x": np.concatenate([own_x, o.x], 1), "v": np.concatenate([own_v, o.vx], 1),
             "promise": np.concatenate([_with_column(own_promise, 0.0), np.zeros((b, k))], 1),
+            "phys": np.concatenate([np.ones((b, kk), bool), body[..., 0]], 1),
         }  # fmt: skip
         if err_own is not None:
             payload["err"] = np.concatenate([err_own, np.broadcast_to(loose[:, None, :], (b, k, 2))], 1)
         conn = np.concatenate([slots < own_n[:, None], np.zeros((b, k), bool)], axis=1)
-        got, valid, n_new = _merge(keys, payload, conn, kk)
+        got, valid, n_new = _merge(keys, payload, conn, kk + k)
+        got = _window_min(got, valid, n_new, payload)
+        got, valid = {name: a[:, :kk] for name, a in got.items()}, valid[:, :kk]
         there = valid & (slots <= n_new[:, None])  # L0 .. the first non-connected one; +inf beyond
         rows2 = own_rows[:, None]
         out.update(

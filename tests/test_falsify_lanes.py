@@ -1,0 +1,74 @@
+"""The multi-lane falsifier (safelane.experiments.falsify_lanes): its world, its referee, its report.
+
+The referee must be able to fail: without the shield the reckless planner crashes and the blame rule names the ego;
+an entrant that ignores the entering rule is counted outside the assumptions; the entry distance is checked against
+RSS's distance written out here; the same seed gives the same outcomes."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from safelane import Params
+from safelane.experiments import falsify_lanes as fl
+from safelane.shield import ShieldConfig
+
+PRM = Params()
+
+
+def spec(n=64, seed=3):
+    return fl.draw(np.random.default_rng(seed), n, PRM)
+
+
+def test_without_the_shield_the_referee_sees_ego_responsible_collisions():
+    s = spec(128)
+    s["ax_hi"][:] = s["ax_lo"][:] = PRM.a_x_a  # full throttle into the target lane
+    s["start_s"][:] = 0.0
+    off = fl.simulate(s, fl.LaneWorld(config=ShieldConfig(enabled=False), horizon_s=6.0))
+    assert off.collided.sum() > 10
+    assert (off.ego_collision & off.collided).sum() >= 0.8 * off.collided.sum()
+    assert not (off.ego_collision & ~off.collided).any()
+
+
+def test_an_entrant_that_ignores_the_entering_rule_is_outside_the_assumptions():
+    s = spec(64)
+    s["ego_y"][:] = 0.0
+    s["start_s"][:] = 10.0  # the ego stays in its lane, at its speed
+    s["ax_hi"][:] = s["ax_lo"][:] = 0.0
+    s["far_present"][:] = False
+    s["side_present"][:] = True
+    s["side_x"][:] = 2.0  # beside the ego, at its speed: it may never enter the ego's lane
+    s["side_dv"][:] = 0.0
+    s["side_want_t"][:] = 0.0
+    s["side_connected"][:] = False
+    honest = fl.simulate(s, fl.LaneWorld(horizon_s=3.0))
+    assert honest.entries.sum() == 0  # beside the ego, nobody may enter
+    s["side_margin"][:] = -1e3  # enters whatever the distance
+    rogue = fl.simulate(s, fl.LaneWorld(horizon_s=3.0))
+    assert (rogue.entries > 0).all() and not rogue.inside.any()
+    assert (rogue.started == honest.started).all()
+
+
+def test_the_entry_distance_is_rss_plus_p_m_by_hand():
+    v_rear, v_front = 30.0, 25.0
+    rho, a, b, b_front = PRM.dt, PRM.a_x_a, PRM.a_x_d, PRM.others_decel
+    v_r = v_rear + a * rho
+    by_hand = v_rear * rho + 0.5 * a * rho**2 + v_r**2 / (2 * b) - v_front**2 / (2 * b_front) + PRM.p_m
+    assert fl._safe_gap(v_rear, v_front, PRM) == pytest.approx(by_hand, abs=1e-9)
+    x = np.array([[-1e3, 1e3, np.inf, 0.0, np.inf]])  # the far entrant at 0, the ego (in lane 1) ahead
+    v = np.array([[0.0, 0.0, 0.0, v_rear, 0.0]])
+    y = np.array([[7.0, 3.5, 0.0, 7.0, -3.5]])
+    ego_x = np.array([by_hand])
+    inside = fl._entry_ok(fl.FAR, x, v, y, ego_x + 1e-6, np.array([v_front]), np.array([3.5]), PRM, 0.0)
+    short = fl._entry_ok(fl.FAR, x, v, y, ego_x - 1e-6, np.array([v_front]), np.array([3.5]), PRM, 0.0)
+    away = fl._entry_ok(fl.FAR, x, v, y, ego_x - 1e-6, np.array([v_front]), np.array([0.0]), PRM, 0.0)
+    assert inside[0] and not short[0] and away[0]  # the ego out of lane 1 does not count
+
+
+def test_same_seed_same_outcomes_and_the_report_adds_up():
+    a = fl.run(96, seed=5, batch_size=48, world=fl.LaneWorld(horizon_s=4.0))
+    b = fl.run(96, seed=5, batch_size=48, world=fl.LaneWorld(horizon_s=4.0))
+    assert a.counts == b.counts and a.generated == 96
+    total = sum(c["scenarios"] for c in a.counts.values()) + a.not_started
+    assert total == 96
+    assert "multi-lane falsifier" in a.text()
