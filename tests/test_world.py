@@ -18,7 +18,7 @@ from safelane.baselines.rss import RssParams
 from safelane.shield import ShieldConfig, Situation, core
 from safelane.shield.decide import PROCEED
 from safelane.shield.situation import SensingBounds
-from safelane.shield.world import ANNOUNCE_HORIZON_S, NO_LANE, Others, fold, lane_reach, roles
+from safelane.shield.world import ANNOUNCE_HORIZON_S, NO_LANE, Others, fold, follower_switched, lane_reach, roles
 
 PRM = Params(lane_width=4.0, vehicle_width=2.0, vehicle_length=5.0, a_x_a=3.0)  # highway-env's geometry
 W, WV = PRM.lane_width, PRM.vehicle_width
@@ -188,6 +188,31 @@ def test_a_vehicle_counted_by_reach_or_announcement_alone_hides_no_vehicle_ahead
     assert (roles(situation(one(-20.0, W, vx=20.0)), PRM).f_v[0]) == 20.0  # physically there: it is F
     for folded in (r, rc, rf):
         folded.validate(PRM)
+
+
+def test_an_f_that_is_not_last_periods_vehicle_restarts_the_assessment():
+    """Found by the multi-lane falsifier: F went back from a nearer entrant (counted by its reach) to the host's F;
+    the assessment read the drop in speed as F yielding. A period's reachable set by hand: from (x, v), at most
+    x + v·dt + a_x_a·dt²/2 and v + a_x_a·dt, at least x + v·dt − a_o_d·dt²/2 and v − a_o_d·dt."""
+    from types import SimpleNamespace
+
+    dt, a_up, a_down = PRM.dt, PRM.a_x_a, PRM.others_decel
+    last = SimpleNamespace(f_x=np.array([-30.0, -30.0, -30.0, -30.0]), f_v=np.full(4, 25.0))
+    x_top = -30.0 + 25.0 * dt + 0.5 * a_up * dt * dt
+    x_bottom = -30.0 + 25.0 * dt - 0.5 * a_down * dt * dt
+    now = SimpleNamespace(f_x=np.array([x_top - 1e-6, x_top + 1e-3, x_bottom + 1e-6, x_top - 1e-6]),
+                          f_v=np.array([25.0 + a_up * dt, 25.0, 25.0 - a_down * dt, 25.0 - a_down * dt - 0.5]),
+                          err_f=None)  # fmt: skip
+    assert follower_switched(last, now, PRM).tolist() == [False, True, False, True]
+    assert not follower_switched(None, now, PRM).any()
+    # in the shield: a state whose last F was 36 m/s, now 33: the belief restarts (aggressive)
+    s = situation(Others.empty(1, 1), follower=(-25.0, 33.0))
+    state = core.init(situation(follower=(-25.0 - 3.6, 36.0)), PRM, ShieldConfig())
+    state = dataclasses.replace(state, last=SimpleNamespace(f_x=np.array([-25.0 - 3.6]), f_v=np.array([36.0])))
+    belief = dataclasses.replace(state.belief, aggressive=np.array([False]))
+    state = dataclasses.replace(state, belief=belief)
+    restarted, _, _ = fold(state, s, PRM, ShieldConfig())
+    assert restarted.belief.aggressive.tolist() == [True]
 
 
 def test_padding_and_vehicles_without_a_role_change_nothing():

@@ -334,6 +334,26 @@ def replaced_follower(situation, folded) -> np.ndarray:
     return np.asarray(folded.f_x != situation.f_x)
 
 
+def follower_switched(last, folded, params: Params) -> np.ndarray:
+    """``(B,)`` rows whose F is no longer the vehicle of the last period: its state now is not one that vehicle could
+    reach in a period, accelerating in ``[−a_o_d, a_x_a]`` (exact, stopping at rest), widened by the sensing box
+    (``err_f``) at both ends and ``TOL_M``. Found by the multi-lane falsifier: an F that a vehicle counted in the
+    target lane only by its reach had replaced went back to the host's F when the reach no longer counted it, the
+    assessment read the jump in speed as F yielding, and the shield took an aggressive F for collaborative. ``last``
+    (the previous period's :class:`~.monitor.Snapshot`) ``None``: no row."""
+    if last is None:
+        return np.zeros(len(folded.f_x), bool)
+    from .._motion import advance
+    from .monitor import TOL_M
+
+    x_hi, v_hi = advance(last.f_x, last.f_v, params.a_x_a, params.dt)
+    x_lo, v_lo = advance(last.f_x, last.f_v, -params.others_decel, params.dt)
+    box = np.zeros((len(folded.f_x), 2)) if folded.err_f is None else 2.0 * np.asarray(folded.err_f)
+    ex, ev = box[:, 0] + TOL_M, box[:, 1] + TOL_M
+    x, v = folded.f_x, folded.f_v
+    return (x > x_hi + ex) | (x < x_lo - ex) | (v > v_hi + ev) | (v < v_lo - ev)
+
+
 def restart_rows(state, rows: np.ndarray, fresh):
     """``state`` (a dataclass of ``(B, ...)`` arrays, possibly nested) with ``rows`` taken from ``fresh``."""
     if dataclasses.is_dataclass(state):
@@ -346,15 +366,16 @@ def restart_rows(state, rows: np.ndarray, fresh):
 
 def fold(state, situation, params: Params, config, chain=None):
     """``(state, situation, chain)`` as :func:`safelane.shield.stages.observe` takes them, with the others folded in
-    (:func:`roles`): the aggressiveness assessment restarts where F was replaced (its history was another vehicle's;
-    a restarted belief is "aggressive"), and ``chain`` (an analysis of the unfolded situation) is dropped. Without
-    ``others`` all three are returned as they are."""
+    (:func:`roles`): the aggressiveness assessment restarts where F was replaced, or where F is not the vehicle of the
+    last period (:func:`follower_switched`; its history was another vehicle's; a restarted belief is "aggressive"),
+    and ``chain`` (an analysis of the unfolded situation) is dropped. Without ``others`` all three are returned as
+    they are."""
     if getattr(situation, "others", None) is None:
         return state, situation, chain
     from .policies import ASSESSMENTS
 
     folded = roles(situation, params)
-    swapped = replaced_follower(situation, folded)
+    swapped = replaced_follower(situation, folded) | follower_switched(getattr(state, "last", None), folded, params)
     if swapped.any() and state.belief is not None:
         fresh = ASSESSMENTS[config.assessment].start(len(swapped), config)
         state = dataclasses.replace(state, belief=restart_rows(state.belief, swapped, fresh))
