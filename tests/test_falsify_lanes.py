@@ -58,11 +58,20 @@ def test_the_entry_distance_is_rss_plus_p_m_by_hand():
     x = np.array([[-1e3, 1e3, np.inf, 0.0, np.inf]])  # the far entrant at 0, the ego (in lane 1) ahead
     v = np.array([[0.0, 0.0, 0.0, v_rear, 0.0]])
     y = np.array([[7.0, 3.5, 0.0, 7.0, -3.5]])
-    ego_x = np.array([by_hand])
-    inside = fl._entry_ok(fl.FAR, x, v, y, ego_x + 1e-6, np.array([v_front]), np.array([3.5]), PRM, 0.0)
-    short = fl._entry_ok(fl.FAR, x, v, y, ego_x - 1e-6, np.array([v_front]), np.array([3.5]), PRM, 0.0)
-    away = fl._entry_ok(fl.FAR, x, v, y, ego_x - 1e-6, np.array([v_front]), np.array([0.0]), PRM, 0.0)
-    assert inside[0] and not short[0] and away[0]  # the ego out of lane 1 does not count
+    vy = np.zeros_like(x)
+    ego_x, ego_v = np.array([by_hand]), np.array([v_front])
+
+    def ok(dx, ego_y, ego_vy=0.0):
+        ego = (ego_x + dx, np.array([ego_y]), ego_v, np.array([ego_vy]))
+        return bool(fl._entry_ok(fl.FAR, x, v, y, vy, ego, PRM, 0.0)[0])
+
+    assert ok(1e-6, 3.5) and not ok(-1e-6, 3.5)
+    assert ok(-1e-6, 0.0)  # the ego in its own lane, not moving: it does not count
+    # moving toward lane 1 its RSS reach counts: body edge 0.2 m short of the line, reach 0.2 m near 0.40 m/s by hand
+    edge_y = 0.5 * PRM.lane_width - 0.5 * PRM.vehicle_width - 0.2
+    reach = lambda u: 0.5 * 1.5 * 0.01 + u * 0.1 + (u + 0.15) ** 2 / 3.0 + 0.05  # noqa: E731
+    assert reach(0.39) < 0.2 < reach(0.42)
+    assert ok(-1e-6, edge_y, 0.39) and not ok(-1e-6, edge_y, 0.42)
 
 
 def test_same_seed_same_outcomes_and_the_report_adds_up():

@@ -17,7 +17,8 @@ lane, 2 the lane beyond it) and five other vehicles besides the ego, each a row'
 **Inside the assumptions** (docs/safety.md, "Other vehicles' lane changes"): every lateral acceleration is at most
 ``a_y_m`` (RSS's lateral bound with ρ = one period; a vehicle that may not enter brakes laterally at ``a_y_m``,
 RSS's proper lateral response); every braking is at most ``a_o_d``; and an entrant enters a lane only at a safe
-longitudinal distance to each vehicle whose body is in that lane, the ego included: RSS's safe distance
+longitudinal distance to each vehicle that is in that lane — its body there, or its RSS lateral worst case reaching it
+(the world model's reach, so a vehicle moving into the lane counts), the ego included: RSS's safe distance
 (:func:`~safelane.baselines.rss.longitudinal_safe_distance_exact` — the rear vehicle accelerates at ``a_x_a`` for
 one period, then brakes at ``a_x_d``; the front one brakes at ``a_o_d``) plus ``p_m`` between centres, so that a
 rear vehicle that responds properly keeps ``p_m``. An entrant decides every period from the states at the period's
@@ -48,7 +49,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from .._motion import advance
-from ..baselines.rss import RssParams, longitudinal_safe_distance_exact
+from ..baselines.rss import RssParams, longitudinal_safe_distance_exact, stated_braking_lateral
 from ..blame import Track, blame
 from ..params import Params
 from ..safety._backend import ARRAY, FEASIBILITY_TOL_M
@@ -76,7 +77,9 @@ class LaneWorld:
     """The world's settings."""
 
     params: Params = field(default_factory=Params)
-    config: ShieldConfig = field(default_factory=ShieldConfig)
+    #: The assessment is the truth (F is aggressive here): the guarantee assumes an accurate one, as in the paper
+    #: world's falsifier. (The ``observed`` assessment reads an F braking for its own leader as yielding.)
+    config: ShieldConfig = field(default_factory=lambda: ShieldConfig(assessment="truth"))
     horizon_s: float = 12.0
     substeps: int = 10
 
@@ -139,14 +142,27 @@ def _safe_gap(v_rear, v_front, prm: Params):
     return longitudinal_safe_distance_exact(v_front, v_rear, prm.dt, prm.a_x_a, prm.a_x_d, prm.others_decel) + prm.p_m
 
 
-def _entry_ok(i: int, x, v, y, ex, evx, ey, prm: Params, margin):
+def _counts_in(y, vy, prm: Params, lane) -> np.ndarray:
+    """Whether a vehicle counts in ``lane`` for an entrant's rule: its body overlaps it, or its RSS lateral worst case
+    reaches it (the reach the world model gives a non-connected vehicle, ``RssParams.matched``:
+    :func:`safelane.shield.world.lane_reach`'s rule 2) — the ego counts in a lane it is moving into."""
+    rss = RssParams.matched(prm)
+    rho, a, b, mu = rss.response_time_other, rss.lat_accel_max, rss.lat_brake_min, 0.5 * rss.lateral_fluctuation_margin
+    half, w = 0.5 * prm.vehicle_width, prm.lane_width
+    up = np.maximum(stated_braking_lateral(vy, rho, a, b), 0.0)
+    down = np.maximum(stated_braking_lateral(-vy, rho, a, b), 0.0)
+    return (y + half + up + mu > (lane - 0.5) * w) & (y - half - down - mu < (lane + 0.5) * w)
+
+
+def _entry_ok(i: int, x, v, y, vy, ego, prm: Params, margin):
     """``(B,)`` whether entrant ``i`` may enter its goal lane now: the safe distance (plus ``margin``) to every
-    vehicle whose body is in that lane, the ego included."""
+    vehicle that counts in that lane (:func:`_counts_in`), the ego included. ``ego``: ``(x, y, vx, vy)``."""
     lane = GOAL[i]
+    ex, ey, evx, evy = ego
     ok = np.ones(len(ex), bool)
-    movers = [(x[:, k], v[:, k], y[:, k]) for k in range(x.shape[1]) if k != i] + [(ex, evx, ey)]
-    for xk, vk, yk in movers:
-        there = _lanes_overlapped(yk, prm, lane)
+    movers = [(x[:, k], v[:, k], y[:, k], vy[:, k]) for k in range(x.shape[1]) if k != i] + [(ex, evx, ey, evy)]
+    for xk, vk, yk, vyk in movers:
+        there = _counts_in(yk, vyk, prm, lane)
         ahead = xk >= x[:, i]
         need = np.where(ahead, _safe_gap(v[:, i], vk, prm), _safe_gap(vk, v[:, i], prm)) + margin
         with np.errstate(invalid="ignore"):  # absent vehicles (x = +inf) are in no lane
@@ -276,7 +292,7 @@ def others_accels(t, ego, x, v, y, vy, entered, entry_t, entry_ahead, completed,
     go[:, F] = spec["f_leave"] & (t >= spec["f_leave_t"])
     go[:, L0] = spec["l0_leave"] & (t >= spec["l0_leave_t"])
     for i, who in ((FAR, "far"), (SIDE, "side")):
-        safe = _entry_ok(i, x, v, y, ex, evx, ey, prm, spec[f"{who}_margin"])
+        safe = _entry_ok(i, x, v, y, vy, ego, prm, spec[f"{who}_margin"])
         go[:, i] = entered[:, i] | ((t >= spec[f"{who}_want_t"]) & safe)
     ay = np.where(np.isfinite(x), _lateral(y, vy, GOAL * prm.lane_width, go, prm), 0.0)
     ay[:, L1] = 0.0
@@ -350,7 +366,7 @@ def simulate(spec: dict, world: LaneWorld, observer=None) -> Outcome:
         for i in ENTRANTS:
             now = ~entered[:, i] & np.isfinite(x[:, i]) & _lanes_overlapped(y[:, i], prm, GOAL[i])
             if now.any():
-                ok = _entry_ok(i, x, v, y, ego[0], ego[2], ego[1], prm, 0.0)
+                ok = _entry_ok(i, x, v, y, vy, ego, prm, 0.0)
                 entry_ok[:, i] &= ~now | ok
                 entry_t[:, i] = np.where(now, t, entry_t[:, i])
                 entry_ahead[:, i] |= now & (x[:, i] > ego[0])
