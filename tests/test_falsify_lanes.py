@@ -41,10 +41,11 @@ def test_an_entrant_that_ignores_the_entering_rule_is_outside_the_assumptions():
     s["side_dv"][:] = 0.0
     s["side_want_t"][:] = 0.0
     s["side_connected"][:] = False
-    honest = fl.simulate(s, fl.LaneWorld(horizon_s=3.0))
+    world = fl.LaneWorld(config=ShieldConfig(enabled=False), horizon_s=3.0)  # the proposal (hold) passes through
+    honest = fl.simulate(s, world)
     assert honest.entries.sum() == 0  # beside the ego, nobody may enter
     s["side_margin"][:] = -1e3  # enters whatever the distance
-    rogue = fl.simulate(s, fl.LaneWorld(horizon_s=3.0))
+    rogue = fl.simulate(s, world)
     assert (rogue.entries > 0).all() and not rogue.inside.any()
     assert (rogue.started == honest.started).all()
 

@@ -79,7 +79,9 @@ def test_a_connected_vehicle_just_inside_its_lane_counts_only_there():
 @pytest.mark.parametrize("side", [+1, -1])
 def test_far_lane_vehicle_counts_once_its_lateral_worst_case_reaches_the_lane(side):
     """Lane 2 (side +1: beyond the target lane, entering it) or lane −1 (side −1: the ego's other side, entering the
-    ego's lane): centred in its lane, moving toward the ego's lanes at v_y."""
+    ego's lane): centred in its lane, moving toward the ego's lanes at v_y. A non-connected vehicle in lane −1 counts
+    in the ego's lane whatever its lateral speed (rule 4); the reach threshold is checked there on a connected one's
+    absence of it and on the body rule of a vehicle just outside lane −1 (below)."""
     lane = 2 if side > 0 else -1
     role_lane = 1 if side > 0 else 0
     y = lane * W
@@ -87,6 +89,7 @@ def test_far_lane_vehicle_counts_once_its_lateral_worst_case_reaches_the_lane(si
     v_star = threshold_speed(gap)
     assert reach_by_hand(v_star) == pytest.approx(gap, abs=1e-12)
     for v, counted in ((v_star - 1e-3, False), (v_star + 1e-3, True), (0.0, False), (-2.0, False)):
+        counted = counted or side < 0  # rule 4: the lane beside the ego's counts in it
         o = one(20.0, y, vx=15.0, vy=-side * v)
         inside = lane_reach(o, 0.0, PRM)[0, 0]
         assert inside[role_lane] == counted and inside[1 - role_lane] is np.False_, (v, inside)
@@ -96,6 +99,21 @@ def test_far_lane_vehicle_counts_once_its_lateral_worst_case_reaches_the_lane(si
             assert r.n_connected[0] == (0 if counted else 2)
         else:  # the entrant into the ego's lane ahead of it becomes L0
             assert (r.own_x is not None and r.own_x[0, 0] == 20.0) == counted
+
+
+def test_a_vehicle_in_the_lane_beside_the_egos_counts_in_it():
+    """Rule 4, found by the multi-lane falsifier: a vehicle beside the ego's lane may enter it ahead of the ego at RSS's
+    distance while the ego escapes an aggressive F and cannot brake; so a non-connected vehicle whose body is in lane
+    −1 counts in lane 0 (virtually: it hides no L0 ahead of it). By hand: lane −1 spans y in (−1.5·W, −0.5·W); a body
+    of half-width WV/2 overlaps it while its centre is in (−1.5·W − WV/2, −0.5·W + WV/2)."""
+    lo, hi = -1.5 * W - 0.5 * WV, -0.5 * W + 0.5 * WV
+    for y, beside in ((hi - 1e-6, True), (lo + 1e-6, True), (lo - 1e-3, False), (-W, True)):
+        inside = lane_reach(one(20.0, y, vx=15.0), 0.0, PRM)[0, 0]
+        assert bool(inside[0]) == beside, (y, inside)
+    assert not lane_reach(one(20.0, -W, vx=15.0, connected=True), 0.0, PRM)[0, 0, 0]  # connected: it announces
+    own = ([[36.0, np.inf]], [[20.0, 0.0]])
+    r = roles(situation(one(24.0, -W, vx=25.0), own=own), PRM)
+    assert r.own_x[0, 0] == 24.0 and r.own_v[0, 0] == 20.0  # virtual: L0's lower speed kept
 
 
 def test_far_lane_vehicle_becomes_l1_when_its_reach_crosses_and_not_before():

@@ -166,6 +166,11 @@ def lane_reach(others: Others, t: float, prm: Params, rss: RssParams | None = No
     lo = (o.y - half - down - mu)[..., None]
     lanes = np.asarray(ROLE_LANES, float)
     inside = (hi > (lanes - 0.5) * prm.lane_width) & (lo < (lanes + 0.5) * prm.lane_width)
+    # 4. the lane beside the ego's lane: a non-connected vehicle whose body is there counts in the ego's lane (it may
+    # enter it ahead of the ego at RSS's distance at any time, when the ego's evasion may not be able to brake)
+    w = prm.lane_width
+    beside = free & (o.y - half < -0.5 * w) & (o.y + half > -1.5 * w)
+    inside[..., 0] |= beside
     announced = o.connected & (o.announce_lane != NO_LANE) & (t >= o.announce_t - horizon_s)
     inside |= announced[..., None] & (o.announce_lane[..., None] == np.asarray(ROLE_LANES))
     return inside & np.isfinite(o.x)[..., None]
