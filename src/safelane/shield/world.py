@@ -15,7 +15,8 @@ lane on the ego's other side). A row's unused slots are padding: ``x = +inf``.
   μ/2 (:func:`~safelane.baselines.rss.stated_braking_lateral`; parameters :meth:`RssParams.matched
   <safelane.baselines.rss.RssParams.matched>` unless given, as the blame rule uses them); a *connected* one is
   trusted to stay in the lanes its body overlaps until it announces a lane change over V2X, and counts in the
-  announced lane from ``announce_t − horizon_s`` on;
+  announced lane from ``announce_t − horizon_s`` on; a *non-connected* one whose body is in the lane beside the ego's
+  lane (−1) also counts in the ego's lane (it may enter it ahead at RSS's distance whenever it likes);
 * **target lane, ahead of the ego** (``x > ego_x``): merged into the chain by position; each is non-connected (the
   record carries no braking promise), so the connected chain ends at the first of them (N shrinks);
 * **target lane, behind the ego**: the nearest becomes F where it is nearer than F — non-connected, not
