@@ -81,7 +81,8 @@ def test_far_lane_vehicle_counts_once_its_lateral_worst_case_reaches_the_lane(si
     """Lane 2 (side +1: beyond the target lane, entering it) or lane −1 (side −1: the ego's other side, entering the
     ego's lane): centred in its lane, moving toward the ego's lanes at v_y. A non-connected vehicle in lane −1 counts
     in the ego's lane whatever its lateral speed (rule 4); the reach threshold is checked there on a connected one's
-    absence of it and on the body rule of a vehicle just outside lane −1 (below)."""
+    absence of it and on the body rule of a vehicle just outside lane −1 (below). In lane 2 the reach decides for a
+    vehicle behind the ego (ahead of it, rule 5 counts it anyway), which becomes F, nearer than F at −30 m."""
     lane = 2 if side > 0 else -1
     role_lane = 1 if side > 0 else 0
     y = lane * W
@@ -90,13 +91,14 @@ def test_far_lane_vehicle_counts_once_its_lateral_worst_case_reaches_the_lane(si
     assert reach_by_hand(v_star) == pytest.approx(gap, abs=1e-12)
     for v, counted in ((v_star - 1e-3, False), (v_star + 1e-3, True), (0.0, False), (-2.0, False)):
         counted = counted or side < 0  # rule 4: the lane beside the ego's counts in it
-        o = one(20.0, y, vx=15.0, vy=-side * v)
+        x = -12.0 if side > 0 else 20.0
+        o = one(x, y, vx=15.0, vy=-side * v)
         inside = lane_reach(o, 0.0, PRM)[0, 0]
         assert inside[role_lane] == counted and inside[1 - role_lane] is np.False_, (v, inside)
         r = roles(situation(o), PRM)
-        if side > 0:  # the entrant ahead of the ego becomes L1: 20 m ahead, before L1 at 40 m
-            assert (r.chain_x[0, 0] == 20.0) == counted
-            assert r.n_connected[0] == (0 if counted else 2)
+        if side > 0:  # the entrant behind the ego becomes F: 12 m behind, nearer than F at 30 m
+            assert (r.f_x[0] == -12.0) == counted
+            assert r.n_connected[0] == 2 and r.chain_x[0, 0] == 40.0
         else:  # the entrant into the ego's lane ahead of it becomes L0
             assert (r.own_x is not None and r.own_x[0, 0] == 20.0) == counted
 
@@ -116,15 +118,36 @@ def test_a_vehicle_in_the_lane_beside_the_egos_counts_in_it():
     assert r.own_x[0, 0] == 24.0 and r.own_v[0, 0] == 20.0  # virtual: L0's lower speed kept
 
 
-def test_far_lane_vehicle_becomes_l1_when_its_reach_crosses_and_not_before():
-    """A lane-2 vehicle whose lateral speed toward the target lane grows by 0.3 m/s each period (its position fixed,
-    as if sampled at the period's start): L1 from the first period whose speed is above the hand threshold."""
+def test_far_lane_vehicle_behind_becomes_f_when_its_reach_crosses_and_not_before():
+    """A lane-2 vehicle behind the ego whose lateral speed toward the target lane grows by 0.3 m/s each period (its
+    position fixed, as if sampled at the period's start): F from the first period whose speed is above the hand
+    threshold."""
     v_star = threshold_speed(0.5 * W - 0.5 * WV - 0.05)
     speeds = 0.3 * np.arange(12)
     first = int(np.argmax(speeds > v_star))
     for k, v in enumerate(speeds):
-        r = roles(situation(one(25.0, 2 * W, vx=15.0, vy=-v)), PRM)
-        assert (r.chain_x[0, 0] == 25.0) == (k >= first), (k, v)
+        r = roles(situation(one(-12.0, 2 * W, vx=15.0, vy=-v)), PRM)
+        assert (r.f_x[0] == -12.0) == (k >= first), (k, v)
+
+
+def test_a_vehicle_beyond_the_target_lane_ahead_of_the_ego_counts_in_it():
+    """Rule 5, found by the multi-lane falsifier: a vehicle in lane 2 ahead of a straddling ego may enter the target
+    lane at RSS's distance and brake while the ego's evasion accelerates away from an aggressive F; so a non-connected
+    vehicle whose body is in lane 2 and whose centre is ahead of the ego's counts in the target lane, virtually, whatever
+    its lateral speed. By hand: lane 2 spans y in (1.5·W, 2.5·W); a body of half-width WV/2 overlaps it while its
+    centre is in (1.5·W − WV/2, 2.5·W + WV/2)."""
+    lo, hi = 1.5 * W - 0.5 * WV, 2.5 * W + 0.5 * WV
+    for y, beyond in ((lo + 1e-6, True), (hi - 1e-6, True), (hi + 1e-3, False), (2 * W, True)):
+        for vy in (0.0, 1.0):  # moving away from the target lane too
+            r = roles(situation(one(20.0, y, vx=15.0, vy=vy)), PRM)
+            assert (r.chain_x[0, 0] == 20.0) == beyond, (y, vy)
+            assert r.n_connected[0] == (0 if beyond else 2)
+    assert roles(situation(one(20.0, 2 * W, vx=15.0, connected=True)), PRM).chain_x[0, 0] == 40.0  # it announces
+    assert roles(situation(one(0.5, 2 * W, vx=15.0)), PRM).chain_x[0, 0] == 0.5  # just ahead of the ego's centre
+    behind = roles(situation(one(-0.5, 2 * W, vx=15.0)), PRM)  # just behind: no role (it would be the rear vehicle)
+    assert behind.chain_x[0, 0] == 40.0 and behind.f_x[0] == -30.0
+    r = roles(situation(one(30.0, 2 * W, vx=28.0)), PRM)  # virtual: L1's lower speed kept (rule 1's window)
+    assert r.chain_x[0, 0] == 30.0 and r.chain_v[0, 0] == 25.0
 
 
 def test_connected_announcement_counts_from_announce_t_minus_horizon():
@@ -236,8 +259,8 @@ def test_an_f_that_is_not_last_periods_vehicle_restarts_the_assessment():
 def test_padding_and_vehicles_without_a_role_change_nothing():
     s = situation()
     pad = Others.empty(1, 3)
-    far = Others.from_arrays([[np.inf, 20.0, -10.0]], [[0.0, 2 * W, 0.0]], [[0.0, 25.0, 25.0]], [[0.0, 0.0, 0.5]])
-    for o in (pad, far):  # padding; lane 2 at rest; own lane behind the ego
+    far = Others.from_arrays([[np.inf, -20.0, -10.0]], [[0.0, 2 * W, 0.0]], [[0.0, 25.0, 25.0]], [[0.0, 0.0, 0.5]])
+    for o in (pad, far):  # padding; lane 2 behind the ego, at rest laterally; own lane behind the ego
         r = roles(dataclasses.replace(s, others=o), PRM)
         for f in dataclasses.fields(Situation):
             a, b = getattr(r, f.name), getattr(s, f.name)
@@ -344,13 +367,14 @@ def test_fold_restarts_the_assessment_where_f_was_replaced():
 
 
 def test_the_shields_first_stage_folds_the_others():
-    """Straddling at y = 2 m: a lane-2 vehicle moving toward the target lane fast enough to count, 9 m ahead, ends the
-    lane change's safe evasion; below the threshold speed it changes nothing (bit-identical decision)."""
+    """Straddling at y = 2 m: a lane-2 vehicle moving toward the target lane fast enough to count, 6 m behind (ahead,
+    rule 5 counts it whatever its lateral speed), ends the lane change's safe evasion; below the threshold speed it
+    changes nothing (bit-identical decision)."""
     v_star = threshold_speed(0.5 * W - 0.5 * WV - 0.05)
     proposal = (np.array([0.0]), np.array([1.0]))
     decisions = {}
     for name, vy in (("none", None), ("slow", v_star - 0.01), ("fast", v_star + 0.01)):
-        o = None if vy is None else one(9.0, 2 * W, vx=25.0, vy=-vy)
+        o = None if vy is None else one(-6.0, 2 * W, vx=27.0, vy=-vy)
         s = situation(o, ego_y=2.0)
         state = core.init(roles(s, PRM), PRM, ShieldConfig(), "CV_all")
         decisions[name] = core.step(state, s, proposal, PRM, ShieldConfig(), "CV_all")[1]

@@ -16,7 +16,9 @@ lane on the ego's other side). A row's unused slots are padding: ``x = +inf``.
   <safelane.baselines.rss.RssParams.matched>` unless given, as the blame rule uses them); a *connected* one is
   trusted to stay in the lanes its body overlaps until it announces a lane change over V2X, and counts in the
   announced lane from ``announce_t − horizon_s`` on; a *non-connected* one whose body is in the lane beside the ego's
-  lane (−1) also counts in the ego's lane (it may enter it ahead at RSS's distance whenever it likes);
+  lane (−1) also counts in the ego's lane (rule 4: it may enter it ahead at RSS's distance whenever it likes), and
+  one whose body is in the lane beyond the target lane (2) *and ahead of the ego* counts in the target lane (rule 5,
+  :func:`beyond_target`);
 * **target lane, ahead of the ego** (``x > ego_x``): merged into the chain by position; each is non-connected (the
   record carries no braking promise), so the connected chain ends at the first of them (N shrinks);
 * **target lane, behind the ego**: the nearest becomes F where it is nearer than F — non-connected, not
@@ -151,6 +153,18 @@ def body_lanes(others: Others, prm: Params) -> np.ndarray:
     return inside & np.isfinite(others.x)[..., None]
 
 
+def beyond_target(others: Others, prm: Params) -> np.ndarray:
+    """``(B, K)``: rule 5's vehicles — non-connected, body in the lane beyond the target lane (2). :func:`roles`
+    counts those ahead of the ego in the target lane, virtually. Found by the multi-lane falsifier: such a vehicle may
+    enter the target lane ahead of a straddling ego at RSS's distance (legal: RSS's rear vehicle can brake) and brake,
+    while the ego's evasion accelerates away from an aggressive F and passes it inside ``p_m`` with its body still in
+    the target lane. Behind the ego it plays no part: there it would enter as the rear vehicle, responsible for the
+    distance."""
+    half, w = 0.5 * prm.vehicle_width, prm.lane_width
+    o = others
+    return ~o.connected & (o.y + half > 1.5 * w) & (o.y - half < 2.5 * w) & np.isfinite(o.x)
+
+
 def lane_reach(others: Others, t: float, prm: Params, rss: RssParams | None = None,
                horizon_s: float = ANNOUNCE_HORIZON_S) -> np.ndarray:  # fmt: skip
     """``(B, K, 2)``: whether each vehicle counts in lane 0 (the ego's original lane) and lane 1 (the target lane)
@@ -233,6 +247,7 @@ def roles(situation, params: Params, rss: RssParams | None = None, horizon_s: fl
     inside = lane_reach(o, s.t, params, rss, horizon_s)
     body = body_lanes(o, params)
     ahead = o.x > s.ego_x[:, None]
+    inside[..., 1] |= beyond_target(o, params) & ahead  # rule 5
     target_ahead, target_behind = inside[..., 1] & ahead, inside[..., 1] & ~ahead
     own_ahead = inside[..., 0] & ahead
     loose = _loosest(s)
