@@ -11,6 +11,7 @@ import pytest
 
 from safelane import Params
 from safelane.experiments import falsify_lanes as fl
+from safelane.experiments.falsify_lanes_run import run
 from safelane.shield import ShieldConfig
 
 PRM = Params()
@@ -76,8 +77,8 @@ def test_the_entry_distance_is_rss_plus_p_m_by_hand():
 
 
 def test_same_seed_same_outcomes_and_the_report_adds_up():
-    a = fl.run(96, seed=5, batch_size=48, world=fl.LaneWorld(horizon_s=4.0))
-    b = fl.run(96, seed=5, batch_size=48, world=fl.LaneWorld(horizon_s=4.0))
+    a = run(96, seed=5, batch_size=48, world=fl.LaneWorld(horizon_s=4.0))
+    b = run(96, seed=5, batch_size=48, world=fl.LaneWorld(horizon_s=4.0))
     assert a.counts == b.counts and a.generated == 96
     total = sum(c["scenarios"] for c in a.counts.values()) + a.not_started
     assert total == 96

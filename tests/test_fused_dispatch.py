@@ -29,7 +29,8 @@ ALTERNATIVES = {
     "l0_gap_min_m": 5.0, "l0_gap_max_m": 80.0, "l0_speed_spread_mps": 1.0, "l0_decel_mps2": 4.0,
     "l0_brake_window_s": 1.0, "sensing_error": True, "sense_connected_pos_m": 0.1, "sense_connected_speed_mps": 0.05,
     "sense_sensed_pos_m": 2.0, "sense_sensed_speed_mps": 1.0, "sensing_edge_share": 0.5, "actuation_delay_s": 0.1,
-    "shield.actuation_delay_s": 0.1, "shield.own_lane": False, "shield.sensing": False,
+    "shield.actuation_delay_s": 0.1, "shield.own_lane": False, "shield.sensing": False, "neighbours": True,
+    "neighbour_headway_min_s": 0.5, "neighbour_headway_max_s": 4.0, "neighbour_speed_spread_mps": 1.0,
 }  # fmt: skip
 
 

@@ -132,10 +132,10 @@ def test_far_lane_vehicle_behind_becomes_f_when_its_reach_crosses_and_not_before
 
 def test_a_vehicle_beyond_the_target_lane_ahead_of_the_ego_counts_in_it():
     """Rule 5, found by the multi-lane falsifier: a vehicle in lane 2 ahead of a straddling ego may enter the target
-    lane at RSS's distance and brake while the ego's evasion accelerates away from an aggressive F; so a non-connected
-    vehicle whose body is in lane 2 and whose centre is ahead of the ego's counts in the target lane, virtually, whatever
-    its lateral speed. By hand: lane 2 spans y in (1.5·W, 2.5·W); a body of half-width WV/2 overlaps it while its
-    centre is in (1.5·W − WV/2, 2.5·W + WV/2)."""
+    lane at RSS's distance and brake while the ego's evasion accelerates away from an aggressive F; so a
+    non-connected vehicle whose body is in lane 2 and whose centre is ahead of the ego's counts in the target lane,
+    virtually, whatever its lateral speed. By hand: lane 2 spans y in (1.5·W, 2.5·W); a body of half-width WV/2
+    overlaps it while its centre is in (1.5·W − WV/2, 2.5·W + WV/2)."""
     lo, hi = 1.5 * W - 0.5 * WV, 2.5 * W + 0.5 * WV
     for y, beyond in ((lo + 1e-6, True), (hi - 1e-6, True), (hi + 1e-3, False), (2 * W, True)):
         for vy in (0.0, 1.0):  # moving away from the target lane too

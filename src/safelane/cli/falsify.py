@@ -122,7 +122,8 @@ def _lanes(minutes, scenarios, seed, batch_size, workers, others_decel, out: Pat
     written as OUT/<run-id>/report.json."""
     import json
 
-    from ..experiments import falsify_lanes as fl
+    from ..experiments.falsify_lanes import LaneWorld
+    from ..experiments.falsify_lanes_run import run_streams
     from ._runs import check_out_dir, run_folder
 
     params = _params(others_decel)
@@ -130,7 +131,7 @@ def _lanes(minutes, scenarios, seed, batch_size, workers, others_decel, out: Pat
     info = {"kind": "falsify", "world": "lanes", "scenarios": scenarios, "minutes": minutes, "seed": seed,
             "batch_size": batch_size, "workers": workers or 1, "others_decel": params.others_decel}  # fmt: skip
     with run_folder(out, f"falsify-lanes-seed{seed}", info) as (run_dir, info):
-        report = fl.run_streams(scenarios, seed, batch_size, fl.LaneWorld(params=params), minutes, workers or 1)
+        report = run_streams(scenarios, seed, batch_size, LaneWorld(params=params), minutes, workers or 1)
         summary = {"scenarios": report.generated, "not_started": report.not_started, "seconds": report.seconds,
                    **report.counts,
                    "min_ratio_inside": report.min_ratio_inside}  # fmt: skip

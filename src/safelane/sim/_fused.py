@@ -42,7 +42,7 @@ FIXED = {
     "shield.assessment": "observed", "shield.completion": "commit_guard", "sensor_noise_std": 0.0,
     "shield.enabled": True, "v2x_loss": 0.0, "v2x_latency_periods": 0, "leader_rule": "worst_case",
     "follower_ignores_ego": False, "shield.monitor": True, "own_lane": False, "sensing_error": False,
-    "actuation_delay_s": 0.0, "shield.actuation_delay_s": 0.0,
+    "actuation_delay_s": 0.0, "shield.actuation_delay_s": 0.0, "neighbours": False,
 }  # fmt: skip
 #: These fields act only through another setting; while the fields named (or the nominal planner: ``"nominal"``)
 #: are at the loop's values they change nothing, so any value runs compiled:
@@ -55,6 +55,8 @@ ONLY_WITH = {
     "sense_connected_pos_m": ("sensing_error",), "sense_connected_speed_mps": ("sensing_error",),
     "sense_sensed_pos_m": ("sensing_error",), "sense_sensed_speed_mps": ("sensing_error",),
     "sensing_edge_share": ("sensing_error",), "shield.sensing": ("sensing_error",),
+    "neighbour_headway_min_s": ("neighbours",), "neighbour_headway_max_s": ("neighbours",),
+    "neighbour_speed_spread_mps": ("neighbours",),
 }  # fmt: skip
 
 

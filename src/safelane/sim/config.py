@@ -75,6 +75,15 @@ class SimConfig(BaseModel):
     sensing_edge_share: float = Field(0.0, ge=0.0, le=1.0, description="Share of measurement errors drawn at the "
                                       "ends of their bounds (the falsifier's corners; 0: uniform inside).")  # fmt: skip
     actuation_delay_s: float = Field(0.0, ge=0.0, le=1.0, description="Actuation delay [s], whole control periods.")
+    # --- Beyond the paper's two lanes (docs/simulator.md, "Neighbours"): off by default ---
+    neighbours: bool = Field(False, description="Traffic in the lane beyond the target lane and on the ego's "
+                             "other side (non-connected platoons keeping their lanes; safelane.sim.neighbours): the "
+                             "shield's world model counts them, so the run measures what the multi-lane world "
+                             "costs.")  # fmt: skip
+    neighbour_headway_min_s: float = Field(1.0, gt=0.0, description="Neighbours' time headway: shortest [s].")
+    neighbour_headway_max_s: float = Field(3.0, gt=0.0, description="Neighbours' time headway: longest [s].")
+    neighbour_speed_spread_mps: float = Field(3.0, ge=0.0, description="A neighbour lane's speed: the ego's initial "
+                                              "speed + uniform in [-this, this] [m/s].")  # fmt: skip
 
     @model_validator(mode="before")
     @classmethod
@@ -123,6 +132,9 @@ class SimConfig(BaseModel):
     def _check_l0(self) -> SimConfig:
         if self.l0_gap_max_m < self.l0_gap_min_m:
             raise ValueError(f"l0_gap_max_m={self.l0_gap_max_m} must be >= l0_gap_min_m={self.l0_gap_min_m}")
+        if self.neighbour_headway_max_s < self.neighbour_headway_min_s:
+            raise ValueError(f"neighbour_headway_max_s={self.neighbour_headway_max_s} must be >= "
+                             f"neighbour_headway_min_s={self.neighbour_headway_min_s}")  # fmt: skip
         return self
 
     def sensing_bounds(self):

@@ -30,6 +30,7 @@ from .checks import ego_checks, lane_checks, lane_pairs
 from .config import SimConfig
 from .kinematics import Fleet, Motion
 from .link import Link
+from .neighbours import Neighbours
 from .realworld import executed_motion, l0_motion, measure, own_lane_checks, with_own_lane
 from .rng import counter_normal
 from .scenario import ScenarioBatch
@@ -122,6 +123,7 @@ class ClosedLoop:
         self.chain_connected = np.column_stack([in_chain, np.zeros(len(batch), bool)])[:, : k - 1]
         self.situation_promise = batch.promise_decel[:, 1:-1]
         self.situation_human = batch.human[:, 1:-1]
+        self.neighbours = Neighbours(batch, seed, cfg, prm) if cfg.neighbours else None
 
     def initial_state(self) -> SimState:
         b = self.b
@@ -191,6 +193,7 @@ class ClosedLoop:
             f_connected=f_connected, f_collaborative=b.connected[:, 0], chain_x=chain_x, chain_v=chain_v,
             chain_promise=self.situation_promise, chain_human=self.situation_human, n_connected=n_connected,
             f_speed_observed=f_speed_observed, f_aggressive_truth=b.follower_aggressive, v2x_stale=stale,
+            others=None if self.neighbours is None else self.neighbours.at(t),
             **({} if l0 is None else self._own_fields(l0)),
         )  # fmt: skip
 
