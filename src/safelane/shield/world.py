@@ -147,10 +147,13 @@ def body_lanes(others: Others, prm: Params) -> np.ndarray:
     """``(B, K, 2)``: whether each vehicle's body overlaps lane 0 and lane 1 now (rule 1 alone: the vehicle is
     *physically* in the lane; padding is in none)."""
     half = 0.5 * prm.vehicle_width
-    y = others.y[..., None]
+    return _overlaps(others.y - half, others.y + half, prm) & np.isfinite(others.x)[..., None]
+
+
+def _overlaps(lo, hi, prm: Params) -> np.ndarray:
+    """``(B, K, 2)``: whether the lateral extent ``(lo, hi)`` (``(B, K)``) overlaps lane 0 and lane 1."""
     lanes = np.asarray(ROLE_LANES, float)
-    inside = (y + half > (lanes - 0.5) * prm.lane_width) & (y - half < (lanes + 0.5) * prm.lane_width)
-    return inside & np.isfinite(others.x)[..., None]
+    return (hi[..., None] > (lanes - 0.5) * prm.lane_width) & (lo[..., None] < (lanes + 0.5) * prm.lane_width)
 
 
 def beyond_target(others: Others, prm: Params) -> np.ndarray:
@@ -177,10 +180,7 @@ def lane_reach(others: Others, t: float, prm: Params, rss: RssParams | None = No
     down = np.where(free, np.maximum(stated_braking_lateral(-o.vy, rho, a_lat, b_lat), 0.0), 0.0)
     mu = np.where(free, 0.5 * rss.lateral_fluctuation_margin, 0.0)
     half = 0.5 * prm.vehicle_width
-    hi = (o.y + half + up + mu)[..., None]
-    lo = (o.y - half - down - mu)[..., None]
-    lanes = np.asarray(ROLE_LANES, float)
-    inside = (hi > (lanes - 0.5) * prm.lane_width) & (lo < (lanes + 0.5) * prm.lane_width)
+    inside = _overlaps(o.y - half - down - mu, o.y + half + up + mu, prm)
     # 4. the lane beside the ego's lane: a non-connected vehicle whose body is there counts in the ego's lane (it may
     # enter it ahead of the ego at RSS's distance at any time, when the ego's evasion may not be able to brake)
     w = prm.lane_width
