@@ -39,8 +39,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .._motion import advance
 from ..baselines.rss import RssParams, stated_braking_lateral
 from ..params import Params
+from .monitor import TOL_M
+from .policies import ASSESSMENTS
 
 #: ``announce_lane`` of a vehicle that announces no lane change.
 NO_LANE = int(np.iinfo(np.int64).min)
@@ -364,9 +367,6 @@ def follower_switched(last, folded, params: Params) -> np.ndarray:
     (the previous period's :class:`~.monitor.Snapshot`) ``None``: no row."""
     if last is None:
         return np.zeros(len(folded.f_x), bool)
-    from .._motion import advance
-    from .monitor import TOL_M
-
     x_hi, v_hi = advance(last.f_x, last.f_v, params.a_x_a, params.dt)
     x_lo, v_lo = advance(last.f_x, last.f_v, -params.others_decel, params.dt)
     box = np.zeros((len(folded.f_x), 2)) if folded.err_f is None else 2.0 * np.asarray(folded.err_f)
@@ -393,8 +393,6 @@ def fold(state, situation, params: Params, config, chain=None):
     they are."""
     if getattr(situation, "others", None) is None:
         return state, situation, chain
-    from .policies import ASSESSMENTS
-
     folded = roles(situation, params)
     swapped = replaced_follower(situation, folded) | follower_switched(getattr(state, "last", None), folded, params)
     if swapped.any() and state.belief is not None:
