@@ -23,12 +23,13 @@ from pydantic import BaseModel, ConfigDict, Field, ValidationInfo, field_validat
 
 from ._motion import advance
 from .params import Params
+from .tolerances import TIME_TOL_S
 
 MAX_AGE_S = 0.3
 """Default maximum message age [s]: three control periods (``dt = 0.1`` s). One lost message is tolerated twice
 over; beyond that, extrapolating with a reported acceleration the sender is no longer bound to is not trusted."""
 
-_TIME_TOL_S = 1e-9  # times on the dt grid (e.g. 1.0 − 0.7) are not exact in float64
+_TIME_TOL_S = TIME_TOL_S  # times on the dt grid (e.g. 1.0 − 0.7) are not exact in float64
 _PAD_GAP_M = 1e6  # padding vehicles sit this far apart ahead of L(N+1): far enough never to constrain it
 
 Intent = Literal["collaborative", "aggressive"]

@@ -17,6 +17,7 @@ from ..params import Params
 from ..sim.config import SimConfig
 from ..sim.scenario import ScenarioConfig
 from ..sim.traffic import TrafficHooks
+from ..tolerances import SETTING_SLACK
 from ._gym import require_gymnasium
 from .core import BEHAVIOUR_NAMES, LaneChangeTask, RewardConfig, ScenarioSampler, check_action
 from .render import task_frame
@@ -82,7 +83,7 @@ def _check_kwargs(variant, n_leaders, decel, p_v, shield, traffic, horizon_s, pa
         raise InputError(f"traffic must be None, a registered traffic model's name, a TrafficModel or TrafficHooks; "
                          f"got {_got(traffic)}", "traffic")  # fmt: skip
     if horizon_s is not None and (not _is_real(horizon_s) or not np.isfinite(horizon_s) or
-                                  horizon_s < params.dt - 1e-12):  # fmt: skip
+                                  horizon_s < params.dt - SETTING_SLACK):  # fmt: skip
         raise InputError(f"horizon_s (episode length) must be a number of seconds >= one control period "
                          f"params.dt={params.dt:g}; got {_got(horizon_s)}", "horizon_s")  # fmt: skip
     for name, value in (("n_leaders", n_leaders), ("decel", decel)):

@@ -34,6 +34,7 @@ from ..blame import PairTracker  # noqa: E402
 from ..params import Params  # noqa: E402
 from ..shield import ABORT, COMPLETED, HESITATE, PROCEED, LaneFrame, Shield, ShieldConfig, Situation  # noqa: E402
 from ..shield.command import Command, InFlight  # noqa: E402
+from ..tolerances import TIME_TOL_S  # noqa: E402
 from ..v2x import MAX_AGE_S, SensedVehicle, V2XMessage, leader_arrays  # noqa: E402
 from .highway_road import (  # noqa: E402
     blame_tracks,
@@ -254,7 +255,7 @@ class SafeLaneShield(gym.Wrapper, gym.utils.RecordConstructorArgs):
             if self.connected and getattr(f, "safelane_connected", False):
                 # F's message: fresh or not, it declares no intent (IDM yields to no one), so F stays aggressive
                 msg = self._received(f)
-                f_connected = isinstance(msg, V2XMessage) and self.t - msg.timestamp_s <= MAX_AGE_S + 1e-9
+                f_connected = isinstance(msg, V2XMessage) and self.t - msg.timestamp_s <= MAX_AGE_S + TIME_TOL_S
                 stale = stale or (isinstance(msg, V2XMessage) and not f_connected)
         else:
             fx, fv = ex - FAR_M, 0.0

@@ -33,6 +33,7 @@ from highway_env.envs.highway_env import HighwayEnv
 from highway_env.road.road import Road, RoadNetwork
 from highway_env.vehicle.behavior import IDMVehicle
 
+from ..tolerances import TIME_TOL_S
 from .highway_vehicles import PromiseIDMVehicle, SuddenBrakeVehicle
 
 TARGET_LANE, EGO_LANE = 0, 1
@@ -142,4 +143,4 @@ class LaneChangeScene(HighwayEnv):
             self.scene["roles"][id(l0)] = "L0"
 
     def _is_truncated(self) -> bool:
-        return self.time >= self.config["duration"] - 1e-9
+        return self.time >= self.config["duration"] - TIME_TOL_S

@@ -24,6 +24,7 @@ from ..params import Params
 from ..safety._backend import ARRAY
 from ..safety.chain import propagate_chain
 from ..sim.behaviours import follower_accel, leader_accels, leader_roles, leader_task
+from ..tolerances import TIME_TOL_S
 
 TRAFFIC_MODES = ("paper", "sumo")
 VIOLATION_TOL_MPS2 = 1e-6
@@ -89,7 +90,7 @@ class TargetLaneTraffic:
         prm = self.params
         x, v = np.asarray(x, float)[None, :], np.asarray(v, float)[None, :]
         bounds = self.chain_bounds(x, v)
-        a_last = np.array([-self.decel_last if t + 1e-9 >= self.brake_start_s else 0.0])
+        a_last = np.array([-self.decel_last if t + TIME_TOL_S >= self.brake_start_s else 0.0])
         task = leader_task(v, self.v_desired[None, :], self.promise, np.full_like(self.promise, self.promise_accel))
         acc = np.array(leader_accels(x, v, self.margin, self.roles, bounds, task, a_last, np.array([self.decel_last]),
                                      None, None, prm))  # fmt: skip
@@ -117,7 +118,7 @@ class TargetLaneTraffic:
 
 def profile_accel(t: float, brake_start_s: float, decel: float) -> float:
     """A sudden-braking profile: constant speed, then ``−decel`` from ``brake_start_s`` until the vehicle stops."""
-    return -decel if t + 1e-9 >= brake_start_s else 0.0
+    return -decel if t + TIME_TOL_S >= brake_start_s else 0.0
 
 
 @dataclass

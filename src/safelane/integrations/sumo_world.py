@@ -34,6 +34,7 @@ from pathlib import Path
 import numpy as np
 
 from ..params import Params
+from ..tolerances import TIME_TOL_S
 
 EDGE = "road"
 ROUTE = "r"
@@ -328,7 +329,7 @@ def braking_parity(world: SumoWorld, v0: float = 30.0, decel: float = 8.0, secon
         x_sumo = float(front_to_centre(world.api.vehicle.getLanePosition("probe"), prm.vehicle_length))
         err = abs(x_sumo - float(x_ref))
         err_v = max(err_v, abs(world.api.vehicle.getSpeed("probe") - float(v_ref)))
-        if k * dt < t_stop - 1e-9:
+        if k * dt < t_stop - TIME_TOL_S:
             err_moving = max(err_moving, err)
         else:
             err_stopped = max(err_stopped, err)

@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..tolerances import TIME_TOL_S
 from .events import LaneChangeEvent, event_frames
 from .recording import Recording
 
@@ -36,7 +37,7 @@ def log_batch(pairs, *, lead_s: float = 3.0, horizon_s: float = 8.0, dt: float =
     identifying columns."""
     rows = []
     for rec, events in pairs:
-        if abs(rec.dt - dt) > 1e-9:
+        if abs(rec.dt - dt) > TIME_TOL_S:
             raise ValueError(f"{rec.source}: recorded every {rec.dt} s; the closed loop needs the shield's dt = {dt}")
         if not events:
             continue

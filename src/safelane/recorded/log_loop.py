@@ -38,6 +38,7 @@ import numpy as np
 from ..planners.base import Observation
 from ..shield import ABORT, HESITATE, Shield, Situation
 from ..shield.command import Command, InFlight
+from ..tolerances import DIST_TOL_M
 from . import log_checks as chk
 from .log_batch import log_batch
 from .recording import Recording
@@ -48,7 +49,7 @@ FAR_M = 1e4
 CONNECTIVITY = ("none", "chain")
 
 #: Gap below ``p_m`` that counts as a violation (the simulator's feasibility tolerance).
-PM_TOL_M = 1e-9
+PM_TOL_M = DIST_TOL_M
 
 
 def _shifted(x, length, ego_x, ego_len, shield_len):

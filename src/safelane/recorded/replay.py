@@ -41,6 +41,7 @@ import pandas as pd
 
 from ..shield import ABORT, COMPLETED, HESITATE, PROCEED, Shield, Situation
 from ..shield.situation import LaneFrame
+from ..tolerances import TIME_TOL_S
 from .events import EventFrames, LaneChangeEvent, event_frames, find_lane_changes
 from .recording import Recording
 
@@ -224,7 +225,7 @@ def replay(recording: Recording, settings: ReplaySettings | None = None) -> Repl
         cross = _judge(crossing_situation, cross_proposal, cfg, variant)
         # the human's steps up to and including the crossing step; after it the lane change is done (open loop:
         # what follows is following L1, which the closed loop judges)
-        out[f"{tag}_verdict"] = np.where(fr.t_rel < -1e-9, human.behaviour, -1)
+        out[f"{tag}_verdict"] = np.where(fr.t_rel < -TIME_TOL_S, human.behaviour, -1)
         out[f"{tag}_crossing_verdict"] = cross.behaviour
         if tag == "shield":
             out["margin_l1_m"] = np.where(fr.leaders[:, 0] >= 0, human.plan.min_gap_leader - params.p_m, np.nan)
@@ -296,7 +297,7 @@ def _rows_table(rec, fr: EventFrames, out, connected, cfg: ReplaySettings) -> pd
 def _first_allowed(t_rel: np.ndarray, allowed: np.ndarray, dt: float) -> tuple[float, float]:
     """``(first t_rel allowed in the window, delay from the crossing step until allowed)``; NaN where never."""
     first = t_rel[allowed].min() if allowed.any() else np.nan
-    later = allowed & (t_rel >= -dt - 1e-9)
+    later = allowed & (t_rel >= -dt - TIME_TOL_S)
     delay = t_rel[later].min() + dt if later.any() else np.nan
     return float(first), float(delay)
 

@@ -22,11 +22,13 @@ from typing import NamedTuple
 
 import numpy as np
 
+from ..tolerances import DIST_TOL_M
+
 INF = math.inf
 
 #: Gaps within this many metres of the margin count as satisfied (float round-off of the closed forms); the same
 #: tolerance decides when a link's slack counts as exactly zero (``chain.min_follow_decel``).
-FEASIBILITY_TOL_M = 1e-9
+FEASIBILITY_TOL_M = DIST_TOL_M
 
 #: Every function marked :func:`jitable`, in the order they were marked: what :mod:`._compile` registers with numba.
 ROW_FUNCTIONS: list = []

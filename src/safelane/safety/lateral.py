@@ -20,11 +20,12 @@ from __future__ import annotations
 import numpy as np
 
 from ..params import Params
+from ..tolerances import DIST_TOL_M
 from ._backend import jitable
 from ._checks import check_params, finish, prepare
 
 #: Intrusions up to this many metres beyond ``y_s`` count as none (round-off of the exact return profile).
-LATERAL_TOL_M = 1e-9
+LATERAL_TOL_M = DIST_TOL_M
 
 
 def lateral_core(xp, p_y, v_y, params: Params):

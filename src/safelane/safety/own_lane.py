@@ -46,6 +46,7 @@ import numpy as np
 
 from .._motion import advance_core
 from ..params import Params
+from ..tolerances import SPEED_TOL_MPS
 from ._backend import ARRAY, FEASIBILITY_TOL_M, INF, jitable
 from .chain import braked_position
 from .evasion import follower_offset
@@ -57,7 +58,7 @@ from .responsible import pair_min_gap_core
 SEARCH_STEPS = 16
 
 #: Speeds this close count as equal in the tail test (round-off of a speed braked to zero at ``t2``).
-SPEED_TOL = 1e-9
+SPEED_TOL = SPEED_TOL_MPS
 
 #: The fields of one member's check (:func:`member_parts`), in the order it returns them.
 MEMBER = ("exists", "lead_ok", "follow_ok", "t_x1", "v_switch", "t_brake_end", "follows_leader", "lead_gap",

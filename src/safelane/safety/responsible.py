@@ -21,6 +21,7 @@ import numpy as np
 
 from .._motion import advance_core, stop_time_core
 from ..params import Params
+from ..tolerances import ACCEL_TOL_MPS2
 from ._backend import ARRAY, FEASIBILITY_TOL_M, INF, jitable
 from .chain import min_follow_decel
 from .evasion import fast_kernel
@@ -101,7 +102,8 @@ def final_stop_accel(slack, v_f, v_l, lead_decel, prm: Params, brake=None):
                                      prm.dt)  # fmt: skip
 
 
-ROOT_EPS_MPS2 = 1e-9  # m/s²: the closed-form bound is applied this far on the safe side (rounding at the boundary)
+#: m/s²: the closed-form bound is applied this far on the safe side (rounding at the boundary).
+ROOT_EPS_MPS2 = ACCEL_TOL_MPS2
 #: Elements from which :func:`responsible_bound` runs the compiled kernel (its call costs a few µs; the NumPy path
 #: ~50 array operations).
 FAST_MIN_BATCH = 256

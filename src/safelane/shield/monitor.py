@@ -47,10 +47,11 @@ from ..params import Params
 from ..safety._backend import ARRAY, INF, jitable
 from ..safety.chain import braked_position
 from ..safety.evasion import fast_kernel
+from ..tolerances import MONITOR_TOL_M
 
 BREACH_KINDS = ("l1_decel", "leader_bound", "last_decel", "follower", "stale_v2x")
 #: Positions within this of the assumed worst case count as inside it (round-off).
-TOL_M = 1e-7
+TOL_M = MONITOR_TOL_M
 
 
 @dataclass(frozen=True)

@@ -31,6 +31,7 @@ from typing import Protocol
 import numpy as np
 
 from ..planners.variants import VARIANT_NAMES, VARIANTS, get_variant
+from ..tolerances import TIME_TOL_S
 from . import assessment as assess
 from .decide import commit_guard
 
@@ -113,7 +114,7 @@ class SlowAssessment(ObservedAssessment):
             key_x, key_v = situation.f_x - situation.ego_x, situation.observed_f_speed
             delay = np.where(fresh, config.assess_delay_s * (0.5 + _scenario_uniform(key_x, key_v, 1)), delay)
             missed = np.where(fresh, _scenario_uniform(key_x, key_v, 2) < config.assess_miss, missed)
-        released = (situation.t - inner.first_collaborative_s) >= delay - 1e-9
+        released = (situation.t - inner.first_collaborative_s) >= delay - TIME_TOL_S
         aggressive = inner.aggressive | missed | ~released
         return SlowState(inner, delay, missed, aggressive)
 

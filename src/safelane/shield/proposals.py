@@ -14,8 +14,9 @@ import numpy as np
 
 from ..params import Params
 from ..safety._backend import ARRAY, jitable
+from ..tolerances import ACCEL_TOL_MPS2
 
-_RANGE_TOL = 1e-9
+_RANGE_TOL = ACCEL_TOL_MPS2
 
 
 def check_proposal(planner, proposal, batch: int, prm: Params):

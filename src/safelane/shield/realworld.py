@@ -30,6 +30,7 @@ from ..safety.lateral import LATERAL_TOL_M
 from ..safety.own_lane import own_lane_core
 from ..safety.plan import EvasionPlan, plan_from_core, set_rows
 from ..safety.responsible import pair_min_gap
+from ..tolerances import TIME_TOL_S
 from .decide import lateral_max, own_kernel, own_margin
 from .situation import Situation
 
@@ -104,7 +105,7 @@ def delay_periods(cfg, prm: Params) -> int:
     """The actuation delay of ``cfg`` (a ``ShieldConfig`` or ``SimConfig``) in control periods; a delay that is not
     a whole number of periods is refused."""
     d = round(cfg.actuation_delay_s / prm.dt)
-    if abs(d * prm.dt - cfg.actuation_delay_s) > 1e-9:
+    if abs(d * prm.dt - cfg.actuation_delay_s) > TIME_TOL_S:
         raise ValueError(f"{type(cfg).__name__}.actuation_delay_s={cfg.actuation_delay_s} must be a whole number of "
                          f"control periods (dt={prm.dt} s)")  # fmt: skip
     return d

@@ -38,6 +38,7 @@ from ..shield.assessment import belief_core
 from ..shield.decide import ABORT, COMPLETED, HESITATE, PROCEED, commit_guard_core, hesitate_core
 from ..shield.proposals import proposal_core
 from ..shield.stages import lane_keep_accel, worst_case_core
+from ..tolerances import DIST_TOL_M
 from ._fast_checks import _ego_row, _lane_row
 from ._fast_general import _general_pair
 from ._fast_held import _motion_max, _plan_motion
@@ -293,7 +294,7 @@ def loop_kernel(
                         lo[n_level], hi[n_level] = _general_pair(lon_t, lon_x, lon_v, lon_a, o_t, o_x, o_v, o_a, lat_t,
                                                                  lat_x, lat_v, lat_a, level, scratch)  # fmt: skip
                 hit = hit or (lo[1] < length and hi[1] > -length)
-                close = close or (lo[0] < p_m - 1e-9 and hi[0] > -p_m + 1e-9)
+                close = close or (lo[0] < p_m - DIST_TOL_M and hi[0] > -p_m + DIST_TOL_M)
                 if c == 0:
                     gap_f = _min(gap_f, -hi[0])
                 elif c == 1:

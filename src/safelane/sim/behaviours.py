@@ -39,6 +39,7 @@ from ..safety._backend import ARRAY, FEASIBILITY_TOL_M, jitable
 from ..safety.chain import min_follow_decel
 from ..safety.evasion import fast_kernel
 from ..safety.responsible import ROOT_EPS_MPS2, responsible_accel_core, responsible_bound_core, responsible_ok_core
+from ..tolerances import TIME_TOL_S
 
 #: :func:`leader_accels` runs the compiled kernel (:mod:`._fast_traffic`) from this many ``(B, K)`` elements on.
 FAST_MIN_ELEMENTS = 64
@@ -57,7 +58,7 @@ def traffic_kernel():
 def last_accel(xp, t, brake_start, decel_last):
     """``L(N+1)``'s default profile at time ``t``: constant speed, then braking at ``decel_last`` (``a_x_N+1_d``) from
     ``brake_start`` on (a start within 1 ns after ``t`` counts: round-off in the period count)."""
-    return xp.where(t + 1e-9 >= brake_start, -decel_last, 0.0)
+    return xp.where(t + TIME_TOL_S >= brake_start, -decel_last, 0.0)
 
 
 def leader_roles(valid, connected, n_connected):

@@ -21,6 +21,7 @@ from ..params import Params
 from ..safety._backend import ARRAY, INF, jitable
 from ..safety.evasion import fast_kernel
 from ..shield.decide import lateral_max
+from ..tolerances import DIST_TOL_M
 from .kinematics import (
     Fleet,
     Motion,
@@ -216,8 +217,8 @@ def ego_pair_kind(xp, on_plan, t1, t_stop, y_min, max_level, dt):
 def ego_verdict(xp, c_min, c_max, o_min, o_max, length, p_m):
     """``(collided, violated)`` of a pair from its gap's ``(min, max)`` over the instants the ego overlaps the target
     lane (``o_*``) and is in the conflict zone (``c_*``): footprints overlap, ``|gap| < length``; the margin is
-    broken, ``|gap| < p_m`` (to ``1e-9``). Backend-generic."""
-    return (o_min < length) & (o_max > -length), (c_min < p_m - 1e-9) & (c_max > -p_m + 1e-9)
+    broken, ``|gap| < p_m`` (to ``DIST_TOL_M``). Backend-generic."""
+    return (o_min < length) & (o_max > -length), (c_min < p_m - DIST_TOL_M) & (c_max > -p_m + DIST_TOL_M)
 
 
 def _stop_gap(xp, t, x1, v1, a1, t1, x2, v2, a2, t2):
@@ -373,7 +374,7 @@ def lane_far_ratio(xp, far, gap0, gap1, margin):
 
 def lane_verdict(xp, low, margin, length):
     """``(collided, violated, ratio)`` of a near pair from its gap's exact minimum ``low``. Backend-generic."""
-    return low < length, low < margin - 1e-9, low / margin
+    return low < length, low < margin - DIST_TOL_M, low / margin
 
 
 # The rules per pair, compiled into the checks' kernels and the compiled closed loop (safety/_compile.py).

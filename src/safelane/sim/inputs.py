@@ -22,9 +22,10 @@ import numpy as np
 from ..config import validate_model
 from ..errors import InputError
 from ..params import Params
+from ..tolerances import SETTING_SLACK
 from .config import SimConfig
 
-_SLACK = 1e-12
+_SLACK = SETTING_SLACK
 
 
 def cell_rng(

@@ -19,6 +19,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..params import Params
+from ..tolerances import TIME_TOL_S
 from ..v2x import received_chain
 from .rng import counter_uniform
 
@@ -68,4 +69,4 @@ class Link:
 
     def fresh(self, slot: int, now: float, max_age_s: float) -> np.ndarray:
         """``(B,)`` the latest message from ``slot`` is fresh at ``now``."""
-        return now - self.t[:, slot] <= max_age_s + 1e-9
+        return now - self.t[:, slot] <= max_age_s + TIME_TOL_S

@@ -21,6 +21,7 @@ import numpy as np
 from ..params import Params
 from ..shield.command import Command
 from ..shield.situation import SensingBounds, Situation
+from ..tolerances import DIST_TOL_M
 from .kinematics import Fleet, Motion, crossing_knots, windowed_gap_extrema
 from .rng import counter_uniform
 from .traffic import profile_segment
@@ -129,7 +130,7 @@ def own_lane_checks(prm: Params, lon: Motion, lat: Motion, plan, l0: Motion, pre
         g_lo, g_hi = windowed_gap_extrema(m_lon, _take(l0, rows), neg, knots, -level)
         lo[rows], hi[rows] = g_lo, g_hi
     collided = present & (lo < prm.vehicle_length) & (hi > -prm.vehicle_length)
-    violated = present & ~completed & (lo < prm.p_m - 1e-9) & (hi > -prm.p_m + 1e-9)  # as the target lane's
+    violated = present & ~completed & (lo < prm.p_m - DIST_TOL_M) & (hi > -prm.p_m + DIST_TOL_M)  # as the target lane's
     return collided, violated, lo
 
 

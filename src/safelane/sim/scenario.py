@@ -15,6 +15,7 @@ from pydantic import BaseModel, ConfigDict, Field, model_validator
 
 from ..params import Params
 from ..planners.variants import VARIANT_NAMES, get_variant
+from ..tolerances import SETTING_SLACK
 from .inputs import check_scenario_ranges
 
 #: Bounds of :class:`ScenarioConfig` that hold whatever the ``Params``: promises beyond 15 m/s² (1.5 g, more than any
@@ -246,7 +247,7 @@ def check_batch(batch: ScenarioBatch, prm: Params) -> None:
         raise ValueError("the scenario batch is empty")
     if batch.x.shape[1] < 2:
         raise ValueError("each scenario needs a follower and at least one leader (K >= 2)")
-    if (batch.decel_last > prm.others_decel + 1e-12).any():
+    if (batch.decel_last > prm.others_decel + SETTING_SLACK).any():
         worst = float(batch.decel_last.max())
         # Allowed, but outside the paper's assumptions: say so rather than silently promising safety.
         warnings.warn(

@@ -31,6 +31,7 @@ from typing import Protocol, runtime_checkable
 import numpy as np
 
 from ..params import Params
+from ..tolerances import SETTING_SLACK, TIME_TOL_S
 
 
 @dataclass(frozen=True)
@@ -136,11 +137,11 @@ def with_last_profile(batch, switch_times_s, accels_mps2, params: Params | None 
     steps = np.diff(t, axis=1)
     if (steps < 0).any():
         raise ValueError("switch_times_s must be ascending along each row")
-    if ((steps > 0) & (steps < prm.dt - 1e-12)).any():
+    if ((steps > 0) & (steps < prm.dt - SETTING_SLACK)).any():
         raise ValueError(f"switches must be at least one period (dt={prm.dt} s) apart (at most one per period)")
     brake = prm.others_decel  # L(N+1) is one of the others: it brakes up to their maximum a_o_d (a_x_d unless set)
-    if (a < -brake - 1e-12).any() or (a > prm.a_x_a + 1e-12).any():
-        bad = a[(a < -brake - 1e-12) | (a > prm.a_x_a + 1e-12)].flat[0]
+    if (a < -brake - SETTING_SLACK).any() or (a > prm.a_x_a + SETTING_SLACK).any():
+        bad = a[(a < -brake - SETTING_SLACK) | (a > prm.a_x_a + SETTING_SLACK)].flat[0]
         raise ValueError(f"accels_mps2 must lie in [-a_o_d={-brake}, a_x_a={prm.a_x_a}] (a_o_d: Params.others_decel); "
                          f"got {bad!r}")  # fmt: skip
     return dataclasses.replace(batch, last_profile_t=t, last_profile_a=a)
@@ -149,7 +150,7 @@ def with_last_profile(batch, switch_times_s, accels_mps2, params: Params | None 
 def profile_segment(t_start: float, dt: float, times: np.ndarray, accels: np.ndarray):
     """The profile over the period ``[t_start, t_start + dt]``: ``(a1, t_switch, a2)`` per row, ``t_switch``
     relative to the period's start (``dt`` and ``a2 = a1`` where nothing switches inside it)."""
-    eps = 1e-9
+    eps = TIME_TOL_S
     idx = (times <= t_start + eps).sum(1) - 1  # the last segment started by now (padding repeats a start)
     rows = np.arange(len(times))
     a1 = accels[rows, idx]
