@@ -134,7 +134,7 @@ def _lanes(minutes, scenarios, seed, batch_size, workers, others_decel, out: Pat
         report = run_streams(scenarios, seed, batch_size, LaneWorld(params=params), minutes, workers or 1)
         summary = {"scenarios": report.generated, "not_started": report.not_started, "seconds": report.seconds,
                    **report.counts,
-                   "min_ratio_inside": report.min_ratio_inside}  # fmt: skip
+                   "min_ratio_inside": report.min_ratio_inside, "failures_inside": report.failures}  # fmt: skip
         (run_dir / "report.json").write_text(json.dumps(summary, indent=1))
         info["files"] = ["report.json", "run.json"]
     typer.echo(report.text())

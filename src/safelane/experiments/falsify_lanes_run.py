@@ -3,6 +3,7 @@ the report that counts them inside and outside the assumptions (``safelane falsi
 
 from __future__ import annotations
 
+import sys
 import time
 from dataclasses import dataclass, field
 
@@ -20,8 +21,19 @@ class LaneReport:
     seconds: float = 0.0
     counts: dict = field(default_factory=dict)
     min_ratio_inside: float = float("inf")
+    #: Every scenario inside the assumptions with a collision or a ``p_m`` violation: where to replay it
+    #: (``default_rng([seed, stream, batch])``, row ``row`` of a batch of ``batch_size``) and what happened.
+    failures: list = field(default_factory=list)
 
-    def add(self, out: Outcome) -> None:
+    def add(self, out: Outcome, where: dict | None = None) -> list[dict]:
+        """Count ``out``'s rows; ``where`` (``seed``, ``stream``, ``batch``, ``batch_size``) locates the batch.
+        Returns the failures inside the assumptions it adds."""
+        found = []
+        for r in np.flatnonzero(out.inside & (out.collided | out.violated)):
+            found.append({**(where or {}), "row": int(r), "collision": bool(out.collided[r]),
+                          "p_m_violation": bool(out.violated[r]),
+                          "ego_responsible": bool(out.ego_collision[r] | out.ego_violation[r])})  # fmt: skip
+        self.failures.extend(found)
         self.generated += len(out.inside)
         self.not_started += int((~out.started).sum())
         for where, rows in (("inside", out.inside), ("outside", out.started & ~out.inside)):
@@ -38,6 +50,7 @@ class LaneReport:
             c["completed"] += int((out.completed & rows).sum())
         if out.inside.any():
             self.min_ratio_inside = min(self.min_ratio_inside, float(out.min_ratio[out.inside].min()))
+        return found
 
     def text(self) -> str:
         lines = [f"multi-lane falsifier: {self.generated:,} scenarios drawn in {self.seconds:.0f} s, "
@@ -46,7 +59,14 @@ class LaneReport:
         for where, c in self.counts.items():
             lines.append(f"  {names[where]}: " + ", ".join(f"{k} {v:,}" for k, v in c.items()))
         lines.append(f"  smallest |dx|/p_m inside (laterally conflicting samples): {self.min_ratio_inside:.6f}")
+        lines.extend(f"  failure inside: {_where(f)}" for f in self.failures)
         return "\n".join(lines)
+
+
+def _where(f: dict) -> str:
+    kinds = [k for k in ("collision", "p_m_violation") if f[k]]
+    return (f"seed {f.get('seed')} stream {f.get('stream')} batch {f.get('batch')} (size {f.get('batch_size')}) row "
+            f"{f['row']}: {' and '.join(kinds)}, {'the ego' if f['ego_responsible'] else 'the other'} responsible")
 
 
 def run(scenarios: int, seed: int = 0, batch_size: int = 2048, world: LaneWorld | None = None, stream: int = 0,
@@ -57,7 +77,9 @@ def run(scenarios: int, seed: int = 0, batch_size: int = 2048, world: LaneWorld 
     report, t0, i = LaneReport(), time.perf_counter(), 0
     while report.generated < scenarios or time.perf_counter() - t0 < 60.0 * minutes:
         spec = draw(np.random.default_rng([seed, stream, i]), batch_size, world.params)
-        report.add(simulate(spec, world))
+        where = {"seed": seed, "stream": stream, "batch": i, "batch_size": batch_size}
+        for f in report.add(simulate(spec, world), where):  # at once: a long campaign can be stopped on it
+            print(f"multi-lane falsifier: failure inside: {_where(f)}", file=sys.stderr, flush=True)
         report.seconds = time.perf_counter() - t0
         i += 1
         if on_batch is not None:
@@ -90,6 +112,7 @@ def run_streams(scenarios: int, seed: int = 0, batch_size: int = 2048, world: La
             for k, v in c.items():
                 mine[k] += v
         out.min_ratio_inside = min(out.min_ratio_inside, p.min_ratio_inside)
+        out.failures.extend(p.failures)
     return out
 
 
