@@ -83,3 +83,20 @@ def test_same_seed_same_outcomes_and_the_report_adds_up():
     total = sum(c["scenarios"] for c in a.counts.values()) + a.not_started
     assert total == 96
     assert "multi-lane falsifier" in a.text()
+
+
+def test_every_failure_inside_is_located_and_replays():
+    """Without the shield there are failures inside the assumptions (the entrants keep the rule; the ego does not):
+    the report lists each one, as many as it counts, and each replays from its seed, stream, batch and row."""
+    world = fl.LaneWorld(config=ShieldConfig(enabled=False), horizon_s=6.0)
+    report = run(64, seed=3, batch_size=32, world=world)
+    inside = report.counts["inside"]
+    failed = report.failures
+    assert len(failed) > 0
+    assert sum(f["collision"] for f in failed) == inside["collisions"]
+    assert sum(f["p_m_violation"] for f in failed) == inside["p_m_violations"]
+    assert "failure inside: seed 3 stream 0 batch" in report.text()
+    f = failed[-1]
+    spec = fl.draw(np.random.default_rng([f["seed"], f["stream"], f["batch"]]), f["batch_size"], world.params)
+    again = fl.simulate(fl.take(spec, [f["row"]]), world)
+    assert again.inside[0] and again.collided[0] == f["collision"] and again.violated[0] == f["p_m_violation"]
