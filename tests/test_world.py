@@ -51,6 +51,52 @@ def threshold_speed(gap: float) -> float:
     return u - a * rho
 
 
+def stop_by_hand(v: float) -> float:
+    """RSS's stopping distance of the ego as the rear vehicle, written out: a_x_a for ρ = dt, then a_x_d to rest."""
+    rho, up, dn = PRM.dt, PRM.a_x_a, PRM.a_x_d
+    return v * rho + 0.5 * up * rho * rho + (v + up * rho) ** 2 / (2 * dn)
+
+
+def entry_gap_by_hand(v_front: float, v_rear: float) -> float:
+    """The centre distance an entrant must leave ahead of the ego: p_m plus RSS's distance (a_o_d = a_x_d here, so
+    RSS's closed form is exact: the rear's stopping distance less the front's braking distance, at least 0)."""
+    return PRM.p_m + max(0.0, stop_by_hand(v_rear) - v_front**2 / (2 * PRM.others_decel))
+
+
+def dilemma_by_hand(y: float, vy: float) -> float:
+    """One period of a_y_m toward the target lane, then the fastest return to y_s = (w_l − w_v)/2 with zero lateral
+    speed (stop the lateral motion, then half the way at −a_y_m and half at +a_y_m), plus one period."""
+    a, dt, y_s = PRM.a_y_m, PRM.dt, 0.5 * (W - WV)
+    y1, v1 = y + vy * dt + 0.5 * a * dt * dt, vy + a * dt
+    peak = y1 + v1 * v1 / (2 * a)
+    return v1 / a + 2 * math.sqrt((peak - y_s) / a) + dt
+
+
+def combined_by_hand(*vehicles) -> tuple[float, float]:
+    """The slot several vehicles that may be there are folded into: the nearest position, and the speed whose braking
+    at a_o_d stops at the nearest of their stopping points (each (x, v) braking at a_o_d)."""
+    a = PRM.others_decel
+    x = min(xv[0] for xv in vehicles)
+    stop = min(xv[0] + xv[1] ** 2 / (2 * a) for xv in vehicles)
+    return x, math.sqrt(2 * a * (stop - x))
+
+
+def test_the_combined_slot_brakes_behind_each_vehicle_at_every_instant():
+    """The hand rule above, checked on a time grid against each vehicle's own braking (not a formula of the module):
+    the combined trajectory is never ahead of any of them."""
+    a, t = PRM.others_decel, np.linspace(0.0, 8.0, 8001)
+
+    def braking(x, v):
+        tt = np.minimum(t, v / a)
+        return x + v * tt - 0.5 * a * tt * tt
+
+    rng = np.random.default_rng(0)
+    for _ in range(200):
+        cars = [(float(rng.uniform(0, 60)), float(rng.uniform(0, 35))) for _ in range(3)]
+        low = braking(*combined_by_hand(*cars))
+        assert all((low <= braking(*car) + 1e-9).all() for car in cars), cars
+
+
 def test_rss_matched_parameters_are_the_ones_the_hand_computation_uses():
     assert (RSS.response_time_other, RSS.lat_accel_max, RSS.lat_brake_min) == (0.1, 1.5, 1.5)
     assert RSS.lateral_fluctuation_margin == pytest.approx(0.1)
@@ -79,10 +125,10 @@ def test_a_connected_vehicle_just_inside_its_lane_counts_only_there():
 @pytest.mark.parametrize("side", [+1, -1])
 def test_far_lane_vehicle_counts_once_its_lateral_worst_case_reaches_the_lane(side):
     """Lane 2 (side +1: beyond the target lane, entering it) or lane −1 (side −1: the ego's other side, entering the
-    ego's lane): centred in its lane, moving toward the ego's lanes at v_y. A non-connected vehicle in lane −1 counts
-    in the ego's lane whatever its lateral speed (rule 4); the reach threshold is checked there on a connected one's
-    absence of it and on the body rule of a vehicle just outside lane −1 (below). In lane 2 the reach decides for a
-    vehicle behind the ego (ahead of it, rule 5 counts it anyway), which becomes F, nearer than F at −30 m."""
+    ego's lane): centred in its lane, moving toward the ego's lanes at v_y. In lane −1 the reach puts it into L0 at its
+    own state; below the threshold rule 4 still counts it, at the cut-in bound (the test below). In lane 2 the reach
+    decides for a vehicle behind the ego (ahead of it, rule 5 counts it anyway), which becomes F, nearer than F at
+    −30 m."""
     lane = 2 if side > 0 else -1
     role_lane = 1 if side > 0 else 0
     y = lane * W
@@ -90,7 +136,6 @@ def test_far_lane_vehicle_counts_once_its_lateral_worst_case_reaches_the_lane(si
     v_star = threshold_speed(gap)
     assert reach_by_hand(v_star) == pytest.approx(gap, abs=1e-12)
     for v, counted in ((v_star - 1e-3, False), (v_star + 1e-3, True), (0.0, False), (-2.0, False)):
-        counted = counted or side < 0  # rule 4: the lane beside the ego's counts in it
         x = -12.0 if side > 0 else 20.0
         o = one(x, y, vx=15.0, vy=-side * v)
         inside = lane_reach(o, 0.0, PRM)[0, 0]
@@ -99,23 +144,46 @@ def test_far_lane_vehicle_counts_once_its_lateral_worst_case_reaches_the_lane(si
         if side > 0:  # the entrant behind the ego becomes F: 12 m behind, nearer than F at 30 m
             assert (r.f_x[0] == -12.0) == counted
             assert r.n_connected[0] == 2 and r.chain_x[0, 0] == 40.0
-        else:  # the entrant into the ego's lane ahead of it becomes L0
-            assert (r.own_x is not None and r.own_x[0, 0] == 20.0) == counted
+        else:  # counted by its reach: L0 at its own state; otherwise rule 4's cut-in bound p_m ahead of the ego
+            assert r.own_x[0, 0] == (20.0 if counted else PRM.p_m), (v, r.own_x)
 
 
 def test_a_vehicle_in_the_lane_beside_the_egos_counts_in_it():
-    """Rule 4, found by the multi-lane falsifier: a vehicle beside the ego's lane may enter it ahead of the ego at RSS's
-    distance while the ego escapes an aggressive F and cannot brake; so a non-connected vehicle whose body is in lane
-    −1 counts in lane 0 (virtually: it hides no L0 ahead of it). By hand: lane −1 spans y in (−1.5·W, −0.5·W); a body
-    of half-width WV/2 overlaps it while its centre is in (−1.5·W − WV/2, −0.5·W + WV/2)."""
+    """Rule 4, found by the multi-lane falsifier twice: a vehicle beside the ego's lane may enter it ahead of the ego at
+    RSS's distance while the ego escapes an aggressive F and cannot brake. A non-connected vehicle whose body is in
+    lane −1 counts in lane 0 (virtually: it hides no L0 ahead of it): at its own state once it is at the entry
+    distance; before that, if it can reach p_m ahead of the ego within the dilemma (it at a_x_a, the ego braking at
+    a_x_d), at the cut-in bound (ego_x + p_m, v*), v*² = 2·a_o_d·(the ego's RSS stopping distance); otherwise not at
+    all. All by hand: lane −1 spans y in (−1.5·W, −0.5·W), a body overlaps it while its centre is in
+    (−1.5·W − WV/2, −0.5·W + WV/2); the ego is at x = 0, 25 m/s, y = 1 (the situation helper)."""
+    ego_v, h = 25.0, dilemma_by_hand(1.0, 0.0)
+    cut = (PRM.p_m, math.sqrt(2 * PRM.others_decel * stop_by_hand(ego_v)))
+
+    def own(r):
+        return None if r.own_x is None or not np.isfinite(r.own_x[0, 0]) else (r.own_x[0, 0], r.own_v[0, 0])
+
+    ready = entry_gap_by_hand(15.0, ego_v)  # 15 m/s: a slower vehicle must leave more than p_m
     lo, hi = -1.5 * W - 0.5 * WV, -0.5 * W + 0.5 * WV
     for y, beside in ((hi - 1e-6, True), (lo + 1e-6, True), (lo - 1e-3, False), (-W, True)):
-        inside = lane_reach(one(20.0, y, vx=15.0), 0.0, PRM)[0, 0]
-        assert bool(inside[0]) == beside, (y, inside)
-    assert not lane_reach(one(20.0, -W, vx=15.0, connected=True), 0.0, PRM)[0, 0, 0]  # connected: it announces
-    own = ([[36.0, np.inf]], [[20.0, 0.0]])
-    r = roles(situation(one(24.0, -W, vx=25.0), own=own), PRM)
-    assert r.own_x[0, 0] == 24.0 and r.own_v[0, 0] == 20.0  # virtual: L0's lower speed kept
+        assert (own(roles(situation(one(ready + 1.0, y, vx=15.0)), PRM)) is not None) == beside, y
+    assert own(roles(situation(one(ready + 1.0, -W, vx=15.0, connected=True)), PRM)) is None  # it announces
+    # at the entry distance: its own state; 1 mm short of it: the cut-in bound
+    assert own(roles(situation(one(ready + 1e-3, -W, vx=15.0)), PRM)) == pytest.approx((ready + 1e-3, 15.0))
+    assert own(roles(situation(one(ready - 1e-3, -W, vx=15.0)), PRM)) == pytest.approx(cut)
+    # behind the ego: the cut-in bound while it can reach p_m ahead within the dilemma, no role beyond
+    gained = 30.0 * h + 0.5 * PRM.a_x_a * h * h - (ego_v * h - 0.5 * PRM.a_x_d * h * h)  # the ego does not stop
+    assert ego_v / PRM.a_x_d > h
+    reach_x = PRM.p_m - gained
+    assert own(roles(situation(one(reach_x + 1e-3, -W, vx=30.0)), PRM)) == pytest.approx(cut)
+    assert own(roles(situation(one(reach_x - 1e-3, -W, vx=30.0)), PRM)) is None
+    # a longer dilemma (the ego deeper in the target lane, moving toward it) reaches farther back
+    deep = roles(situation(one(reach_x - 5.0, -W, vx=30.0), ego_y=2.5), PRM)
+    assert dilemma_by_hand(2.5, 0.0) > h and own(deep) == pytest.approx(cut)
+    # virtual: L0 physically ahead is not hidden; the slot takes the combined stopping point (by hand)
+    l0 = ([[36.0, np.inf]], [[10.0, 0.0]])
+    r = roles(situation(one(ready - 1e-3, -W, vx=15.0), own=l0), PRM)
+    assert own(r) == pytest.approx(combined_by_hand(cut, (36.0, 10.0)))
+    assert r.own_v[0, 0] < cut[1]  # the slower L0 binds
 
 
 def test_far_lane_vehicle_behind_becomes_f_when_its_reach_crosses_and_not_before():
@@ -130,24 +198,38 @@ def test_far_lane_vehicle_behind_becomes_f_when_its_reach_crosses_and_not_before
         assert (r.f_x[0] == -12.0) == (k >= first), (k, v)
 
 
-def test_a_vehicle_beyond_the_target_lane_ahead_of_the_ego_counts_in_it():
-    """Rule 5, found by the multi-lane falsifier: a vehicle in lane 2 ahead of a straddling ego may enter the target
-    lane at RSS's distance and brake while the ego's evasion accelerates away from an aggressive F; so a
-    non-connected vehicle whose body is in lane 2 and whose centre is ahead of the ego's counts in the target lane,
-    virtually, whatever its lateral speed. By hand: lane 2 spans y in (1.5·W, 2.5·W); a body of half-width WV/2
-    overlaps it while its centre is in (1.5·W − WV/2, 2.5·W + WV/2)."""
+def test_a_vehicle_beyond_the_target_lane_counts_in_it_as_rule_4_counts_one_beside():
+    """Rule 5, found by the multi-lane falsifier: a vehicle in lane 2 may enter the target lane ahead of a straddling
+    ego at RSS's distance and brake while the ego's evasion accelerates away from an aggressive F. It counts in the
+    target lane as rule 4's vehicle counts in lane 0 — its own state at the entry distance, the cut-in bound before,
+    no role where it cannot get ahead within the dilemma — whatever its lateral speed, and virtually (L1 is not
+    hidden). By hand: lane 2 spans y in (1.5·W, 2.5·W); a body overlaps it while its centre is in
+    (1.5·W − WV/2, 2.5·W + WV/2)."""
+    ego_v, h = 25.0, dilemma_by_hand(1.0, 0.0)
+    cut = (PRM.p_m, math.sqrt(2 * PRM.others_decel * stop_by_hand(ego_v)))
+    ready = entry_gap_by_hand(28.0, ego_v)
+    assert ready < 20.0
     lo, hi = 1.5 * W - 0.5 * WV, 2.5 * W + 0.5 * WV
     for y, beyond in ((lo + 1e-6, True), (hi - 1e-6, True), (hi + 1e-3, False), (2 * W, True)):
         for vy in (0.0, 1.0):  # moving away from the target lane too
-            r = roles(situation(one(20.0, y, vx=15.0, vy=vy)), PRM)
+            r = roles(situation(one(20.0, y, vx=28.0, vy=vy), leaders=((60.0, 80.0, 100.0), (28.0, 28.0, 28.0))),
+                      PRM)  # fmt: skip
             assert (r.chain_x[0, 0] == 20.0) == beyond, (y, vy)
             assert r.n_connected[0] == (0 if beyond else 2)
     assert roles(situation(one(20.0, 2 * W, vx=15.0, connected=True)), PRM).chain_x[0, 0] == 40.0  # it announces
-    assert roles(situation(one(0.5, 2 * W, vx=15.0)), PRM).chain_x[0, 0] == 0.5  # just ahead of the ego's centre
-    behind = roles(situation(one(-0.5, 2 * W, vx=15.0)), PRM)  # just behind: no role (it would be the rear vehicle)
+    short = roles(situation(one(ready - 1e-3, 2 * W, vx=28.0)), PRM)  # 1 mm short of the entry distance
+    assert (short.chain_x[0, 0], short.n_connected[0]) == (PRM.p_m, 0)
+    assert short.chain_v[0, 0] == pytest.approx(combined_by_hand(cut, (40.0, 25.0))[1])  # L1 (40 m, 25 m/s) folded in
+    gained = 30.0 * h + 0.5 * PRM.a_x_a * h * h - (ego_v * h - 0.5 * PRM.a_x_d * h * h)
+    reach_x = PRM.p_m - gained
+    assert roles(situation(one(reach_x + 1e-3, 2 * W, vx=30.0)), PRM).chain_x[0, 0] == PRM.p_m  # behind, can reach
+    behind = roles(situation(one(reach_x - 1e-3, 2 * W, vx=30.0)), PRM)  # cannot: no role (not F either)
     assert behind.chain_x[0, 0] == 40.0 and behind.f_x[0] == -30.0
-    r = roles(situation(one(30.0, 2 * W, vx=28.0)), PRM)  # virtual: L1's lower speed kept (rule 1's window)
-    assert r.chain_x[0, 0] == 30.0 and r.chain_v[0, 0] == 25.0
+    r = roles(situation(one(30.0, 2 * W, vx=28.0)), PRM)  # at the entry distance; L1 (40 m, 25 m/s) not hidden
+    assert (r.chain_x[0, 0], r.chain_v[0, 0]) == pytest.approx(combined_by_hand((30.0, 28.0), (40.0, 25.0)))
+    r = roles(situation(one(30.0, 2 * W, vx=28.0), leaders=((40.0, 60.0, 80.0), (10.0, 25.0, 25.0))), PRM)
+    expected = combined_by_hand((30.0, 28.0), (40.0, 10.0))[1]
+    assert r.chain_v[0, 0] == pytest.approx(expected) and expected < 28.0  # a slow L1 binds
 
 
 def test_connected_announcement_counts_from_announce_t_minus_horizon():
@@ -209,18 +291,22 @@ def test_own_lane_merge_keeps_l0_first():
 def test_a_vehicle_counted_by_reach_or_announcement_alone_hides_no_vehicle_ahead():
     """Found by the multi-lane falsifier: a vehicle in the lane beside, counted in the ego's lane by its announcement
     (or its reach) but not in it, was merged as L0 and the slower, physically present L0 ahead of it was dropped.
-    The slot now takes the lowest speed of the two (the nearest position is the virtual one's): by hand, the worst
-    case (both braking at a_o_d) of a vehicle at the lower position and the lower speed stays behind both."""
-    own = ([[36.0, np.inf]], [[29.5, 0.0]])
+    The slot now combines them (the nearest position, and the speed braking to the nearer stopping point; checked
+    against each vehicle's braking on a time grid above): a slower L0 ahead binds, a faster one does not."""
+    own = ([[36.0, np.inf]], [[20.0, 0.0]])
     announced = one(24.0, -W, vx=30.8, connected=True, announce_lane=0, announce_t=0.0)  # lane -1, announced lane 0
     r = roles(situation(announced, own=own), PRM)
-    assert r.own_x[0, 0] == 24.0 and r.own_v[0, 0] == 29.5 and r.own_n_connected[0] == 0
+    assert r.own_x[0, 0] == 24.0 and r.own_n_connected[0] == 0
+    expected = combined_by_hand((24.0, 30.8), (36.0, 20.0))[1]
+    assert r.own_v[0, 0] == pytest.approx(expected) and expected < 30.8
+    assert roles(situation(announced, own=([[36.0, np.inf]], [[29.5, 0.0]])), PRM).own_v[0, 0] == 30.8  # L0 ahead
     inside = one(24.0, 0.0, vx=30.8)  # physically in the ego's lane: it shields L0, as before
     assert roles(situation(inside, own=own), PRM).own_v[0, 0] == 30.8
-    # the target lane: an announced entrant nearer than L1 (connected, 25 m/s) takes L1's lower speed, N = 0
+    # the target lane: an announced entrant nearer than L1 (connected, 25 m/s) folds L1 in, N = 0
     fast = one(30.0, 2 * W, vx=28.0, connected=True, announce_lane=1, announce_t=0.0)
     rc = roles(situation(fast), PRM)
-    assert rc.chain_x[0, 0] == 30.0 and rc.chain_v[0, 0] == 25.0 and rc.n_connected[0] == 0
+    assert rc.chain_x[0, 0] == 30.0 and rc.n_connected[0] == 0
+    assert rc.chain_v[0, 0] == pytest.approx(combined_by_hand((30.0, 28.0), (40.0, 25.0))[1])
     assert roles(situation(one(30.0, W, vx=28.0)), PRM).chain_v[0, 0] == 28.0  # physically there
     # behind: an announced entrant nearer than F but slower takes F's higher speed (F's worst case is ahead of both)
     slow = one(-20.0, 2 * W, vx=20.0, connected=True, announce_lane=1, announce_t=0.0)
@@ -367,14 +453,14 @@ def test_fold_restarts_the_assessment_where_f_was_replaced():
 
 
 def test_the_shields_first_stage_folds_the_others():
-    """Straddling at y = 2 m: a lane-2 vehicle moving toward the target lane fast enough to count, 6 m behind (ahead,
-    rule 5 counts it whatever its lateral speed), ends the lane change's safe evasion; below the threshold speed it
-    changes nothing (bit-identical decision)."""
+    """Straddling at y = 2 m: a lane-2 vehicle moving toward the target lane fast enough to count, 6 m behind at
+    20 m/s (too slow to get ahead of the ego within the dilemma, so rule 5 leaves it out), ends the lane change's safe
+    evasion; below the threshold speed it changes nothing (bit-identical decision)."""
     v_star = threshold_speed(0.5 * W - 0.5 * WV - 0.05)
     proposal = (np.array([0.0]), np.array([1.0]))
     decisions = {}
     for name, vy in (("none", None), ("slow", v_star - 0.01), ("fast", v_star + 0.01)):
-        o = None if vy is None else one(-6.0, 2 * W, vx=27.0, vy=-vy)
+        o = None if vy is None else one(-6.0, 2 * W, vx=20.0, vy=-vy)
         s = situation(o, ego_y=2.0)
         state = core.init(roles(s, PRM), PRM, ShieldConfig(), "CV_all")
         decisions[name] = core.step(state, s, proposal, PRM, ShieldConfig(), "CV_all")[1]

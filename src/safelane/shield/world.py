@@ -16,9 +16,8 @@ lane on the ego's other side). A row's unused slots are padding: ``x = +inf``.
   <safelane.baselines.rss.RssParams.matched>` unless given, as the blame rule uses them); a *connected* one is
   trusted to stay in the lanes its body overlaps until it announces a lane change over V2X, and counts in the
   announced lane from ``announce_t − horizon_s`` on; a *non-connected* one whose body is in the lane beside the ego's
-  lane (−1) also counts in the ego's lane (rule 4: it may enter it ahead at RSS's distance whenever it likes), and
-  one whose body is in the lane beyond the target lane (2) *and ahead of the ego* counts in the target lane (rule 5,
-  :func:`beyond_target`);
+  lane (−1) or beyond the target lane (2) also counts ahead of the ego in the lane next to it (rules 4 and 5: it may
+  enter there at RSS's distance whenever it likes), at its own state or at the cut-in bound (:func:`entrants`);
 * **target lane, ahead of the ego** (``x > ego_x``): merged into the chain by position; each is non-connected (the
   record carries no braking promise), so the connected chain ends at the first of them (N shrinks);
 * **target lane, behind the ego**: the nearest becomes F where it is nearer than F — non-connected, not
@@ -39,7 +38,9 @@ import dataclasses
 import numpy as np
 
 from .._motion import advance
-from ..baselines.rss import RssParams, stated_braking_lateral
+from ..baselines.rss import (RssParams, longitudinal_safe_distance_exact, stated_braking_lateral,
+                             stated_braking_longitudinal)
+from ..safety.lateral import lateral_core
 from ..params import Params
 from .monitor import TOL_M
 from .others import NO_LANE, Others
@@ -66,14 +67,51 @@ def _overlaps(lo, hi, prm: Params) -> np.ndarray:
     return (hi[..., None] > (lanes - 0.5) * prm.lane_width) & (lo[..., None] < (lanes + 0.5) * prm.lane_width)
 
 
-def beyond_target(others: Others, prm: Params) -> np.ndarray:
-    """``(B, K)``: rule 5's vehicles — non-connected, body in the lane beyond the target lane (2). :func:`roles`
-    counts those ahead of the ego in the target lane, virtually. Found by the multi-lane falsifier: such a vehicle may
-    enter the target lane ahead of a straddling ego at RSS's distance (legal: RSS's rear vehicle can brake) and brake,
-    while the ego's evasion accelerates away from an aggressive F and passes it inside ``p_m`` with its body still in
-    the target lane. Behind the ego it plays no part: there it would enter as the rear vehicle, responsible for the
-    distance."""
-    return ~others.connected & _body_in(others, prm, 2) & np.isfinite(others.x)
+def dilemma_s(situation, prm: Params) -> np.ndarray:
+    """``(B,)`` how long the evasion adopted this period can keep the ego's body in the target lane [s]: the fastest
+    lateral return to ``y_s`` (Eq. 5) from the farthest lateral state one period of ``a_y_m`` toward the target lane
+    can reach, plus one period. While the body is in the target lane an aggressive ``F`` may oblige the evasion to
+    accelerate; afterwards the ego can always brake (rule 4)."""
+    a, dt = prm.a_y_m, prm.dt
+    y = situation.ego_y + situation.ego_vy * dt + 0.5 * a * dt * dt
+    with np.errstate(invalid="ignore"):
+        t_back = lateral_core(np, y, situation.ego_vy + a * dt, prm)[0]
+    return t_back + dt
+
+
+def entrants(situation, others: Others, prm: Params, lane: int):
+    """Rules 4 and 5: the non-connected vehicles whose body is in ``lane`` — −1, beside the ego's lane (rule 4), or 2,
+    beyond the target lane (rule 5) — as leaders in the lane next to it (0 or 1). Returns ``(x, v, counted)``, each
+    ``(B, K)``: the state each counts at there and whether it counts.
+
+    RSS lets such a vehicle enter that lane ahead of the ego whenever it is at RSS's safe distance plus ``p_m`` (the
+    ego the rear vehicle: one period at ``a_x_a``, then ``a_x_d``; the entrant brakes at ``a_o_d``) — and then brake,
+    when an ego escaping an aggressive ``F`` may be unable to. So:
+
+    * **at that distance now**: it counts at its own state (its braking from now bounds every trajectory it has);
+    * **not yet, but able to reach ``p_m`` ahead of the ego within** :func:`dilemma_s` (it accelerating at ``a_x_a``,
+      the ego braking at ``a_x_d``): it counts at the **cut-in bound** ``(ego_x + p_m, v*)``, ``v*² = 2·a_o_d·S``
+      with ``S`` the ego's RSS stopping distance — every legal entry's braking trajectory lies ahead of this one
+      (docs/safety.md, rule 4), whenever it happens;
+    * otherwise it plays no role: it cannot enter ahead of the ego before the evasion adopted now has taken the ego's
+      body out of the target lane, and from then on the ego can brake (the bound holds it from the period it can
+      reach).
+
+    Found by the multi-lane falsifier (rule 4): a faster vehicle beside and behind the ego overtook it during an abort
+    and entered at RSS's distance; counted only once ahead of the ego's centre, it came too late for any evasion."""
+    o, s = others, situation
+    ex, ev = s.ego_x[:, None], s.ego_vx[:, None]
+    a_o, a_up, a_dn, dt = prm.others_decel, prm.a_x_a, prm.a_x_d, prm.dt
+    there = ~o.connected & _body_in(o, prm, lane) & np.isfinite(o.x)
+    with np.errstate(invalid="ignore"):
+        gap = o.x - ex - prm.p_m
+        ready = there & (gap >= longitudinal_safe_distance_exact(o.vx, ev, dt, a_up, a_dn, a_o))
+        h = dilemma_s(s, prm)[:, None]
+        tb = np.minimum(h, ev / a_dn)
+        gained = o.vx * h + 0.5 * a_up * h * h - (ev * tb - 0.5 * a_dn * tb * tb)
+    cut = there & ~ready & ((gap >= 0.0) | (gap + gained >= 0.0))
+    v_star = np.sqrt(2.0 * a_o * stated_braking_longitudinal(ev, dt, a_up, a_dn))
+    return np.where(cut, ex + prm.p_m, o.x), np.where(cut, v_star, o.vx), ready | cut
 
 
 def _body_in(o: Others, prm: Params, lane: int) -> np.ndarray:
@@ -95,9 +133,6 @@ def lane_reach(others: Others, t: float, prm: Params, rss: RssParams | None = No
     mu = np.where(free, 0.5 * rss.lateral_fluctuation_margin, 0.0)
     half = 0.5 * prm.vehicle_width
     inside = _overlaps(o.y - half - down - mu, o.y + half + up + mu, prm)
-    # 4. the lane beside the ego's lane: a non-connected vehicle whose body is there counts in the ego's lane (it may
-    # enter it ahead of the ego at RSS's distance at any time, when the ego's evasion may not be able to brake)
-    inside[..., 0] |= free & _body_in(o, prm, -1)
     announced = o.connected & (o.announce_lane != NO_LANE) & (t >= o.announce_t - horizon_s)
     inside |= announced[..., None] & (o.announce_lane[..., None] == np.asarray(ROLE_LANES))
     return inside & np.isfinite(o.x)[..., None]
@@ -123,19 +158,28 @@ def _merge(keys, payload, conn, width: int):
     return {name: take(a) for name, a in payload.items()}, valid, lead
 
 
-def _window_min(got, valid, n_new, keep):
-    """The first non-connected slot ``n_new`` of a merged, sorted lane as the vehicles it cannot hide: its speed
-    becomes the lowest of the slots from it up to and including the first vehicle *physically* in the lane (a
-    vehicle counted by its reach or announcement alone is not there to shield the ones ahead; docs/safety.md).
-    Positions are sorted, so the slot's position is already the lowest. ``keep``: the payload keys to combine
-    (speed by its minimum, an error bound by its maximum)."""
+def _window_min(got, valid, n_new, keep, decel: float):
+    """The first non-connected slot ``n_new`` of a merged, sorted lane as the vehicles it cannot hide, the slots from
+    it up to and including the first vehicle *physically* in the lane (a vehicle counted by its reach, announcement
+    or rule 4 alone is not there to shield the ones ahead; docs/safety.md). Positions are sorted, so the slot's
+    position is already the lowest. Its speed becomes the one whose braking at ``decel`` (the others' ``a_o_d``, the
+    analysis' worst case for a non-connected vehicle) stops at the nearest of their stopping points: that braking
+    trajectory lies behind each of theirs at every instant (same start or behind, same deceleration, stopping no
+    farther; docs/safety.md). With sensing-error bounds (``"err"`` in ``keep``) the speed is the lowest of the window
+    instead (the corners of the boxes need not order alike) and the bound the largest."""
     slots = np.arange(valid.shape[1])[None, :]
     later = valid & got["phys"] & (slots >= n_new[:, None])
     first_phys = np.where(later.any(1), np.argmax(later, axis=1), valid.shape[1] - 1)
     window = valid & (slots >= n_new[:, None]) & (slots <= first_phys[:, None])
     rows = np.arange(valid.shape[0])
     at = np.minimum(n_new, valid.shape[1] - 1)
-    got["v"][rows, at] = np.where(window.any(1), np.where(window, got["v"], np.inf).min(1), got["v"][rows, at])
+    if "err" in keep:
+        combined = np.where(window, got["v"], np.inf).min(1)
+    else:
+        with np.errstate(invalid="ignore"):
+            stop = np.where(window, got["x"] + got["v"] * got["v"] / (2.0 * decel), np.inf).min(1)
+            combined = np.sqrt(np.maximum(2.0 * decel * (stop - got["x"][rows, at]), 0.0))
+    got["v"][rows, at] = np.where(window.any(1), combined, got["v"][rows, at])
     if "err" in keep:
         err = np.where(window[..., None], got["err"], -np.inf).max(1)
         got["err"][rows, at] = np.where(window.any(1)[:, None], err, got["err"][rows, at])
@@ -159,9 +203,14 @@ def roles(situation, params: Params, rss: RssParams | None = None, horizon_s: fl
     inside = lane_reach(o, s.t, params, rss, horizon_s)
     body = body_lanes(o, params)
     ahead = o.x > s.ego_x[:, None]
-    inside[..., 1] |= beyond_target(o, params) & ahead  # rule 5
-    target_ahead, target_behind = inside[..., 1] & ahead, inside[..., 1] & ~ahead
-    own_ahead = inside[..., 0] & ahead
+    # each lane's vehicles ahead: at their own state (rules 1-3), or as rules 4 and 5 count them
+    own_state, target_state = inside[..., 0] & ahead, inside[..., 1] & ahead
+    side_x, side_v, side = entrants(s, o, params, -1)  # rule 4
+    far_x, far_v, far = entrants(s, o, params, 2)  # rule 5
+    own_ahead, target_ahead = own_state | side, target_state | far
+    own_cx, own_cv = np.where(own_state, o.x, side_x), np.where(own_state, o.vx, side_v)
+    tgt_cx, tgt_cv = np.where(target_state, o.x, far_x), np.where(target_state, o.vx, far_v)
+    target_behind = inside[..., 1] & ~ahead
     loose = _loosest(s)
     out = {"others": None}
 
@@ -194,19 +243,19 @@ def roles(situation, params: Params, rss: RssParams | None = None, horizon_s: fl
     if merge_rows.any():
         slots = np.arange(m)[None, :]
         keep = slots <= s.n_connected[:, None]
-        keys = np.concatenate([np.where(keep, s.chain_x, np.inf), np.where(target_ahead, o.x, np.inf)], axis=1)
+        keys = np.concatenate([np.where(keep, s.chain_x, np.inf), np.where(target_ahead, tgt_cx, np.inf)], axis=1)
         k = o.x.shape[1]
         payload = {
-            "x": np.concatenate([s.chain_x, o.x], 1), "v": np.concatenate([s.chain_v, o.vx], 1),
+            "x": np.concatenate([s.chain_x, tgt_cx], 1), "v": np.concatenate([s.chain_v, tgt_cv], 1),
             "promise": np.concatenate([_with_column(s.chain_promise, 0.0), np.zeros((b, k))], 1),
             "human": np.concatenate([_with_column(s.chain_human, False, bool), np.zeros((b, k), bool)], 1),
-            "phys": np.concatenate([np.ones((b, m), bool), body[..., 1]], 1),
+            "phys": np.concatenate([np.ones((b, m), bool), body[..., 1] & target_state], 1),
         }  # fmt: skip
         if s.err_chain is not None:
             payload["err"] = np.concatenate([s.err_chain, np.broadcast_to(loose[:, None, :], (b, k, 2))], 1)
         conn = np.concatenate([slots < s.n_connected[:, None], np.zeros((b, k), bool)], axis=1)
         got, valid, n_new = _merge(keys, payload, conn, m + k)
-        got = {name: a[:, :m] for name, a in _window_min(got, valid, n_new, payload).items()}
+        got = {name: a[:, :m] for name, a in _window_min(got, valid, n_new, payload, params.others_decel).items()}
         # Beyond the new L(N+1): padding far ahead, at its speed (links there never bind).
         last_x = np.take_along_axis(got["x"], n_new[:, None], 1)
         last_v = np.take_along_axis(got["v"], n_new[:, None], 1)
@@ -237,17 +286,17 @@ def roles(situation, params: Params, rss: RssParams | None = None, horizon_s: fl
         kk, k = own_x.shape[1], o.x.shape[1]
         slots = np.arange(kk)[None, :]
         keep = (slots <= own_n[:, None]) & np.isfinite(own_x)
-        keys = np.concatenate([np.where(keep, own_x, np.inf), np.where(own_ahead, o.x, np.inf)], axis=1)
+        keys = np.concatenate([np.where(keep, own_x, np.inf), np.where(own_ahead, own_cx, np.inf)], axis=1)
         payload = {
-            "x": np.concatenate([own_x, o.x], 1), "v": np.concatenate([own_v, o.vx], 1),
+            "x": np.concatenate([own_x, own_cx], 1), "v": np.concatenate([own_v, own_cv], 1),
             "promise": np.concatenate([_with_column(own_promise, 0.0), np.zeros((b, k))], 1),
-            "phys": np.concatenate([np.ones((b, kk), bool), body[..., 0]], 1),
+            "phys": np.concatenate([np.ones((b, kk), bool), body[..., 0] & own_state], 1),
         }  # fmt: skip
         if err_own is not None:
             payload["err"] = np.concatenate([err_own, np.broadcast_to(loose[:, None, :], (b, k, 2))], 1)
         conn = np.concatenate([slots < own_n[:, None], np.zeros((b, k), bool)], axis=1)
         got, valid, n_new = _merge(keys, payload, conn, kk + k)
-        got = _window_min(got, valid, n_new, payload)
+        got = _window_min(got, valid, n_new, payload, params.others_decel)
         got, valid = {name: a[:, :kk] for name, a in got.items()}, valid[:, :kk]
         there = valid & (slots <= n_new[:, None])  # L0 .. the first non-connected one; +inf beyond
         rows2 = own_rows[:, None]
