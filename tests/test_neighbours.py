@@ -2,7 +2,7 @@
 
 The platoons against their definition written out here (bounds, one speed per lane, spacing = headway · speed +
 length), their independence of the batch they are drawn in, the shield folding them (a lane-2 neighbour ahead cuts
-the connected chain: world-model rule 5), and the simulator's outcomes: they keep their lanes, so in the guarantee's
+the connected chain: world-model rule 5, by hand), and the simulator's outcomes: they keep their lanes, so in the guarantee's
 mode no collision and no ``p_m`` violation appears, and the ego only completes less often."""
 
 from __future__ import annotations
@@ -70,9 +70,21 @@ def test_the_shield_counts_a_neighbour_ahead_beyond_the_target_lane():
     assert situation.others is not None
     folded = roles(situation, PRM)
     o, n = situation.others, situation.n_connected
-    ahead = (o.y == 2 * PRM.lane_width) & (o.x > situation.ego_x[:, None])
-    first = np.where(ahead, o.x, np.inf).min(1)  # the nearest lane-2 neighbour ahead of the ego
-    # by hand: the connected chain keeps the leaders before it, and ends there
+    assert (situation.ego_y == 0.0).all() and (situation.ego_vy == 0.0).all()
+    # by hand (world-model rule 5): a lane-2 neighbour counts at its own position once it is p_m plus RSS's distance
+    # ahead of the ego (the ego's stopping distance, a_x_a for dt then a_x_d, less the neighbour's at a_o_d = a_x_d),
+    # else at ego_x + p_m where it can get p_m ahead within the dilemma — here one period (the ego in its lane: an
+    # evasion adopted now keeps no part of it in the target lane), it at a_x_a, the ego braking at a_x_d
+    dt, up, dn, ev = PRM.dt, PRM.a_x_a, PRM.a_x_d, situation.ego_vx[:, None]
+    assert PRM.others_decel == dn and (ev > dn * dt).all()
+    stop = ev * dt + 0.5 * up * dt * dt + (ev + up * dt) ** 2 / (2 * dn)
+    gap = o.x - situation.ego_x[:, None] - PRM.p_m
+    lane2 = o.y == 2 * PRM.lane_width
+    ready = lane2 & (gap >= np.maximum(stop - o.vx**2 / (2 * dn), 0.0))
+    cut = lane2 & ~ready & (gap + (o.vx - ev) * dt + 0.5 * (up + dn) * dt * dt >= 0.0)
+    first = np.minimum(np.where(ready, o.x, np.inf).min(1), np.where(cut.any(1), situation.ego_x + PRM.p_m, np.inf))
+    assert ready.any() and cut.any()
+    # the connected chain keeps the leaders before the first of them, and ends there
     slot = np.arange(situation.chain_x.shape[1])[None, :]
     expected = ((situation.chain_x < first[:, None]) & (slot < n[:, None])).sum(1)
     assert np.array_equal(folded.n_connected, expected)

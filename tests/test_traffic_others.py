@@ -90,7 +90,7 @@ def test_the_others_are_the_lanes_beyond_and_beside_in_the_shield_frame_once_and
     assert folded.chain_x[0, :2].tolist() == [110.0, 110.0 + PAD_M] and folded.n_connected[0] == 0
     assert folded.own_x[1, 0] == 1105.0 and folded.f_x[1] == s.f_x[1]
     assert folded.chain_x[1].tolist() == s.chain_x[1].tolist()
-    # the same fleet with human.b not moving: ahead of cav.r in lane 2 it still counts (world-model rule 5); moved
+    # the same fleet with human.b not moving: ahead of cav.r in lane 2 it still counts (world-model rule 5, at the cut-in bound); moved
     # behind cav.r (nearer than F) it reaches nothing and changes nothing
     def moved(x_b):
         return fleet([(r[0], x_b if r[0] == "human.b" else r[1], r[2], r[3], 0.0 if r[0] == "human.b" else r[4])
@@ -101,7 +101,8 @@ def test_the_others_are_the_lanes_beyond_and_beside_in_the_shield_frame_once_and
         s2, _ = ch.situation(still, still.x.copy(), rows, 5.0)
         folded2 = roles(s2, PRM)
         assert s2.others.vy[0, 0] == 0.0 and s2.others.x[0, 0] == x_b
-        assert (folded2.chain_x[0].tolist() == folded.chain_x[0].tolist()) == counts
+        # counted: 110 m is short of RSS's entry distance ahead of the ego, so at the cut-in bound ego_x + p_m
+        assert (folded2.chain_x[0, 0] == s2.ego_x[0] + PRM.p_m and folded2.n_connected[0] == 0) == counts
         assert (folded2.chain_x[0].tolist() == s2.chain_x[0].tolist()) != counts
         assert folded2.f_x[0] == s2.f_x[0] == 90.0
     # the feed off: no record (the paper's world, as before)
