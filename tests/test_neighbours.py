@@ -1,9 +1,9 @@
 """Traffic in the lanes beside (``SimConfig.neighbours``, safelane.sim.neighbours) and the lane-cost experiment.
 
 The platoons against their definition written out here (bounds, one speed per lane, spacing = headway · speed +
-length), their independence of the batch they are drawn in, the shield folding them (a lane-2 neighbour ahead cuts
-the connected chain: world-model rule 5, by hand), and the simulator's outcomes: they keep their lanes, so in the guarantee's
-mode no collision and no ``p_m`` violation appears, and the ego only completes less often."""
+length), their independence of the batch they are drawn in, the shield folding them (a lane-2 neighbour that can get
+ahead cuts the connected chain: world-model rule 5, by hand), and the simulator's outcomes: they keep their lanes, so
+in the guarantee's mode no collision and no ``p_m`` violation appears, and the ego only completes less often."""
 
 from __future__ import annotations
 

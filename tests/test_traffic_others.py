@@ -90,8 +90,8 @@ def test_the_others_are_the_lanes_beyond_and_beside_in_the_shield_frame_once_and
     assert folded.chain_x[0, :2].tolist() == [110.0, 110.0 + PAD_M] and folded.n_connected[0] == 0
     assert folded.own_x[1, 0] == 1105.0 and folded.f_x[1] == s.f_x[1]
     assert folded.chain_x[1].tolist() == s.chain_x[1].tolist()
-    # the same fleet with human.b not moving: ahead of cav.r in lane 2 it still counts (world-model rule 5, at the cut-in bound); moved
-    # behind cav.r (nearer than F) it reaches nothing and changes nothing
+    # the same fleet with human.b not moving: ahead of cav.r in lane 2 it still counts (world-model rule 5, at the
+    # cut-in bound); moved behind cav.r (nearer than F) it reaches nothing and changes nothing
     def moved(x_b):
         return fleet([(r[0], x_b if r[0] == "human.b" else r[1], r[2], r[3], 0.0 if r[0] == "human.b" else r[4])
                       for r in zip(f.ids, f.x, f.y, f.v, f.vy, strict=True)])  # fmt: skip

@@ -38,10 +38,14 @@ import dataclasses
 import numpy as np
 
 from .._motion import advance
-from ..baselines.rss import (RssParams, longitudinal_safe_distance_exact, stated_braking_lateral,
-                             stated_braking_longitudinal)
-from ..safety.lateral import lateral_core
+from ..baselines.rss import (
+    RssParams,
+    longitudinal_safe_distance_exact,
+    stated_braking_lateral,
+    stated_braking_longitudinal,
+)
 from ..params import Params
+from ..safety.lateral import lateral_core
 from .monitor import TOL_M
 from .others import NO_LANE, Others
 from .policies import ASSESSMENTS
