@@ -82,6 +82,7 @@ NOT_RUN: dict[str, str] = {
     "safelane falsify --minutes 10 --scenarios 1000000 --seed 0 --out /tmp/fz_final --no-progress": _LONG,
     "safelane falsify --world lanes --scenarios 150000 --minutes 0 --seed 1 --batch-size 2048": _LONG,
     "safelane falsify --world lanes --scenarios 1400000 --minutes 0 --seed 2 --batch-size 2048 --workers 2": _LONG,
+    "safelane falsify --world lanes --scenarios 1400000 --minutes 0 --seed 3 --batch-size 2048 --workers 2": _LONG,
     "git checkout 68a1771 && safelane falsify --minutes 0 --scenarios 20000 --seed 0 --no-progress": "checks out "
     "an old commit: " + _LONG,
     "safelane falsify --world realistic --scenarios 1000000 --minutes 0 --seed 17 --workers 2 --batch-size 16384":
