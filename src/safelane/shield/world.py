@@ -162,7 +162,7 @@ def _merge(keys, payload, conn, width: int):
     return {name: take(a) for name, a in payload.items()}, valid, lead
 
 
-def _window_min(got, valid, n_new, keep, decel: float):
+def _fold_window(got, valid, n_new, keep, decel: float):
     """The first non-connected slot ``n_new`` of a merged, sorted lane as the vehicles it cannot hide, the slots from
     it up to and including the first vehicle *physically* in the lane (a vehicle counted by its reach, announcement
     or rule 4 alone is not there to shield the ones ahead; docs/safety.md). Positions are sorted, so the slot's
@@ -259,7 +259,7 @@ def roles(situation, params: Params, rss: RssParams | None = None, horizon_s: fl
             payload["err"] = np.concatenate([s.err_chain, np.broadcast_to(loose[:, None, :], (b, k, 2))], 1)
         conn = np.concatenate([slots < s.n_connected[:, None], np.zeros((b, k), bool)], axis=1)
         got, valid, n_new = _merge(keys, payload, conn, m + k)
-        got = {name: a[:, :m] for name, a in _window_min(got, valid, n_new, payload, params.others_decel).items()}
+        got = {name: a[:, :m] for name, a in _fold_window(got, valid, n_new, payload, params.others_decel).items()}
         # Beyond the new L(N+1): padding far ahead, at its speed (links there never bind).
         last_x = np.take_along_axis(got["x"], n_new[:, None], 1)
         last_v = np.take_along_axis(got["v"], n_new[:, None], 1)
@@ -300,7 +300,7 @@ def roles(situation, params: Params, rss: RssParams | None = None, horizon_s: fl
             payload["err"] = np.concatenate([err_own, np.broadcast_to(loose[:, None, :], (b, k, 2))], 1)
         conn = np.concatenate([slots < own_n[:, None], np.zeros((b, k), bool)], axis=1)
         got, valid, n_new = _merge(keys, payload, conn, kk + k)
-        got = _window_min(got, valid, n_new, payload, params.others_decel)
+        got = _fold_window(got, valid, n_new, payload, params.others_decel)
         got, valid = {name: a[:, :kk] for name, a in got.items()}, valid[:, :kk]
         there = valid & (slots <= n_new[:, None])  # L0 .. the first non-connected one; +inf beyond
         rows2 = own_rows[:, None]
