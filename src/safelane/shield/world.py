@@ -83,10 +83,11 @@ def dilemma_s(situation, prm: Params) -> np.ndarray:
     return t_back + dt
 
 
-def entrants(situation, others: Others, prm: Params, lane: int):
-    """Rules 4 and 5: the non-connected vehicles whose body is in ``lane`` — −1, beside the ego's lane (rule 4), or 2,
-    beyond the target lane (rule 5) — as leaders in the lane next to it (0 or 1). Returns ``(x, v, counted)``, each
-    ``(B, K)``: the state each counts at there and whether it counts.
+def entrants(situation, others: Others, prm: Params):
+    """Rules 4 and 5: the non-connected vehicles whose body is in lane −1, beside the ego's lane (rule 4), or in lane 2,
+    beyond the target lane (rule 5), as leaders in the lane next to theirs (0 or 1). Returns ``(x, v, counted)``, each
+    ``(B, K)``: the state each counts at there and whether it counts (one pass for both lanes: the bound does not
+    depend on the lane).
 
     RSS lets such a vehicle enter that lane ahead of the ego whenever it is at RSS's safe distance plus ``p_m`` (the
     ego the rear vehicle: one period at ``a_x_a``, then ``a_x_d``; the entrant brakes at ``a_o_d``) — and then brake,
@@ -106,7 +107,7 @@ def entrants(situation, others: Others, prm: Params, lane: int):
     o, s = others, situation
     ex, ev = s.ego_x[:, None], s.ego_vx[:, None]
     a_o, a_up, a_dn, dt = prm.others_decel, prm.a_x_a, prm.a_x_d, prm.dt
-    there = ~o.connected & _body_in(o, prm, lane) & np.isfinite(o.x)
+    there = ~o.connected & (_body_in(o, prm, -1) | _body_in(o, prm, 2)) & np.isfinite(o.x)
     with np.errstate(invalid="ignore"):
         gap = o.x - ex - prm.p_m
         ready = there & (gap >= longitudinal_safe_distance_exact(o.vx, ev, dt, a_up, a_dn, a_o))
@@ -209,11 +210,11 @@ def roles(situation, params: Params, rss: RssParams | None = None, horizon_s: fl
     ahead = o.x > s.ego_x[:, None]
     # each lane's vehicles ahead: at their own state (rules 1-3), or as rules 4 and 5 count them
     own_state, target_state = inside[..., 0] & ahead, inside[..., 1] & ahead
-    side_x, side_v, side = entrants(s, o, params, -1)  # rule 4
-    far_x, far_v, far = entrants(s, o, params, 2)  # rule 5
+    bound_x, bound_v, counted = entrants(s, o, params)
+    side, far = counted & _body_in(o, params, -1), counted & _body_in(o, params, 2)  # rules 4 and 5
     own_ahead, target_ahead = own_state | side, target_state | far
-    own_cx, own_cv = np.where(own_state, o.x, side_x), np.where(own_state, o.vx, side_v)
-    tgt_cx, tgt_cv = np.where(target_state, o.x, far_x), np.where(target_state, o.vx, far_v)
+    own_cx, own_cv = np.where(own_state, o.x, bound_x), np.where(own_state, o.vx, bound_v)
+    tgt_cx, tgt_cv = np.where(target_state, o.x, bound_x), np.where(target_state, o.vx, bound_v)
     target_behind = inside[..., 1] & ~ahead
     loose = _loosest(s)
     out = {"others": None}
