@@ -31,6 +31,7 @@ ALTERNATIVES = {
     "sense_sensed_pos_m": 2.0, "sense_sensed_speed_mps": 1.0, "sensing_edge_share": 0.5, "actuation_delay_s": 0.1,
     "shield.actuation_delay_s": 0.1, "shield.own_lane": False, "shield.sensing": False, "neighbours": True,
     "neighbour_headway_min_s": 0.5, "neighbour_headway_max_s": 4.0, "neighbour_speed_spread_mps": 1.0,
+    "own_lane_connected": 2, "own_promise_decel": 1.0,
 }  # fmt: skip
 
 

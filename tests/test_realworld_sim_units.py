@@ -14,7 +14,8 @@ from safelane import Params
 from safelane.shield.command import Command
 from safelane.sim import SimConfig
 from safelane.sim.kinematics import Fleet, Motion
-from safelane.sim.realworld import executed_motion, l0_motion, own_lane_checks, with_own_lane
+from safelane.sim.own_chain import OwnLane
+from safelane.sim.realworld import executed_motion, own_lane_checks, with_own_lane
 from safelane.sim.scenario import paper_scenarios
 from test_sim_checks_reference import GRID, _plan_segments, crossings, scenarios, trajectory
 
@@ -177,10 +178,12 @@ def test_l0_motion_follows_its_profile_over_a_period():
     """L0 cruises, then brakes from its profile's instant: the period's motion against segment-by-segment
     integration, for periods before, across and after the switch."""
     batch = with_own_lane(_batch(50), 3, SimConfig(l0_brake_window_s=0.3), PARAMS)
+    lane = OwnLane.of(batch, PARAMS)
     x, v = batch.l0_x, batch.l0_v
     t_brake = batch.l0_profile_t[:, 1]
     for t in (0.0, 0.1, 0.2, 0.3):
-        motion, (x1, v1) = l0_motion(batch, t, x, v, DT)
+        fleet, _ = lane.period(batch, t, x[:, None], v[:, None], None, PARAMS)
+        motion, (x1, v1) = fleet.motion(slice(None), 0), (fleet.x_end[:, 0], fleet.v_end[:, 0])
         xq, vq = motion.at(np.broadcast_to(GRID, (len(x), GRID.size)))
         for i in range(len(x)):
             rel = t_brake[i] - t

@@ -91,6 +91,6 @@ def task_frame(task, row: int = 0) -> np.ndarray:
             continue
         colour = FOLLOWER if slot == 0 else (CONNECTED if slot <= n else LAST)
         others.append((float(state.x[row, slot]), prm.lane_width, colour))
-    if state.l0 is not None:
-        others.append((float(state.l0[0][row]), 0.0, OWN))
+    if state.l0 is not None:  # the own lane: L0 and any vehicles ahead of it
+        others.extend((float(x), 0.0, OWN) for x in state.l0[0][row] if np.isfinite(x))
     return draw_scene(prm, (ex, ey), others, collided=bool(state.collided[row]))

@@ -101,7 +101,25 @@ def build(spec: dict, prm: Params, *, profiles: bool) -> tuple[ScenarioBatch, np
             l0_profile_t=spec["l0_profile_t"].astype(float), l0_profile_a=spec["l0_profile_a"].astype(float),
             world_key=spec["world_key"].astype(np.int64),
         )  # fmt: skip
+        if np.any(spec.get("own_n", 0)):  # a connected own lane (specs written before it have no "own_n")
+            batch = _own_chain(batch, spec, prm)
     return batch, _assumptions_hold(batch, prm)
+
+
+def _own_chain(batch, spec: dict, prm: Params):
+    """The own lane as a chain (sim/own_chain.py): ``own_n`` connected vehicles from L0 on, then the head; each a
+    slack ahead of the one behind it, slots beyond a row's head empty (``+inf``)."""
+    n = spec["own_n"].astype(np.int64)
+    j = n.max()
+    slot = np.arange(1, j + 1)[None, :]
+    x = batch.l0_x[:, None] + np.cumsum(prm.p_m + spec["own_slack"][:, :j], axis=1)
+    v = np.maximum(batch.l0_v[:, None] + np.cumsum(spec["own_dv"][:, :j], axis=1), 0.0)
+    present = slot <= n[:, None]
+    return dataclasses.replace(
+        batch, own_ahead_x=np.where(present, x, np.inf), own_ahead_v=np.where(present, v, 0.0),
+        own_promise=np.where(slot <= n[:, None], spec["own_promise"][:, :j], 0.0), own_n_connected=n,
+        own_brake_t=spec["own_brake_t"][:, :j].astype(float),
+    )  # fmt: skip
 
 
 def _leaders(a: np.ndarray, k: int) -> np.ndarray:

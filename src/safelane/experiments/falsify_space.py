@@ -27,6 +27,7 @@ from ..planners.variants import PAPER_VARIANT_NAMES, VARIANT_NAMES
 MAX_N = 10  #: most connected leaders searched
 L = MAX_N + 1  #: leader slots L1..L(N+1)
 P = 4  #: segments of L(N+1)'s acceleration profile
+MAX_OWN = 3  #: most connected own-lane vehicles searched (L0 and the ones ahead of it; the realistic world)
 PLANNER_PARAMS = 12
 
 
@@ -113,7 +114,10 @@ def decode(u: np.ndarray, prm: Params, brake_start_s: float = 0.0, world: str = 
 def _decode_realistic(c: _Cube, spec: dict, prm: Params) -> None:
     """L0 (present in 85 % of rows): its slack behind which the ego starts (edge mixture: exactly ``p_m``), its speed
     relative to the ego's, a piecewise-constant profile as L(N+1)'s (a quarter of the segments at ``-a_o_d``); the
-    actuation delay in periods (0–3)."""
+    actuation delay in periods (0–3); the own lane as a chain (half the rows with L0): up to :data:`MAX_OWN`
+    connected vehicles from L0 on, each a slack (edge mixture: exactly ``p_m``) ahead of the one behind it, a speed
+    relative to it, a promise in ``[0, a_x_d]`` and an instant from which it brakes at it (a fifth never), the
+    vehicle ahead of them driving L0's profile."""
     n = len(spec["n"])
     spec["l0_present"] = c.take() < 0.85
     spec["l0_slack"] = _edge(c.take(), 0.0, 60.0)  # L0 − ego − p_m
@@ -126,6 +130,13 @@ def _decode_realistic(c: _Cube, spec: dict, prm: Params) -> None:
     spec["l0_profile_a"] = np.where(c.take(P) < 0.25, -prm.others_decel, acc)
     spec["delay_periods"] = np.minimum((c.take() * (MAX_DELAY_PERIODS + 1)).astype(np.int64), MAX_DELAY_PERIODS)
     spec["world_key"] = (c.take() * 2**52).astype(np.int64)  # keys the measurement errors: a replay draws the same
+    u_n = c.take()
+    spec["own_n"] = np.where(spec["l0_present"] & (u_n >= 0.5), 1 + np.minimum(((u_n - 0.5) * 2 * MAX_OWN).astype(
+        np.int64), MAX_OWN - 1), 0)  # fmt: skip
+    spec["own_slack"] = _edge(c.take(MAX_OWN), 0.0, 40.0)  # each one − the one behind it − p_m
+    spec["own_dv"] = np.where(c.take(MAX_OWN) < 0.3, 0.0, lin(c.take(MAX_OWN), -3.0, 6.0))
+    spec["own_promise"] = _edge(c.take(MAX_OWN), 0.0, prm.a_x_d, exact=prm.a_x_d, p_exact=0.1, p_tiny=0.1)
+    spec["own_brake_t"] = np.where(c.take(MAX_OWN) < 0.2, np.inf, lin(c.take(MAX_OWN), 0.0, 6.0))
 
 
 def dimension(prm: Params, world: str = "paper") -> int:

@@ -78,11 +78,12 @@ def _sim_episode(b, frames, row: int, first: int, prm: Params, shielded: bool) -
         x.append(np.array([f[3][row, i] for f in frames]))
         y.append(np.full(len(frames), prm.lane_width))
         speed.append(np.array([f[4][row, i] for f in frames]))
-    if frames[0][5] is not None and np.isfinite(frames[0][5][row]):
-        names.append("L0")
-        x.append(np.array([f[5][row] for f in frames]))
+    own = [] if frames[0][5] is None else np.flatnonzero(np.isfinite(frames[0][5][row]))
+    for j in own:  # the own lane: L0, then the vehicles ahead of it (L0+1, ...)
+        names.append("L0" if j == 0 else f"L0+{j}")
+        x.append(np.array([f[5][row, j] for f in frames]))
         y.append(np.zeros(len(frames)))
-        speed.append(np.array([f[6][row] for f in frames]))
+        speed.append(np.array([f[6][row, j] for f in frames]))
     n = len(names)
     return EpisodeTrajectories(
         host="simulator", episode_id=int(b.scenario_id[row]), dt=prm.dt, names=tuple(names), x=np.stack(x),

@@ -52,6 +52,7 @@ ONLY_WITH = {
     "l1_plan_steps": ("nominal",),  # L1's shared plan feeds the neural planners' features; the expert ignores it
     "l0_gap_min_m": ("own_lane",), "l0_gap_max_m": ("own_lane",), "l0_speed_spread_mps": ("own_lane",),
     "l0_decel_mps2": ("own_lane",), "l0_brake_window_s": ("own_lane",), "shield.own_lane": ("own_lane",),
+    "own_lane_connected": ("own_lane",), "own_promise_decel": ("own_lane",),
     "sense_connected_pos_m": ("sensing_error",), "sense_connected_speed_mps": ("sensing_error",),
     "sense_sensed_pos_m": ("sensing_error",), "sense_sensed_speed_mps": ("sensing_error",),
     "sensing_edge_share": ("sensing_error",), "shield.sensing": ("sensing_error",),

@@ -36,7 +36,7 @@ import numpy as np
 
 from ..params import Params
 from ..safety._backend import ARRAY, FEASIBILITY_TOL_M, jitable
-from ..safety.chain import min_follow_decel
+from ..safety.chain import min_follow_decel, propagate_chain
 from ..safety.evasion import fast_kernel
 from ..safety.responsible import ROOT_EPS_MPS2, responsible_accel_core, responsible_bound_core, responsible_ok_core
 from ..tolerances import TIME_TOL_S
@@ -68,6 +68,22 @@ def leader_roles(valid, connected, n_connected):
     is_last = np.asfortranarray(slots == n_connected[:, None] + 1)
     acts = np.asfortranarray(connected & valid & (slots >= 1) & (slots <= n_connected[:, None]) & ~is_last)
     return is_last, acts
+
+
+def lane_bounds(x, v, promise, margin, prm: Params):
+    """The chain analysis on true states: ``(bounds (B, K), unsafe (B,))`` of a lane laid out as the target lane's
+    ``x, v`` (slot 0 the follower, ``F``; the chain from slot 1, its non-connected head last), ``bounds[:, i]`` the
+    worst-case deceleration of slot ``i`` (the others' maximum ``a_o_d`` for slot 0, the head and anything not
+    connected). ``promise``, ``margin``: ``(K − 2, B)`` vehicle-major, one per link from slot 1 on (``a_o_d`` for a
+    link that is not connected). From :data:`FAST_MIN_ELEMENTS` rows on the compiled scan, the same bits."""
+    if len(x) >= FAST_MIN_ELEMENTS and (kernel := traffic_kernel()) is not None:
+        return kernel.chain_bounds(x, v, promise, margin, prm)
+    n_links = x.shape[1] - 2
+    with np.errstate(all="ignore"):  # inputs were checked with the batch: the scan alone, unchecked
+        decel, _, unsafe = propagate_chain(ARRAY, x.T[1:], v.T[1:], promise, margin, prm, n_links)
+    others = np.full(len(x), prm.others_decel)  # slot 0: one of the others
+    bounds = np.column_stack([others, *(np.broadcast_to(d, (len(x),)) for d in decel)])
+    return bounds, np.broadcast_to(np.asarray(unsafe, bool), (len(x),))
 
 
 def leader_want(xp, slack, v_f, v_l, d, own, task, dt):

@@ -74,8 +74,9 @@ def _observe(sb: SimBlame, t: float, prm, valid, ego, x, v, l0) -> SimBlame:
     lane_pm = update(sb.lane_pm, t, e, o, sb.rss, min_lon_gap_m=pm_lon, min_lat_gap_m=pm_lat, active=valid)
     own, own_pm = sb.own, sb.own_pm
     if own is not None:
-        present = np.isfinite(l0[0])
-        e, o = _tracks(prm, ego, np.where(present, l0[0], 0.0)[:, None], l0[1][:, None], 0.0)
+        l0_x, l0_v = l0[0][:, 0], l0[1][:, 0]  # L0, the own lane's nearest: the ego's only partner there
+        present = np.isfinite(l0_x)
+        e, o = _tracks(prm, ego, np.where(present, l0_x, 0.0)[:, None], l0_v[:, None], 0.0)
         e, o = (Track(*(np.asarray(q)[:, 0] if np.ndim(q) == 2 else q for q in tr)) for tr in (e, o))
         own = update(own, t, e, o, sb.rss, active=present)
         own_pm = update(own_pm, t, e, o, sb.rss, min_lon_gap_m=pm_lon, min_lat_gap_m=pm_lat, active=present)

@@ -67,6 +67,14 @@ class SimConfig(BaseModel):
     l0_speed_spread_mps: float = Field(3.0, ge=0.0, description="L0's initial speed: the ego's + up to this [m/s].")
     l0_decel_mps2: float | None = Field(None, gt=0.0, description="L0's sudden braking [m/s²] (default a_x_d).")
     l0_brake_window_s: float = Field(4.0, ge=0.0, description="L0 starts braking at a uniform instant in [0, this].")
+    own_lane_connected: int = Field(0, ge=0, le=8, description="How many vehicles from L0 on are connected (V2X: "
+                                    "state and a promised maximum deceleration); the vehicle ahead of them, not "
+                                    "connected, brakes as L0 does with 0 (docs/real_roads.md, 'A connected own "
+                                    "lane'). Each is placed l0_gap_* ahead of the one behind it, not slower "
+                                    "than it by more than 0, faster by up to l0_speed_spread_mps.")  # fmt: skip
+    own_promise_decel: float = Field(0.5, ge=0.0, description="The connected own-lane vehicles' promised maximum "
+                                     "deceleration [m/s²] (the paper's a_m_d); each brakes at it from an instant "
+                                     "uniform in [0, l0_brake_window_s].")  # fmt: skip
     sensing_error: bool = Field(False, description="The ego measures the others with errors inside SensingBounds.")
     sense_connected_pos_m: float = Field(0.5, ge=0.0, description="Position error bound, connected vehicles [m].")
     sense_connected_speed_mps: float = Field(0.2, ge=0.0, description="Speed error bound, connected [m/s].")

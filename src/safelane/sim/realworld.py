@@ -1,10 +1,11 @@
 """The simulator beyond the paper's world (real_roads.md): a leader ``L0`` in the ego's own lane, sensing error, delay.
 
-* **L0** (:func:`with_own_lane`, :func:`l0_motion`, :func:`own_lane_checks`): one non-connected vehicle ahead of the
+* **L0** (:func:`with_own_lane`, :func:`own_lane_checks`; its motion: :mod:`.own_chain`): one vehicle ahead of the
   ego in its original lane, driving a piecewise-constant acceleration profile (by default: cruise, then brake at
-  ``SimConfig.l0_decel_mps2`` from a random instant until it stops). The ego's collisions with it (footprints overlap:
-  ``|dx| < vehicle_length`` while ``y < w_v``) and ``p_m`` violations (``|dx| < p_m`` at the same instants, before the
-  lane change completes) are exact in continuous time and count as the ego's.
+  ``SimConfig.l0_decel_mps2`` from a random instant until it stops) — or, with ``SimConfig.own_lane_connected``, the
+  first of a connected chain whose non-connected head drives that profile. The ego's collisions with ``L0``
+  (footprints overlap: ``|dx| < vehicle_length`` while ``y < w_v``) and ``p_m`` violations (``|dx| < p_m`` at the
+  same instants, before the lane change completes) are exact in continuous time and count as the ego's.
 * **Sensing error** (:func:`measure`): each period the ego measures every other vehicle's position and speed with an
   error drawn uniformly inside its bound (:class:`~safelane.shield.SensingBounds`, by connectivity), from counters
   (seed, scenario, step, slot): the shield sees only the measurements and the bounds.
@@ -22,9 +23,8 @@ from ..params import Params
 from ..shield.command import Command
 from ..shield.situation import SensingBounds, Situation
 from ..tolerances import DIST_TOL_M
-from .kinematics import Fleet, Motion, crossing_knots, windowed_gap_extrema
+from .kinematics import Motion, crossing_knots, windowed_gap_extrema
 from .rng import counter_uniform
-from .traffic import profile_segment
 
 #: Counter slots of the draws made here (kept apart from the other per-step draws).
 _SLOT_L0, _SLOT_NOISE = 7001, 7100
@@ -45,20 +45,36 @@ def with_own_lane(batch, seed: int, cfg, prm: Params):
     decel = prm.others_decel if cfg.l0_decel_mps2 is None else cfg.l0_decel_mps2
     times = np.stack([np.zeros_like(t_brake), t_brake], 1)
     accels = np.stack([np.zeros_like(t_brake), np.full_like(t_brake, -decel)], 1)
-    return dataclasses.replace(batch, l0_x=batch.ego_x + gap, l0_v=speed, l0_profile_t=times, l0_profile_a=accels)
+    out = dataclasses.replace(batch, l0_x=batch.ego_x + gap, l0_v=speed, l0_profile_t=times, l0_profile_a=accels)
+    return out if cfg.own_lane_connected == 0 else _with_own_chain(out, seed, cfg, prm)
+
+
+def _with_own_chain(batch, seed: int, cfg, prm: Params):
+    """``batch`` with ``cfg.own_lane_connected`` connected vehicles from ``L0`` on and the non-connected head ahead
+    of them: each ``l0_gap_*`` ahead of the one behind it and up to ``l0_speed_spread_mps`` faster, promising
+    ``own_promise_decel`` and braking at it from an instant uniform in ``[0, l0_brake_window_s]``."""
+    if cfg.own_promise_decel > prm.a_x_d:
+        raise ValueError(f"SimConfig.own_promise_decel={cfg.own_promise_decel} must be <= a_x_d={prm.a_x_d} (a "
+                         "promise no harder than the ego's own braking: Situation.own_promise)")  # fmt: skip
+    sid, n = _key(batch), cfg.own_lane_connected
+    x, v, brake = [batch.l0_x], [batch.l0_v], []
+    for j in range(1, n + 1):  # counters 3j.. : L0's own draws (0, 1, 2) stay what they were
+        u = [counter_uniform(seed, sid, _SLOT_L0, 3 * j + k) for k in range(3)]
+        x.append(x[-1] + cfg.l0_gap_min_m + (cfg.l0_gap_max_m - cfg.l0_gap_min_m) * u[0])
+        v.append(v[-1] + cfg.l0_speed_spread_mps * u[1])
+        brake.append(cfg.l0_brake_window_s * u[2])
+    rows = len(batch)
+    return dataclasses.replace(
+        batch, own_ahead_x=np.column_stack(x[1:]), own_ahead_v=np.column_stack(v[1:]),
+        own_promise=np.full((rows, n), cfg.own_promise_decel), own_n_connected=np.full(rows, n, np.int64),
+        own_brake_t=np.column_stack(brake),
+    )  # fmt: skip
 
 
 def _key(batch) -> np.ndarray:
     """The counter key of a scenario's draws here: ``batch.world_key`` where set (the falsifier's, so that a replayed
     row draws what it drew in the campaign), else the scenario id."""
     return batch.scenario_id if batch.world_key is None else batch.world_key
-
-
-def l0_motion(batch, t: float, x, v, dt: float) -> tuple[Motion, tuple]:
-    """``L0``'s exact motion over the period ``[t, t + dt]`` and its state at the end."""
-    a1, t_sw, a2 = profile_segment(t, dt, batch.l0_profile_t, batch.l0_profile_a)
-    fleet = Fleet.switched(x, v, a1, t_sw, a2, dt)
-    return fleet.motion(...), fleet.end
 
 
 def measure(seed: int, batch, step: int, s: Situation, bounds: SensingBounds, edge_share: float = 0.0) -> Situation:

@@ -103,8 +103,11 @@ def _own_lane_columns(s) -> dict:
     if getattr(s, "l0", None) is None:
         return {}
     gap = s.min_gap_l0
-    return {"own_lane_collision": s.l0_collided, "own_lane_violation": s.l0_violated,
-            "min_gap_own_lane_m": np.where(np.isinf(gap), np.nan, gap)}  # fmt: skip
+    out = {"own_lane_collision": s.l0_collided, "own_lane_violation": s.l0_violated,
+           "min_gap_own_lane_m": np.where(np.isinf(gap), np.nan, gap)}  # fmt: skip
+    if s.l0[0].shape[1] > 1:  # a chain: did its vehicles keep clear of each other (the traffic's own soundness)
+        out["own_lane_leader_collision"] = s.own_pair_collided
+    return out
 
 
 def trace_rows(b: ScenarioBatch, s, behaviour, limit: int) -> pd.DataFrame:

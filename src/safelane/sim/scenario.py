@@ -100,6 +100,16 @@ class ScenarioBatch:
     l0_v: np.ndarray | None = None
     l0_profile_t: np.ndarray | None = None
     l0_profile_a: np.ndarray | None = None
+    #: The own lane as a chain (real_roads.md, "A connected own lane"): ``(B, J)`` the vehicles ahead of ``L0``,
+    #: nearest first (``+inf`` position: none), their speeds, ``(B, J)`` the promised maximum deceleration of the
+    #: connected ones from ``L0`` on (``L0`` first), ``(B,)`` how many from ``L0`` on are connected (at most ``J``;
+    #: the first one that is not, the head, drives ``l0_profile_*``), and ``(B, J)`` the instant each connected one
+    #: starts braking at its promise (``inf``: never). ``None``: ``L0`` alone, not connected.
+    own_ahead_x: np.ndarray | None = None
+    own_ahead_v: np.ndarray | None = None
+    own_promise: np.ndarray | None = None
+    own_n_connected: np.ndarray | None = None
+    own_brake_t: np.ndarray | None = None
     #: ``(B,)`` counter key of the realistic world's draws (measurement errors, L0), default the scenario id.
     world_key: np.ndarray | None = None
 

@@ -17,21 +17,21 @@ import numpy as np
 from ..params import Params
 from ..planners.base import NominalPlanner, Observation
 from ..planners.variants import VARIANT_NAMES, VARIANTS
-from ..safety._backend import ARRAY
-from ..safety.chain import propagate_chain
 from ..safety.lateral import LATERAL_TOL_M
 from ..shield import ABORT, HESITATE, PROCEED, ShieldState, Situation
 from ..shield import core as shield
 from ..shield.command import Command, InFlight
 from ..shield.realworld import delay_periods
 from . import blame_log
-from .behaviours import FAST_MIN_ELEMENTS, traffic_kernel
+from .behaviours import lane_bounds
 from .checks import ego_checks, lane_checks, lane_pairs
 from .config import SimConfig
 from .kinematics import Fleet, Motion
 from .link import Link
 from .neighbours import Neighbours
-from .realworld import executed_motion, l0_motion, measure, own_lane_checks, with_own_lane
+from .own_chain import OwnLane
+from .own_chain import start as own_start
+from .realworld import executed_motion, measure, own_lane_checks, with_own_lane
 from .rng import counter_normal
 from .scenario import ScenarioBatch
 from .traffic import TrafficView, resolve_traffic
@@ -61,7 +61,9 @@ class SimState:
     n_invalid: np.ndarray  # (B,) periods whose nominal proposal was invalid (non-finite or out of range)
     leader_cap: np.ndarray  # (B, K) the smallest chain bound each vehicle has had: it never brakes harder
     link: Link | None = None  # the V2X emulation's received messages (None: perfect V2X)
-    l0: tuple | None = None  # (x, v) of the own lane's leader L0 (sim/realworld.py); None: the paper's empty lane
+    l0: tuple | None = None  # (x, v) (B, K) of the own lane, L0 first (sim/own_chain.py); None: the paper's empty lane
+    own_cap: np.ndarray | None = None  # (B, K) the smallest chain bound each own-lane vehicle has had
+    own_pair_collided: np.ndarray | None = None  # (B,) own-lane vehicles ran into each other (the traffic's soundness)
     l0_collided: np.ndarray | None = None
     l0_violated: np.ndarray | None = None
     min_gap_l0: np.ndarray | None = None
@@ -124,6 +126,7 @@ class ClosedLoop:
         self.situation_promise = batch.promise_decel[:, 1:-1]
         self.situation_human = batch.human[:, 1:-1]
         self.neighbours = Neighbours(batch, seed, cfg, prm) if cfg.neighbours else None
+        self.own = None if batch.l0_x is None else OwnLane.of(batch, prm)
 
     def initial_state(self) -> SimState:
         b = self.b
@@ -131,7 +134,7 @@ class ClosedLoop:
         link = Link.start(b.x, b.v) if self.emulate_v2x else None
         x, v = b.x.copy(order="F"), b.v.copy(order="F")
         ego = (b.ego_x.copy(), b.ego_y.copy(), b.ego_vx.copy(), b.ego_vy.copy())
-        l0 = None if b.l0_x is None else (b.l0_x.copy(), b.l0_v.copy())
+        l0 = None if self.own is None else own_start(b)
         start = self.situation(0.0, ego, x, v, None, b.v[:, 0], l0)
         if self.sensing is not None:
             start = measure(self.seed, b, -1, start, self.sensing, self.cfg.sensing_edge_share)
@@ -162,6 +165,8 @@ class ClosedLoop:
             leader_cap=np.full(b.x.shape, np.inf),
             link=link,
             l0=l0,
+            own_cap=None if l0 is None else np.full(l0[0].shape, np.inf),
+            own_pair_collided=None if l0 is None else np.zeros(n, bool),
             l0_collided=None if l0 is None else np.zeros(n, bool),
             l0_violated=None if l0 is None else np.zeros(n, bool),
             min_gap_l0=None if l0 is None else np.full(n, np.inf),
@@ -194,13 +199,8 @@ class ClosedLoop:
             chain_promise=self.situation_promise, chain_human=self.situation_human, n_connected=n_connected,
             f_speed_observed=f_speed_observed, f_aggressive_truth=b.follower_aggressive, v2x_stale=stale,
             others=None if self.neighbours is None else self.neighbours.at(t),
-            **({} if l0 is None else self._own_fields(l0)),
+            **({} if l0 is None else self.own.situation_fields(*l0)),
         )  # fmt: skip
-
-    def _own_fields(self, l0) -> dict:
-        n = len(l0[0])
-        return dict(own_x=l0[0][:, None], own_v=l0[1][:, None], own_promise=np.zeros((n, 0)),
-                    own_n_connected=np.zeros(n, np.int64))  # fmt: skip
 
     def observe(self, s: SimState) -> Observation:
         b = self.b
@@ -229,17 +229,7 @@ class ClosedLoop:
         """The chain analysis on the current states: ``(bounds (B, K), unsafe (B,))``, ``bounds[:, i]`` the worst-case
         deceleration of slot ``i`` (the others' maximum ``a_o_d`` for F's slot, ``L(N+1)`` and anything not
         connected)."""
-        prm = self.prm
-        if len(s.x) >= FAST_MIN_ELEMENTS and (kernel := traffic_kernel()) is not None:  # the same bits, compiled
-            return kernel.chain_bounds(s.x, s.v, self.chain_promise, self.chain_margin, prm)
-        n_links = s.x.shape[1] - 2
-        with np.errstate(all="ignore"):  # inputs were checked with the batch: the scan alone, unchecked
-            decel, _, unsafe = propagate_chain(
-                ARRAY, s.x.T[1:], s.v.T[1:], self.chain_promise, self.chain_margin, prm, n_links
-            )
-        others = np.full(len(s.x), prm.others_decel)  # F's slot: one of the others
-        bounds = np.column_stack([others, *(np.broadcast_to(d, (len(s.x),)) for d in decel)])
-        return bounds, np.broadcast_to(np.asarray(unsafe, bool), (len(s.x),))
+        return lane_bounds(s.x, s.v, self.chain_promise, self.chain_margin, self.prm)
 
     def step(self, s: SimState):
         b, prm, cfg = self.b, self.prm, self.cfg
@@ -301,15 +291,20 @@ class ClosedLoop:
         return new, obs, behaviour
 
     def _own_lane(self, s: SimState, new: SimState, lon, lat, plan) -> SimState:
-        """L0 drives its profile; the ego's collisions and p_m violations against it (sim/realworld.py)."""
+        """The own lane drives (sim/own_chain.py); the ego's collisions and p_m violations against L0
+        (sim/realworld.py)."""
         prm = self.prm
         present = np.isfinite(s.l0[0])
-        x0 = np.where(present, s.l0[0], 0.0)
-        motion, (x1, v1) = l0_motion(self.b, s.t, x0, s.l0[1], prm.dt)
-        col, vio, gap = own_lane_checks(prm, lon, lat, plan, motion, present, s.completed)
+        fleet, cap = self.own.period(self.b, s.t, s.l0[0], s.l0[1], s.own_cap, prm)
+        col, vio, gap = own_lane_checks(prm, lon, lat, plan, fleet.motion(slice(None), 0), present[:, 0],
+                                        s.completed)  # fmt: skip
+        pair = s.own_pair_collided
+        if self.own.slots > 1:
+            pair = pair | self.own.pair_collisions(fleet, present, prm)[0]
+        x1, v1 = fleet.end
         return dataclasses.replace(
-            new, l0=(np.where(present, x1, np.inf), v1), l0_collided=s.l0_collided | col,
-            l0_violated=s.l0_violated | vio, min_gap_l0=np.minimum(s.min_gap_l0, gap),
+            new, l0=(np.asfortranarray(np.where(present, x1, np.inf)), v1), own_cap=cap, own_pair_collided=pair,
+            l0_collided=s.l0_collided | col, l0_violated=s.l0_violated | vio, min_gap_l0=np.minimum(s.min_gap_l0, gap),
             collided=new.collided | col, violated=new.violated | vio,
         )  # fmt: skip
 
