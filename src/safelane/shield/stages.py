@@ -315,10 +315,15 @@ def remember(state, obs: Observed, worst: WorstCase, fr: Frame, verdicts: Verdic
     sfx, sfv, sex = e.f_x, e.f_v, s.ego_x
     watch = np.flatnonzero(active & ~plan_f_aggr & (sex - sfx > 0.0))
     if watch.size:
+        # The most a responsible F may accelerate (the ego brakes at most a_x_d, F itself up to a_o_d), at the corner
+        # of the sensing box that allows it the most — F low and slow, the observed corner — so that a measurement
+        # error is never taken for a breach: at the analysis' corner (F high and fast) the gap can be below the
+        # margin where F's true one is not, and the limit -a_o_d that no responsible F has to obey. The prediction
+        # starts from the analysis' corner (monitor.pushed_harder): the box is counted on both sides.
+        lo = worst_corners(s)[1]
         with np.errstate(all="ignore"):
-            gap = (sex - sfx - prm.p_m)[watch]
-            # The most a responsible F may accelerate: the ego brakes at most a_x_d, F itself up to a_o_d.
-            limit = responsible_bound(gap, sfv[watch], s.ego_vx[watch], np.full(watch.size, prm.a_x_d), prm,
+            gap = (sex - lo.f_x - prm.p_m)[watch]
+            limit = responsible_bound(gap, lo.f_v[watch], s.ego_vx[watch], np.full(watch.size, prm.a_x_d), prm,
                                       brake=prm.others_decel)  # fmt: skip
         f_limit[watch] = np.maximum(limit, -prm.others_decel)
     anchor = None
