@@ -39,6 +39,14 @@ def test_the_shield_accounts_for_the_worlds_delay_unless_told_otherwise():
     ignores = SimConfig(actuation_delay_s=0.2, shield_delay=False).model_copy(update={"actuation_delay_s": 0.3})
     assert ignores.shield.actuation_delay_s == 0.0
     assert load_preset("realistic").sim.shield.actuation_delay_s == load_preset("realistic").sim.actuation_delay_s > 0
+    # shield_delay in a copy's update reads as in the constructor (it used to clash with the copied shield's delay)
+    realistic = load_preset("realistic").sim
+    assert realistic.model_copy(update={"shield_delay": False}).shield.actuation_delay_s == 0.0
+    assert realistic.model_copy(update={"shield_delay": False}).actuation_delay_s == 0.2
+    both = SimConfig(shield_delay=False).model_copy(update={"actuation_delay_s": 0.3, "shield_delay": True})
+    assert both.shield.actuation_delay_s == 0.3
+    with pytest.raises(ValueError, match=r"shield_delay and shield\.actuation_delay_s"):
+        realistic.model_copy(update={"shield_delay": True, "shield": {"actuation_delay_s": 0.1}})
 
 
 def test_contradictions_and_bad_values_are_refused_naming_the_field():

@@ -130,7 +130,12 @@ class SimConfig(BaseModel):
             if old in update:
                 shield[new] = update.pop(old)
         follows = self.shield.actuation_delay_s == self.actuation_delay_s
-        if "actuation_delay_s" in update and "actuation_delay_s" not in shield and "shield_delay" not in update:
+        accounts = update.pop("shield_delay", None)
+        if accounts is not None:  # the shield accounts for the world's delay (as it is after this update), or not
+            if "actuation_delay_s" in shield:
+                raise ValueError("shield_delay and shield.actuation_delay_s both given: give one of them")
+            shield["actuation_delay_s"] = update.get("actuation_delay_s", self.actuation_delay_s) if accounts else 0.0
+        elif "actuation_delay_s" in update and "actuation_delay_s" not in shield:
             shield["actuation_delay_s"] = update["actuation_delay_s"] if follows else self.shield.actuation_delay_s
         data.update(update)
         data["shield"] = {**data["shield"], **shield}
