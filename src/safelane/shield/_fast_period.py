@@ -32,7 +32,7 @@ import numpy as np
 
 from ..safety import _compile
 from ..safety._backend import SCALAR, Limits, _clip
-from ..safety._fast_base import announce_compile
+from ..safety._fast_base import announce_compile, row_function
 from ..safety._fast_responsible import _responsible_bound
 from ..safety.chain import chain_link
 from ..safety.own_lane import own_period
@@ -149,6 +149,19 @@ def _held_motion(plan, r, age, dt, a_a, a_d, kt, kx, kv, ky, kvy):
 
 
 @numba.njit(inline="always")
+def _sort8(a):
+    """``a.sort()`` of a short array in place, NaN last as NumPy sorts, allocating nothing (an insertion sort: the
+    row functions compiled without numba's reference counting cannot call its quicksort)."""
+    for i in range(1, a.shape[0]):
+        key = a[i]
+        j = i - 1
+        while j >= 0 and (a[j] > key or (a[j] != a[j] and key == key)):
+            a[j + 1] = a[j]
+            j -= 1
+        a[j + 1] = key
+
+
+@numba.njit(inline="always")
 def plan_knots(held, lead_p, lead_v, lead_decel, age, dt, a_a, a_d, kt, kx, kv, ky, kvy):
     """``decide.plan_motion`` of one held plan (a :class:`~safelane.safety.plan.PlanRecord`, the profile following
     ``(lead_p, lead_v, lead_decel)``) on ``[age, age + dt]``: the period's ends and the plan's switches inside it
@@ -160,13 +173,13 @@ def plan_knots(held, lead_p, lead_v, lead_decel, age, dt, a_a, a_d, kt, kx, kv, 
     for j in range(6):
         kt[j + 1] = switches[j]
     kt[7] = dt
-    kt.sort()
+    _sort8(kt)
     lim = Limits(a_a, a_d, 0.0, 0.0)
     for j in range(8):
         kx[j], ky[j], kv[j], kvy[j] = plan_state(SCALAR, held, age + kt[j], lead_p, lead_v, lead_decel, lim)
 
 
-@numba.njit(cache=True, nogil=True, error_model="numpy")
+@row_function
 def monitor_row(b, t, dt, mon_tol, now, snap_x, snap_v, snap_bounds, snap_nc, st, sk):
     """The monitor's comparison of the last period for row ``b`` (:func:`~.monitor.observe_breaches`): ``now``
     ``(., M + 1)`` the chain as seen now with F in slot 0 (row 0), the snapshot's chain ``snap_*`` (row ``b``); the
@@ -180,7 +193,7 @@ def monitor_row(b, t, dt, mon_tol, now, snap_x, snap_v, snap_bounds, snap_nc, st
     sk[b, 5], sk[b, 6], sk[b, 7], sk[b, 8] = sk[b, 5] or f0, sk[b, 6] or f1, sk[b, 7] or f2, sk[b, 8] or f3
 
 
-@numba.njit(cache=True, nogil=True, error_model="numpy")
+@row_function
 def period_row(b, prm, times, den, sf, sb, chain_x, chain_v, link_promise, link_margin, own_x, own_v, own_promise,
                own_nc, history, count, st, sk, plan, has_last, snap_x, snap_v, snap_bounds, snap_nc, bounds,
                given_unsafe, of, ob, knots, x2, v2, b2, kn):  # fmt: skip
