@@ -206,7 +206,7 @@ def _no_own(n: int) -> tuple:
 
 
 @functools.lru_cache(maxsize=64)
-def _constants(prm: Params, cfg: ShieldConfig) -> np.ndarray:
+def period_constants(prm: Params, cfg: ShieldConfig) -> np.ndarray:
     """The kernel's parameter vector (its first entry, the period's time, is the caller's to set): the parameters,
     the tolerances and the settings it reads (both records are frozen, so the vector is built once per pair)."""
     out = np.array([0.0, prm.dt, prm.a_x_a, prm.a_x_d, prm.a_y_m, prm.y_safe, prm.p_m, prm.p_m_human, prm.y_boundary,
@@ -241,7 +241,7 @@ def step(packed: Packed, situation, proposal, params: Params, config: ShieldConf
         sb[:, 5] = s.f_aggressive_truth
     else:
         sb[:, 5] = False
-    prm_vec = _constants(prm, cfg).copy()
+    prm_vec = period_constants(prm, cfg).copy()
     prm_vec[0] = s.t
     if cfg.own_lane and s.own_x is not None:
         k = s.own_x.shape[1]

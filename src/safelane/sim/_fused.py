@@ -18,10 +18,8 @@ import numpy as np
 
 from ..planners.base import ExpertPlanner
 from ..planners.variants import VARIANT_NAMES, VARIANTS
-from ..safety._backend import FEASIBILITY_TOL_M
 from ..safety.evasion import fast_kernel
 from ..safety.lateral import LATERAL_TOL_M
-from ..safety.responsible import ROOT_EPS_MPS2
 from ..shield.monitor import BREACH_KINDS, TOL_M, Breach
 
 #: :func:`covers` takes batches from this many scenarios on.
@@ -150,8 +148,9 @@ def run(sim, n_steps: int, progress: bool = False):
 def run_chunk(sim, n_steps: int) -> dict:
     """The final state's arrays by name, from :func:`._fast_loop.loop_kernel` on :class:`~.step.ClosedLoop`
     ``sim``'s arrays."""
+    from ..shield.fast_step import Packed, period_constants
     from ..shield.policies import variant_flags
-    from ._fast_loop import OUT_B, OUT_F, PLAN, PRM, loop_kernel
+    from ._fast_loop import OUT_B, OUT_F, PRM, loop_kernel
 
     b, prm, cfg, nominal = sim.b, sim.prm, sim.cfg, sim.nominal
     start = sim.initial_state()
@@ -161,17 +160,14 @@ def run_chunk(sim, n_steps: int) -> dict:
     overlap = prm.lane_width - prm.vehicle_width
     values = dict(
         dt=prm.dt, a_x_a=prm.a_x_a, a_x_d=prm.a_x_d, a_y_m=prm.a_y_m, y_safe=prm.y_safe, p_m=prm.p_m,
-        lane_width=prm.lane_width, y_boundary=prm.y_boundary, vehicle_length=prm.vehicle_length, conflict=conflict,
-        overlap=overlap, lat_tol=LATERAL_TOL_M, tol=FEASIBILITY_TOL_M, eps=ROOT_EPS_MPS2, monitor_tol=TOL_M,
-        brake_start_s=cfg.brake_start_s, assess_threshold=cfg.shield.assess_threshold,
-        open_decel=cfg.follower_open_decel, open_gap_m=cfg.follower_open_gap_m, k_p=nominal.k_p, k_v=nominal.k_v,
-        gap_fraction=nominal.gap_fraction,
+        lane_width=prm.lane_width, vehicle_length=prm.vehicle_length, conflict=conflict, overlap=overlap,
+        monitor_tol=TOL_M, brake_start_s=cfg.brake_start_s, open_decel=cfg.follower_open_decel,
+        open_gap_m=cfg.follower_open_gap_m, k_p=nominal.k_p, k_v=nominal.k_v, gap_fraction=nominal.gap_fraction,
         brake_comfort=nominal.brake_comfort, omega2=nominal.omega**2, two_omega=2.0 * nominal.omega,
         a_o_d=prm.others_decel,
     )  # fmt: skip
     prm_vec = np.array([float(values[name]) for name in PRM])
-    plan = start.shield.plan
-    plan_init = np.ascontiguousarray(np.stack([np.asarray(getattr(plan, name), np.float64) for name in PLAN], 1))
+    packed = Packed.of(start.shield)  # the shield's state as its compiled period holds it
     uses = np.ascontiguousarray(np.stack(variant_flags(b.variant, n), 1))
     c = np.ascontiguousarray
     out_f, out_b = np.empty((n, len(OUT_F))), np.empty((n, len(OUT_B)), np.bool_)
@@ -183,8 +179,9 @@ def run_chunk(sim, n_steps: int) -> dict:
         c(np.stack([b.ego_x, b.ego_y, b.ego_vx, b.ego_vy], 1)), c(b.valid), c(b.n_connected.astype(np.int64)),
         c(b.connected[:, 0]), c(b.follower_aggressive), uses, c(sim.chain_promise), c(sim.chain_margin),
         c(traffic.margin), c(is_last), c(acts), c(traffic.v_desired), c(b.promise_decel), c(b.promise_accel),
-        c(b.decel_last.astype(np.float64)), c(traffic.gap0), c(sim.lane_pairs[0]), c(sim.lane_pairs[1]), plan_init,
-        c(np.asarray(plan.follows_leader, np.bool_)), out_f, out_b, counts, n_invalid, flags, bad,
+        c(b.decel_last.astype(np.float64)), c(traffic.gap0), c(sim.lane_pairs[0]), c(sim.lane_pairs[1]),
+        period_constants(prm, cfg.shield), c(packed.plan), c(packed.history), c(packed.count), c(packed.st),
+        c(packed.sk), out_f, out_b, counts, n_invalid, flags, bad,
     )  # fmt: skip
     if (bad >= 0).any():
         step = int(bad[bad >= 0].min())
