@@ -16,16 +16,11 @@ It writes what the NumPy stages compute, in their order of evaluation, so a row'
 bits (``tests/test_fast_period.py`` compares them field by field over many periods). :mod:`.fast_step` is the Python
 side (the state packed into arrays between periods, the :class:`~.decision.Decision` built from them).
 
-**A twin of glue, not of rules.** The closed loop's shield section (``sim/_fast_loop.loop_kernel``, from the chain
-analysis to the monitor's snapshot) writes the same glue again for its default settings — the assessment's window,
-the candidate loop with the commit guard, the plan record, the abort's first segment, the snapshot — while every rule
-it calls is the one above. Making the loop call :func:`period_row` instead gave the same tables but doubled its
-kernel's CPU time (0.37 → 0.79 s for 4,000 scenarios, not understood yet; docs/architecture.md, "What is still not
-one source"), so both stay, each held bit for bit to the NumPy stages (``tests/test_fast_period.py``,
-``tests/test_fast_loop.py``). The held plan's knots are shared already (:func:`plan_knots`). :func:`period_row` and
-:func:`monitor_row` are row functions (inlined, compiled without numba's reference counting: 34 array arguments
-cost 68 atomic reference-count operations per row otherwise); with that the loop calling :func:`period_row` costs
-1.39x its own glue, not 2.1x (docs/architecture.md).
+**One glue.** The compiled closed loop (``sim/_fast_loop.py``) calls :func:`period_row` for its shield's period:
+there is no second copy of a period's glue. :func:`period_row` and :func:`monitor_row` are row functions (inlined,
+compiled without numba's reference counting: their 34 array arguments would cost 68 atomic reference-count
+operations per row), and the loop runs its rows without reference counting too (docs/architecture.md, "One glue of
+a period"). The held plan's knots come from :func:`plan_knots`.
 """
 
 from __future__ import annotations
