@@ -24,6 +24,8 @@ period-by-period path with its part kernels (what ``benchmarks/bench_core.py`` c
 
 from __future__ import annotations
 
+import collections
+
 import numba
 import numpy as np
 
@@ -55,6 +57,18 @@ PRM = (
     "monitor_tol", "brake_start_s", "open_decel", "open_gap_m", "k_p", "k_v", "gap_fraction", "brake_comfort",
     "omega2", "two_omega", "a_o_d",
 )  # fmt: skip
+#: The batch's inputs of :func:`loop_kernel`, per scenario (:class:`~.step.ClosedLoop`'s arrays; ``promise``,
+#: ``chain_margin``: ``(N, B)``; ``uses``: ``(B, 3)`` the variant's flags).
+LoopBatch = collections.namedtuple("LoopBatch", (
+    "x", "v", "ego", "valid", "n_connected", "f_connected", "f_aggressive", "uses", "promise", "chain_margin", "margin",
+    "is_last", "acts", "v_desired", "promise_decel", "promise_accel", "decel_last", "gap0", "lane_valid", "lane_margin",
+))  # fmt: skip
+#: The shield at the start: its period's parameter vector (``shield/_fast_period.PRM``) and its state packed as
+#: :func:`~safelane.shield._fast_period.period_row` holds it (``shield/fast_step.Packed``).
+ShieldStart = collections.namedtuple("ShieldStart", ("prm", "plan", "history", "count", "st", "sk"))
+#: What :func:`loop_kernel` writes: :data:`OUT_F`, :data:`OUT_B` per scenario, ``counts (B, 3)``, ``n_invalid``,
+#: ``breach_flags (B, 5)`` and ``bad_step`` (the first period whose state is not finite, ``-1`` if none).
+LoopOut = collections.namedtuple("LoopOut", ("f", "b", "counts", "n_invalid", "breach_flags", "bad_step"))
 #: Float outputs per scenario.
 OUT_F = ("t_complete", "min_gap_f", "min_gap_l1", "min_lane_ratio", "first_collaborative_s", "breach_first_s")
 #: Bool outputs per scenario.
@@ -62,20 +76,12 @@ OUT_B = ("completed", "collided", "violated", "leader_collided", "leader_violate
 
 
 @numba.njit(cache=True, nogil=True, error_model="numpy")
-def loop_kernel(
-    n_steps, prm, window, x_init, v_init, ego_init, valid, n_connected, f_connected, f_aggressive, uses, promise,
-    chain_margin, margin, is_last, acts, v_desired, promise_decel, promise_accel, decel_last, gap0, lane_valid,
-    lane_margin, period_prm, plan_init, history_init, count_init, st_init, sk_init, out_f, out_b, counts, n_invalid,
-    breach_flags, bad_step,
-):  # fmt: skip
-    """Run every scenario of the batch through ``n_steps`` periods and the final observation (see the module
-    docstring). Per scenario ``b``: inputs as :class:`~.step.ClosedLoop`'s arrays (``promise``, ``chain_margin``:
-    ``(N, B)``; ``uses``: ``(B, 3)`` the variant's flags; ``period_prm``: the shield period's parameter vector
-    (``shield/_fast_period.PRM``); ``plan_init``, ``history_init``, ``count_init``, ``st_init``, ``sk_init``: the
-    shield's initial state packed as :func:`~safelane.shield._fast_period.period_row` holds it); outputs
-    :data:`OUT_F`, :data:`OUT_B`, ``counts (B, 3)``, ``n_invalid``, ``breach_flags (B, 5)``, and ``bad_step`` (the
-    first period whose state is not finite, ``-1`` if none)."""
-    k = x_init.shape[1]
+def loop_kernel(n_steps, prm, batch, start, out):
+    """Run every scenario of ``batch`` (:class:`LoopBatch`) through ``n_steps`` periods and the final observation
+    (see the module docstring), the shield from ``start`` (:class:`ShieldStart`), into ``out`` (:class:`LoopOut`);
+    ``prm``: :data:`PRM`'s values."""
+    period_prm, plan_init, history_init, _, st_init, sk_init = start
+    k = batch.x.shape[1]
     m = k - 1
     window = history_init.shape[1]
     # The scratch arrays, allocated here once; the rows run in _loop_rows, compiled without reference counting
@@ -92,21 +98,11 @@ def loop_kernel(
         np.empty(3), np.empty(3), np.empty(3), np.empty(2), np.empty(2), np.empty(2), np.empty(2), np.empty(1),
         np.empty(3), np.empty(3), np.empty(3), np.empty(2), np.empty(2), np.empty(2), np.empty(window),
     )  # fmt: skip
-    _loop_rows(
-        n_steps, prm, window, x_init, v_init, ego_init, valid, n_connected, f_connected, f_aggressive, uses, promise,
-        chain_margin, margin, is_last, acts, v_desired, promise_decel, promise_accel, decel_last, gap0, lane_valid,
-        lane_margin, period_prm, plan_init, history_init, count_init, st_init, sk_init, out_f, out_b, counts, n_invalid,
-        breach_flags, bad_step, work,
-    )  # fmt: skip
+    _loop_rows(n_steps, prm, batch, start, out, work)
 
 
 @numba.njit(nogil=True, error_model="numpy", _nrt=False)
-def _loop_rows(
-    n_steps, prm, window, x_init, v_init, ego_init, valid, n_connected, f_connected, f_aggressive, uses, promise,
-    chain_margin, margin, is_last, acts, v_desired, promise_decel, promise_accel, decel_last, gap0, lane_valid,
-    lane_margin, period_prm, plan_init, history_init, count_init, st_init, sk_init, out_f, out_b, counts, n_invalid,
-    breach_flags, bad_step, work,
-):  # fmt: skip
+def _loop_rows(n_steps, prm, batch, start, out, work):
     """:func:`loop_kernel`'s rows, on its scratch arrays ``work`` (no allocation, no reference counting)."""
     dt, a_a, a_d, a_ym, y_safe, p_m, lane_w, length, conflict, overlap = prm[:10]
     mon_tol, brake_start, open_decel, open_gap = prm[10:14]
@@ -115,6 +111,10 @@ def _loop_rows(
     a_lim = _max(a_a, a_d)
     gains, lim = ExpertGains(k_p, k_v, gap_frac, brake_comfort, om2, two_om), Limits(a_a, a_d, a_ym, y_safe)
     max_level = _max(conflict, overlap)
+    (x_init, v_init, ego_init, valid, n_connected, f_connected, f_aggressive, uses, promise, chain_margin, margin,
+     is_last, acts, v_desired, promise_decel, promise_accel, decel_last, gap0, lane_valid, lane_margin) = batch
+    _, plan_init, history_init, count_init, st_init, sk_init = start
+    out_f, out_b, counts, n_invalid, breach_flags, bad_step = out
     bsz, k = x_init.shape
     m = k - 1
     window = history_init.shape[1]

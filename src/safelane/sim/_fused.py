@@ -150,7 +150,7 @@ def run_chunk(sim, n_steps: int) -> dict:
     ``sim``'s arrays."""
     from ..shield.fast_step import Packed, period_constants
     from ..shield.policies import variant_flags
-    from ._fast_loop import OUT_B, OUT_F, PRM, loop_kernel
+    from ._fast_loop import OUT_B, OUT_F, PRM, LoopBatch, LoopOut, ShieldStart, loop_kernel
 
     b, prm, cfg, nominal = sim.b, sim.prm, sim.cfg, sim.nominal
     start = sim.initial_state()
@@ -174,15 +174,16 @@ def run_chunk(sim, n_steps: int) -> dict:
     counts, n_invalid = np.empty((n, 3), np.int64), np.empty(n, np.int64)
     flags, bad = np.empty((n, len(BREACH_KINDS)), np.bool_), np.empty(n, np.int64)
     is_last, acts = traffic.roles
-    loop_kernel(
-        n_steps, prm_vec, cfg.shield.assess_window, c(b.x), c(b.v),
-        c(np.stack([b.ego_x, b.ego_y, b.ego_vx, b.ego_vy], 1)), c(b.valid), c(b.n_connected.astype(np.int64)),
-        c(b.connected[:, 0]), c(b.follower_aggressive), uses, c(sim.chain_promise), c(sim.chain_margin),
-        c(traffic.margin), c(is_last), c(acts), c(traffic.v_desired), c(b.promise_decel), c(b.promise_accel),
-        c(b.decel_last.astype(np.float64)), c(traffic.gap0), c(sim.lane_pairs[0]), c(sim.lane_pairs[1]),
-        period_constants(prm, cfg.shield), c(packed.plan), c(packed.history), c(packed.count), c(packed.st),
-        c(packed.sk), out_f, out_b, counts, n_invalid, flags, bad,
+    batch = LoopBatch(
+        c(b.x), c(b.v), c(np.stack([b.ego_x, b.ego_y, b.ego_vx, b.ego_vy], 1)), c(b.valid),
+        c(b.n_connected.astype(np.int64)), c(b.connected[:, 0]), c(b.follower_aggressive), uses, c(sim.chain_promise),
+        c(sim.chain_margin), c(traffic.margin), c(is_last), c(acts), c(traffic.v_desired), c(b.promise_decel),
+        c(b.promise_accel), c(b.decel_last.astype(np.float64)), c(traffic.gap0), c(sim.lane_pairs[0]),
+        c(sim.lane_pairs[1]),
     )  # fmt: skip
+    shield_start = ShieldStart(period_constants(prm, cfg.shield), c(packed.plan), c(packed.history), c(packed.count),
+                               c(packed.st), c(packed.sk))  # fmt: skip
+    loop_kernel(n_steps, prm_vec, batch, shield_start, LoopOut(out_f, out_b, counts, n_invalid, flags, bad))
     if (bad >= 0).any():
         step = int(bad[bad >= 0].min())
         rows = np.flatnonzero(bad == step)
