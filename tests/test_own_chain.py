@@ -97,10 +97,10 @@ def test_connected_own_lane_vehicles_brake_no_harder_than_the_reference_chain_bo
 
 
 def test_connected_vehicles_keep_their_task_where_it_is_safe():
-    """A kilometre apart (where even the head's worst case, 9.5 m/s², asks less of them than their promise), each
+    """1.5 km apart (where even the head's worst case, 9.5 m/s², asks less of them than their promise), each
     connected vehicle holds its speed until its own instant, then brakes at exactly its promise (the adversarial
     timing inside the assumptions)."""
-    cfg = _config(2, l0_gap_min_m=1000.0, l0_gap_max_m=1000.0, l0_speed_spread_mps=0.0, l0_brake_window_s=2.0,
+    cfg = _config(2, l0_gap_min_m=1500.0, l0_gap_max_m=1500.0, l0_speed_spread_mps=2.0, l0_brake_window_s=2.0,
                   l0_decel_mps2=1e-9)  # fmt: skip
     loop = ClosedLoop(with_own_lane(_batch(16, seed=4), 5, cfg, PRM), 5, PRM, cfg, ExpertPlanner())
     _, vs, _ = _run(loop, 30)
