@@ -86,7 +86,8 @@ class OwnLane:
         promise_vm = np.where(in_chain, self.promise, prm.others_decel).T.copy()
         margin_vm = np.full((k - 1, n), prm.p_m)
         lane = lambda a, slot0: np.asfortranarray(np.column_stack([np.full(n, slot0), a]))  # noqa: E731
-        bounds, _ = lane_bounds(lane(xs, 0.0), lane(vs, 0.0), promise_vm, margin_vm, prm)
+        lx, lv = lane(xs, 0.0), lane(vs, 0.0)
+        bounds, _ = lane_bounds(lx, lv, promise_vm, margin_vm, prm)
         cap = np.minimum(cap, bounds[:, 1:])
         hold = hold_speed(ARRAY, v[:, :-1], self.v_desired[:, :-1])
         wanted = np.where(t + TIME_TOL_S >= self.brake_t, -self.promise, hold)
@@ -94,7 +95,7 @@ class OwnLane:
         valid = np.column_stack([np.zeros(n, bool), present])
         connected = np.column_stack([np.zeros(n, bool), in_chain, np.zeros(n, bool)])
         roles = leader_roles(valid, connected, self.n_connected)
-        acc = leader_accels(lane(xs, 0.0), lane(vs, 0.0), np.full((n, k + 1), prm.p_m, order="F"), roles,
+        acc = leader_accels(lx, lv, np.full((n, k + 1), prm.p_m, order="F"), roles,
                             lane(cap, prm.others_decel), lane(np.column_stack([task, np.zeros(n)]), 0.0), a_head,
                             np.full(n, prm.others_decel), None, None, prm)  # fmt: skip
         return np.asfortranarray(acc[:, 1:]), cap
