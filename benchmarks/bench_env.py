@@ -1,32 +1,35 @@
-"""Throughput of the Gymnasium environments: the native vector env vs the single env looped.
+"""Throughput of the Gymnasium environments, compiled and period by period in NumPy, measured in the same run.
 
 *Vector*: :class:`safelane.envs.LaneChangeVectorEnv` with ``--envs`` sub-envs (default 1,024) — one batched closed
-loop, the shield on, same-step auto-reset of finished sub-envs included. *Loop*: one
-:class:`safelane.envs.LaneChangeEnv` stepped ``--envs`` times per vector step (what a ``SyncVectorEnv`` of single
-envs would do, without its bookkeeping), resetting when an episode ends. Both in this one process, measured in
-the same run; env-steps = sub-envs × vector steps.
+loop, the shield on, same-step auto-reset of finished sub-envs included. *Single*: one
+``gymnasium.make("safelane/LaneChange-v0")`` env (Gymnasium's own wrappers included) stepped ``--single-steps``
+times, resetting when an episode ends. Each twice: on the compiled period (``sim/_fast_loop.step_kernel``, the
+default) and on the NumPy path (``SAFELANE_NO_FUSED=1``: :class:`safelane.sim.step.ClosedLoop`, the baseline).
 
 Two action streams: *expert* (the rule-based expert planner's law computed from the observation: lane changes
 that complete in about 3 s, so many resets) and *random* (uniform in the action box: long, hesitant episodes).
 The scenario distribution is the environment's default (``CV_all``, N = 3, ``a_x_N+1_d ~ U[2, 6]``). The vector
 time is the best of ``--repeat`` runs of ``--steps`` steps after ``--warmup`` steps, on the wall clock and in CPU
 time of this process (on a busy machine the wall clock also counts the time other processes held the core).
-Target: >= 100,000 env-steps/s at 1,024 sub-envs. Run with ``python benchmarks/bench_env.py [--envs 1024]
-[--quick]``; it prints, never asserts.
+Targets: vector >= 1,000,000 env-steps/s at 1,024 sub-envs, single >= 10,000 steps/s. Run with
+``python benchmarks/bench_env.py [--envs 1024] [--quick]``; it prints, never asserts.
 """
 
 from __future__ import annotations
 
 import argparse
+import os
 import time
 
+import gymnasium as gym
 import numpy as np
 from threadpoolctl import threadpool_limits
 
 from safelane import Params
-from safelane.envs import LaneChangeEnv, LaneChangeVectorEnv
+from safelane.envs import LaneChangeVectorEnv
 
-TARGET = 100_000  # env-steps/s at 1,024 sub-envs
+TARGET_VECTOR = 1_000_000  # env-steps/s at 1,024 sub-envs
+TARGET_SINGLE = 10_000  # steps/s of one env
 
 
 def expert_actions(obs: np.ndarray, rng: np.random.Generator, prm: Params) -> np.ndarray:
@@ -63,19 +66,18 @@ def time_vector(policy, envs: int, steps: int, warmup: int, repeat: int, prm: Pa
     return envs * steps / best, envs * steps / best_cpu, episodes
 
 
-def time_loop(policy, envs: int, vector_steps: int, prm: Params):
-    env = LaneChangeEnv()
+def time_single(policy, steps: int, prm: Params):
+    env = gym.make("safelane/LaneChange-v0")
     rng = np.random.default_rng(0)
     obs, _ = env.reset(seed=0)
-    done = 0
+    for _ in range(20):  # (compiles on first use)
+        obs, _, terminated, truncated, _ = env.step(policy(obs, rng, prm)[0])
     t0, c0 = time.perf_counter(), time.process_time()
-    for _ in range(vector_steps):
-        for _ in range(envs):
-            obs, _, terminated, truncated, _ = env.step(policy(obs, rng, prm)[0])
-            if terminated or truncated:
-                obs, _ = env.reset()
-                done += 1
-    return envs * vector_steps / (time.perf_counter() - t0), envs * vector_steps / (time.process_time() - c0)
+    for _ in range(steps):
+        obs, _, terminated, truncated, _ = env.step(policy(obs, rng, prm)[0])
+        if terminated or truncated:
+            obs, _ = env.reset()
+    return steps / (time.perf_counter() - t0), steps / (time.process_time() - c0)
 
 
 def main(argv=None) -> None:
@@ -84,29 +86,40 @@ def main(argv=None) -> None:
     ap.add_argument("--steps", type=int, default=200, help="timed vector steps per run")
     ap.add_argument("--warmup", type=int, default=50, help="untimed vector steps first (episodes in flight)")
     ap.add_argument("--repeat", type=int, default=3, help="vector runs (the best counts)")
-    ap.add_argument("--loop-steps", type=int, default=2, help="vector steps' worth of single-env steps in the loop")
-    ap.add_argument("--quick", action="store_true", help="128 envs, 20 steps, 1 run (a smoke run)")
+    ap.add_argument("--single-steps", type=int, default=5000, help="timed steps of the single env (NumPy: a tenth)")
+    ap.add_argument("--quick", action="store_true", help="128 envs, 20 steps, 1 run, 500 single steps (a smoke run)")
     args = ap.parse_args(argv)
     if args.quick:
-        args.envs, args.steps, args.warmup, args.repeat, args.loop_steps = 128, 20, 5, 1, 1
+        args.envs, args.steps, args.warmup, args.repeat, args.single_steps = 128, 20, 5, 1, 500
     prm = Params()
     print(
-        f"bench_env: safelane/LaneChange-v0 defaults (CV_all, N = 3, decel U[2, 6], shield on), {args.envs} sub-envs, "
-        f"{args.steps} steps after {args.warmup} (best of {args.repeat}); loop: one env x {args.envs} x "
-        f"{args.loop_steps}"
+        f"bench_env: safelane/LaneChange-v0 defaults (CV_all, N = 3, decel U[2, 6], shield on); vector: {args.envs} "
+        f"sub-envs, {args.steps} steps after {args.warmup} (best of {args.repeat}); single: gymnasium.make, "
+        f"{args.single_steps} steps"
     )
-    print(f"target: vector >= {TARGET:,} env-steps/s at 1,024 sub-envs\n")
+    print(f"targets: vector >= {TARGET_VECTOR:,} env-steps/s at 1,024 sub-envs, single >= {TARGET_SINGLE:,} steps/s\n")
     print("env-steps/s of wall-clock time (and per CPU-second of this process, in brackets: on a busy machine the")
     print("wall clock also counts the time other processes held the core)\n")
-    print(f"{'actions':<8} {'vector':>22} {'episodes':>9} {'single env looped':>20} {'ratio':>6}")
+    print(f"{'path':<9} {'actions':<8} {'vector':>22} {'episodes':>9} {'single env':>20}")
+    rows = {}
     with threadpool_limits(limits=1, user_api="blas"):
-        for name, policy in (("expert", expert_actions), ("random", random_actions)):
-            vec, vec_cpu, episodes = time_vector(policy, args.envs, args.steps, args.warmup, args.repeat, prm)
-            loop, loop_cpu = time_loop(policy, args.envs, args.loop_steps, prm)
-            print(
-                f"{name:<8} {vec:>10,.0f} ({vec_cpu:>9,.0f}) {episodes:>9} {loop:>8,.0f} ({loop_cpu:>8,.0f}) "
-                f"{vec / loop:>5.0f}x"
-            )
+        for path, flag in (("compiled", "0"), ("NumPy", "1")):
+            os.environ["SAFELANE_NO_FUSED"] = flag  # read at every env's (re)build of its loop
+            scale = 1 if flag == "0" else 10
+            for name, policy in (("expert", expert_actions), ("random", random_actions)):
+                vec, vec_cpu, episodes = time_vector(policy, args.envs, max(2, args.steps // scale), args.warmup,
+                                                     args.repeat, prm)  # fmt: skip
+                one, one_cpu = time_single(policy, max(50, args.single_steps // scale), prm)
+                rows[path, name] = vec_cpu, one_cpu
+                print(f"{path:<9} {name:<8} {vec:>10,.0f} ({vec_cpu:>9,.0f}) {episodes:>9} {one:>8,.0f} "
+                      f"({one_cpu:>8,.0f})")  # fmt: skip
+    os.environ.pop("SAFELANE_NO_FUSED")
+    print("\ncompiled / NumPy per CPU-second, and the targets (per CPU-second, the best action stream):")
+    for j, (what, target) in enumerate((("vector", TARGET_VECTOR), ("single", TARGET_SINGLE))):
+        ratio = "  ".join(f"{name} {rows['compiled', name][j] / rows['NumPy', name][j]:.1f}x"
+                          for name in ("expert", "random"))  # fmt: skip
+        best = max(rows["compiled", name][j] for name in ("expert", "random"))
+        print(f"  {what:<7} {ratio}   target >= {target:,}: {'pass' if best >= target else 'MISS'} ({best:,.0f})")
 
 
 if __name__ == "__main__":

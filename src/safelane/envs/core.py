@@ -28,6 +28,7 @@ from ..params import Params
 from ..planners.base import Observation
 from ..planners.features import FEATURE_NAMES, features
 from ..planners.variants import VARIANT_NAMES, get_variant
+from ..sim._fused import Stepper, steps_compiled
 from ..sim.config import SimConfig
 from ..sim.scenario import ScenarioBatch, ScenarioConfig, paper_scenarios
 from ..sim.step import ClosedLoop
@@ -191,6 +192,8 @@ class StepOutcome:
 def check_action(action, shape: tuple[int, ...], accepted: tuple[int, ...] | None = None) -> np.ndarray:
     """``action`` as a float array of ``shape``; an :class:`~safelane.errors.InputError` naming the action, its
     shape and the expected one otherwise (``accepted``: the shape the caller takes, named in the message)."""
+    if type(action) is np.ndarray and action.dtype == np.float64 and action.shape == shape:
+        return action  # nothing to check or convert (the envs check an action, then hand the array to the task)
     from ..errors import InputError
 
     want = accepted or shape
@@ -268,8 +271,13 @@ class LaneChangeTask:
         self.state = replace_rows(self.state, start, rows, self.n)
         self.steps[rows] = 0
 
-    def _loop(self, batch: ScenarioBatch) -> ClosedLoop:
-        return ClosedLoop(batch, self.seed, self.params, self.config, self.planner, self.traffic)
+    def _loop(self, batch: ScenarioBatch):
+        """The closed loop over ``batch``: compiled (:class:`~safelane.sim._fused.Stepper`) where it covers the
+        settings, else :class:`~safelane.sim.step.ClosedLoop` (the same interface, period by period)."""
+        loop = ClosedLoop(batch, self.seed, self.params, self.config, self.planner, self.traffic)
+        if not steps_compiled(batch, self.config, self.traffic):
+            return Stepper(loop)
+        return loop
 
     def observe(self) -> np.ndarray:
         return features(self.loop.observe(self.state), self.params).astype(np.float32)
@@ -280,7 +288,10 @@ class LaneChangeTask:
         proposal = np.clip(check_action(action, (self.n, 2)), lo, hi)  # NaN stays: an invalid one
         self.planner.set(proposal)
         before = self.state
-        self.state, _, behaviour = self.loop.step(before)
+        if isinstance(self.loop, Stepper):  # (the proposals are given: no observation to build for the planner)
+            self.state, behaviour = self.loop.step_with(before, self.planner.a_x, self.planner.a_y)
+        else:
+            self.state, _, behaviour = self.loop.step(before)
         after = self.state
         self.steps += 1
         dt, prm, rc = self.params.dt, self.params, self.reward_config

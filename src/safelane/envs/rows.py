@@ -52,7 +52,7 @@ def replace_rows(tree, fresh, rows: np.ndarray, batch: int):
         out[rows] = fresh
         return out
     if isinstance(tree, tuple):
-        return tuple(replace_rows(a, b, rows, batch) for a, b in zip(tree, fresh, strict=True))
+        return _like(tree, [replace_rows(a, b, rows, batch) for a, b in zip(tree, fresh, strict=True)])
     if dataclasses.is_dataclass(tree) and not isinstance(tree, type):
         changes = {}
         for f in dataclasses.fields(tree):
@@ -76,7 +76,7 @@ def vacate_rows(record, rows: np.ndarray, batch: int):
         out[rows] = False if out.dtype == bool else (-1 if out.dtype.kind in "iu" else np.nan)
         return out
     if isinstance(record, tuple):
-        return tuple(vacate_rows(a, rows, batch) for a in record)
+        return _like(record, [vacate_rows(a, rows, batch) for a in record])
     if dataclasses.is_dataclass(record) and not isinstance(record, type):
         return dataclasses.replace(
             record, **{f.name: vacate_rows(getattr(record, f.name), rows, batch) for f in dataclasses.fields(record)}
@@ -97,3 +97,8 @@ def shift_plan_clock(tree, t: float):
         elif dataclasses.is_dataclass(value):
             changes[f.name] = shift_plan_clock(value, t)
     return dataclasses.replace(tree, **changes)
+
+
+def _like(tree: tuple, items: list) -> tuple:
+    """``items`` as a tuple of ``tree``'s type (a named tuple stays one)."""
+    return type(tree)(*items) if hasattr(tree, "_fields") else tuple(items)

@@ -95,6 +95,22 @@ def announce_compile(source: str, stream=None) -> bool:
 #: arrays and create views, never allocate.
 row_function = numba.njit(error_model="numpy", nogil=True, _nrt=False, forceinline=True)
 
+
+
+@numba.njit(inline="always")
+def sort_short(a):
+    """``a.sort()`` of a short array in place, NaN last as NumPy sorts, allocating nothing (an insertion sort: code
+    compiled without numba's reference counting — the row functions, the closed loop's rows — cannot call numba's
+    quicksort, which may allocate)."""
+    for i in range(1, a.shape[0]):
+        key = a[i]
+        j = i - 1
+        while j >= 0 and (a[j] > key or (a[j] != a[j] and key == key)):
+            a[j + 1] = a[j]
+            j -= 1
+        a[j + 1] = key
+
+
 # One explicit signature (compiled at import, or loaded from the cache): read-only 1-D arrays of any layout, so
 # contiguous inputs, broadcast scalars (stride 0) and read-only views all take the same machine code.
 _F = types.Array(types.float64, 1, "A", readonly=True)

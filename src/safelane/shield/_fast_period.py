@@ -30,7 +30,7 @@ import numpy as np
 
 from ..safety import _compile
 from ..safety._backend import SCALAR, Limits, _clip
-from ..safety._fast_base import announce_compile, row_function
+from ..safety._fast_base import announce_compile, row_function, sort_short
 from ..safety._fast_responsible import _responsible_bound
 from ..safety.chain import chain_link
 from ..safety.own_lane import own_period
@@ -147,19 +147,6 @@ def _held_motion(plan, r, age, dt, a_a, a_d, kt, kx, kv, ky, kvy):
 
 
 @numba.njit(inline="always")
-def _sort8(a):
-    """``a.sort()`` of a short array in place, NaN last as NumPy sorts, allocating nothing (an insertion sort: the
-    row functions compiled without numba's reference counting cannot call its quicksort)."""
-    for i in range(1, a.shape[0]):
-        key = a[i]
-        j = i - 1
-        while j >= 0 and (a[j] > key or (a[j] != a[j] and key == key)):
-            a[j + 1] = a[j]
-            j -= 1
-        a[j + 1] = key
-
-
-@numba.njit(inline="always")
 def plan_knots(held, lead_p, lead_v, lead_decel, age, dt, a_a, a_d, kt, kx, kv, ky, kvy):
     """``decide.plan_motion`` of one held plan (a :class:`~safelane.safety.plan.PlanRecord`, the profile following
     ``(lead_p, lead_v, lead_decel)``) on ``[age, age + dt]``: the period's ends and the plan's switches inside it
@@ -171,7 +158,7 @@ def plan_knots(held, lead_p, lead_v, lead_decel, age, dt, a_a, a_d, kt, kx, kv, 
     for j in range(6):
         kt[j + 1] = switches[j]
     kt[7] = dt
-    _sort8(kt)
+    sort_short(kt)
     lim = Limits(a_a, a_d, 0.0, 0.0)
     for j in range(8):
         kx[j], ky[j], kv[j], kvy[j] = plan_state(SCALAR, held, age + kt[j], lead_p, lead_v, lead_decel, lim)

@@ -17,7 +17,7 @@ from numba import types
 
 from ..safety import _compile
 from ..safety._backend import INF, SCALAR
-from ..safety._fast_base import _max, _min, announce_compile
+from ..safety._fast_base import _max, _min, announce_compile, sort_short
 from .kinematics import segment_crossings, state_at, windowed_piece
 
 _compile.register_rows()
@@ -53,7 +53,7 @@ def _general_pair(bt, bx, bv, bacc, at, ax, av, aacc, lt, lx, lv, lacc, level, k
                                                                 lacc[j], level)  # fmt: skip
     size = second + nl - 1
     merged = knots[:size]
-    merged.sort()
+    sort_short(merged)  # (not merged.sort(): the closed loop runs this without reference counting)
     low, high = INF, -INF
     xa, va = _at(at, ax, av, aacc, merged[0])
     xb, vb = _at(bt, bx, bv, bacc, merged[0])

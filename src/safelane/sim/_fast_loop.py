@@ -32,11 +32,7 @@ import numpy as np
 from ..planners.base import ExpertGains, expert_accel
 from ..safety import _compile
 from ..safety._backend import SCALAR, Limits
-from ..safety._fast_base import (
-    _max,
-    _min,
-    announce_compile,
-)
+from ..safety._fast_base import _max, _min, announce_compile, row_function
 from ..shield._fast_period import monitor_row, period_row
 from ..shield.decide import ABORT, HESITATE, PROCEED
 from ..tolerances import DIST_TOL_M
@@ -63,9 +59,29 @@ LoopBatch = collections.namedtuple("LoopBatch", (
     "x", "v", "ego", "valid", "n_connected", "f_connected", "f_aggressive", "uses", "promise", "chain_margin", "margin",
     "is_last", "acts", "v_desired", "promise_decel", "promise_accel", "decel_last", "gap0", "lane_valid", "lane_margin",
 ))  # fmt: skip
-#: The shield at the start: its period's parameter vector (``shield/_fast_period.PRM``) and its state packed as
-#: :func:`~safelane.shield._fast_period.period_row` holds it (``shield/fast_step.Packed``).
-ShieldStart = collections.namedtuple("ShieldStart", ("prm", "plan", "history", "count", "st", "sk"))
+#: A row's whole state between periods, one array per part with the batch first (the compiled loop's only state):
+#: the target lane ``x``, ``v``, the last period's accelerations ``acc`` and the running minimum of the chain bounds
+#: ``cap`` ``(B, K)``; the running values ``rf`` (:data:`RF`), ``rb`` (:data:`RB`), ``ri`` (:data:`RI`); the
+#: shield's state as :func:`~safelane.shield._fast_period.period_row` holds it (``shield/fast_step.Packed``:
+#: ``plan``, ``history``, ``count``, ``st``, ``sk``) and the monitor's snapshot of the last period (``snap_*``).
+Rows = collections.namedtuple("Rows", (
+    "x", "v", "acc", "cap", "rf", "rb", "ri", "plan", "history", "count", "st", "sk", "snap_x", "snap_v", "snap_b",
+    "snap_nc",
+))  # fmt: skip
+#: A row's running floats: the ego's state, the row's clock, the results' times and smallest gaps.
+RF = ("ego_x", "ego_y", "ego_vx", "ego_vy", "t", "t_complete", "min_gap_f", "min_gap_l1", "min_lane_ratio")
+#: A row's running flags (``has_last``: the monitor has a snapshot of a last period).
+RB = ("collided", "violated", "leader_collided", "leader_violated", "has_last")
+#: A row's counts: periods that proceeded, hesitated, aborted; invalid proposals.
+RI = ("proceed", "hesitate", "abort", "invalid")
+#: The scratch arrays of one row's period (:func:`_scratch`), by name.
+Scratch = collections.namedtuple("Scratch", (
+    "x2", "v2", "f_acc2", "f_ts2", "f_xe2", "f_ve2", "acc", "cap", "general2", "pp", "sf", "sb", "chain_x", "chain_v",
+    "own_x", "own_v", "own_promise", "own_nc", "history", "count", "st", "sk", "plan", "snap_x", "snap_v", "snap_b",
+    "snap_nc", "bounds_out", "no_chain", "of", "ob", "knots", "px2", "pv2", "pb2", "kn", "kax", "kay", "scratch",
+    "lon_t", "lon_x", "lon_v", "lon_a", "lat_t", "lat_x", "lat_v", "lat_a", "o_t", "o_x", "o_v", "o_a", "lo", "hi",
+    "times", "rf", "rb", "ri",
+))  # fmt: skip
 #: What :func:`loop_kernel` writes: :data:`OUT_F`, :data:`OUT_B` per scenario, ``counts (B, 3)``, ``n_invalid``,
 #: ``breach_flags (B, 5)`` and ``bad_step`` (the first period whose state is not finite, ``-1`` if none).
 LoopOut = collections.namedtuple("LoopOut", ("f", "b", "counts", "n_invalid", "breach_flags", "bad_step"))
@@ -76,220 +92,305 @@ OUT_B = ("completed", "collided", "violated", "leader_collided", "leader_violate
 
 
 @numba.njit(cache=True, nogil=True, error_model="numpy")
-def loop_kernel(n_steps, prm, batch, start, out):
-    """Run every scenario of ``batch`` (:class:`LoopBatch`) through ``n_steps`` periods and the final observation
-    (see the module docstring), the shield from ``start`` (:class:`ShieldStart`), into ``out`` (:class:`LoopOut`);
-    ``prm``: :data:`PRM`'s values."""
-    period_prm, plan_init, history_init, _, st_init, sk_init = start
-    k = batch.x.shape[1]
+def loop_kernel(n_steps, prm, period_prm, batch, start, out):
+    """Run every scenario of ``batch`` (:class:`LoopBatch`) from its row of ``start`` (:class:`Rows`) through
+    ``n_steps`` periods of the expert planner and the final observation (see the module docstring), into ``out``
+    (:class:`LoopOut`); ``prm``: :data:`PRM`'s values, ``period_prm``: the shield's (``shield/_fast_period.PRM``)."""
+    _loop_rows(n_steps, prm, batch, start, out, _scratch(start, period_prm))
+
+
+@numba.njit(cache=True, nogil=True, error_model="numpy")
+def step_kernel(prm, period_prm, batch, rows, proposal, behaviour, finite):
+    """One period of every row of ``rows`` (:class:`Rows`, updated in place) with the nominal proposals ``proposal``
+    ``(B, 2)`` (the envs' actions) instead of the expert planner: each row's behaviour code into ``behaviour``, and
+    ``finite[b]`` false where the row's state stopped being finite."""
+    _step_rows(prm, batch, rows, proposal, behaviour, finite, _scratch(rows, period_prm))
+
+
+@numba.njit(cache=True, nogil=True, error_model="numpy")
+def _scratch(rows, period_prm):
+    """The scratch arrays of one row's period, allocated once per call of a kernel: the rows then run without
+    reference counting (every array a period touches would otherwise cost atomic increments and decrements)."""
+    k = rows.x.shape[1]
     m = k - 1
-    window = history_init.shape[1]
-    # The scratch arrays, allocated here once; the rows run in _loop_rows, compiled without reference counting
-    # (every array a period touches would otherwise cost atomic increments and decrements around each call).
-    work = (
+    window = rows.history.shape[1]
+    return Scratch(
         np.empty((1, k)), np.empty((1, k)), np.empty((1, k)), np.empty((1, k)), np.empty((1, k)), np.empty((1, k)),
         np.empty(k), np.empty(k), np.zeros((1, k), np.bool_), period_prm.copy(), np.empty((1, 9)),
         np.zeros((1, 6), np.bool_), np.empty((1, m)), np.empty((1, m)), np.full((1, 1), _INF), np.zeros((1, 1)),
         np.empty((1, 0)), np.zeros(1, np.int64), np.empty((1, window)), np.empty(1, np.int64),
-        np.empty((1, st_init.shape[1])), np.empty((1, sk_init.shape[1]), np.bool_), np.empty((1, plan_init.shape[1])),
-        np.empty((1, m)), np.empty((1, m)), np.empty((1, m)), np.empty(1, np.int64), np.empty((1, m)),
-        np.zeros(0, np.bool_), np.empty((1, 5)), np.empty((1, 4), np.bool_), np.empty((1, 5, 8)), np.empty((1, m + 1)),
-        np.empty((1, m + 1)), np.empty((1, m + 1)), np.empty((5, 8)), np.empty(7), np.empty(7), np.empty(64),
-        np.empty(3), np.empty(3), np.empty(3), np.empty(2), np.empty(2), np.empty(2), np.empty(2), np.empty(1),
-        np.empty(3), np.empty(3), np.empty(3), np.empty(2), np.empty(2), np.empty(2), np.empty(window),
+        np.empty((1, rows.st.shape[1])), np.empty((1, rows.sk.shape[1]), np.bool_),
+        np.empty((1, rows.plan.shape[1])), np.empty((1, m)), np.empty((1, m)), np.empty((1, m)), np.empty(1, np.int64),
+        np.empty((1, m)), np.zeros(0, np.bool_), np.empty((1, 5)), np.empty((1, 4), np.bool_), np.empty((1, 5, 8)),
+        np.empty((1, m + 1)), np.empty((1, m + 1)), np.empty((1, m + 1)), np.empty((5, 8)), np.empty(7), np.empty(7),
+        np.empty(64), np.empty(3), np.empty(3), np.empty(3), np.empty(2), np.empty(2), np.empty(2), np.empty(2),
+        np.empty(1), np.empty(3), np.empty(3), np.empty(3), np.empty(2), np.empty(2), np.empty(2), np.empty(window),
+        np.empty((1, len(RF))), np.empty((1, len(RB)), np.bool_), np.empty((1, len(RI)), np.int64),
     )  # fmt: skip
-    _loop_rows(n_steps, prm, batch, start, out, work)
+
+
+@row_function
+def _load(rows, b, batch, w):
+    """Row ``b`` of ``rows`` into the scratch ``w`` (and the row's situation flags from ``batch``)."""
+    x2, v2, acc, cap, sb, rf, rb, ri = w.x2, w.v2, w.acc, w.cap, w.sb, w.rf, w.rb, w.ri
+    history, count, st, sk, plan = w.history, w.count, w.st, w.sk, w.plan
+    snap_x, snap_v, snap_b, snap_nc = w.snap_x, w.snap_v, w.snap_b, w.snap_nc
+    for i in range(x2.shape[1]):
+        x2[0, i], v2[0, i], acc[i], cap[i] = rows.x[b, i], rows.v[b, i], rows.acc[b, i], rows.cap[b, i]
+    for j in range(rf.shape[1]):
+        rf[0, j] = rows.rf[b, j]
+    for j in range(rb.shape[1]):
+        rb[0, j] = rows.rb[b, j]
+    for j in range(ri.shape[1]):
+        ri[0, j] = rows.ri[b, j]
+    for j in range(plan.shape[1]):
+        plan[0, j] = rows.plan[b, j]
+    for j in range(history.shape[1]):
+        history[0, j] = rows.history[b, j]
+    count[0] = rows.count[b]
+    for j in range(st.shape[1]):
+        st[0, j] = rows.st[b, j]
+    for j in range(sk.shape[1]):
+        sk[0, j] = rows.sk[b, j]
+    for j in range(snap_x.shape[1]):
+        snap_x[0, j], snap_v[0, j], snap_b[0, j] = rows.snap_x[b, j], rows.snap_v[b, j], rows.snap_b[b, j]
+    snap_nc[0] = rows.snap_nc[b]
+    sb[0, 0] = batch.f_connected[b]  # F trusted where the variant listens: connected (it declares itself collaborative)
+    sb[0, 2], sb[0, 3], sb[0, 4] = batch.uses[b, 0], batch.uses[b, 1], batch.uses[b, 2]
+
+
+@row_function
+def _store(rows, b, w):
+    """The scratch ``w`` back into row ``b`` of ``rows`` (:func:`_load`'s inverse)."""
+    x2, v2, acc, cap, rf, rb, ri = w.x2, w.v2, w.acc, w.cap, w.rf, w.rb, w.ri
+    history, count, st, sk, plan = w.history, w.count, w.st, w.sk, w.plan
+    snap_x, snap_v, snap_b, snap_nc = w.snap_x, w.snap_v, w.snap_b, w.snap_nc
+    for i in range(x2.shape[1]):
+        rows.x[b, i], rows.v[b, i], rows.acc[b, i], rows.cap[b, i] = x2[0, i], v2[0, i], acc[i], cap[i]
+    for j in range(rf.shape[1]):
+        rows.rf[b, j] = rf[0, j]
+    for j in range(rb.shape[1]):
+        rows.rb[b, j] = rb[0, j]
+    for j in range(ri.shape[1]):
+        rows.ri[b, j] = ri[0, j]
+    for j in range(plan.shape[1]):
+        rows.plan[b, j] = plan[0, j]
+    for j in range(history.shape[1]):
+        rows.history[b, j] = history[0, j]
+    rows.count[b] = count[0]
+    for j in range(st.shape[1]):
+        rows.st[b, j] = st[0, j]
+    for j in range(sk.shape[1]):
+        rows.sk[b, j] = sk[0, j]
+    for j in range(snap_x.shape[1]):
+        rows.snap_x[b, j], rows.snap_v[b, j], rows.snap_b[b, j] = snap_x[0, j], snap_v[0, j], snap_b[0, j]
+    rows.snap_nc[b] = snap_nc[0]
+
+
+@row_function
+def _window(times, dt):
+    """The assessment's window of sample times centred on 0 (``times``, filled) and the sum of their squares."""
+    window = times.shape[0]
+    for j in range(window):
+        times[j] = (j - (window - 1) / 2.0) * dt
+    den = times[0] * times[0]
+    for j in range(1, window):
+        den = den + times[j] * times[j]
+    return den
 
 
 @numba.njit(nogil=True, error_model="numpy", _nrt=False)
-def _loop_rows(n_steps, prm, batch, start, out, work):
-    """:func:`loop_kernel`'s rows, on its scratch arrays ``work`` (no allocation, no reference counting)."""
-    dt, a_a, a_d, a_ym, y_safe, p_m, lane_w, length, conflict, overlap = prm[:10]
-    mon_tol, brake_start, open_decel, open_gap = prm[10:14]
-    k_p, k_v, gap_frac, brake_comfort, om2, two_om = prm[14:20]
+def _loop_rows(n_steps, prm, batch, start, out, w):
+    """:func:`loop_kernel`'s rows, on its scratch arrays ``w`` (no allocation, no reference counting)."""
+    dt, lane_w, mon_tol = prm[0], prm[6], prm[10]
+    a_a, a_d, a_ym, y_safe = prm[1], prm[2], prm[3], prm[4]
+    gains = ExpertGains(prm[14], prm[15], prm[16], prm[17], prm[18], prm[19])
+    lim = Limits(a_a, a_d, a_ym, y_safe)
+    out_f, out_b, counts, n_invalid, breach_flags, bad_step = out
+    x2, v2, st, sk, px2, rf, rb, ri = w.x2, w.v2, w.st, w.sk, w.px2, w.rf, w.rb, w.ri
+    snap_x, snap_v, snap_b, snap_nc = w.snap_x, w.snap_v, w.snap_b, w.snap_nc
+    x, v = x2[0], v2[0]
+    k = x.shape[0]
+    den = _window(w.times, dt)
+    for b in range(start.x.shape[0]):
+        _load(start, b, batch, w)
+        bad = -1
+        for step in range(n_steps + 1):
+            if step == n_steps:  # the monitor's view of the last period (core.observe after the run: finish)
+                if rb[0, 4]:
+                    for i in range(k):
+                        px2[0, i] = x[i]
+                    monitor_row(0, rf[0, 4], dt, mon_tol, px2, snap_x, snap_v, snap_b, snap_nc, st, sk)
+                break
+            # --- observe, the expert planner (planners.base.ExpertPlanner) ---
+            ax_n, ay_n = expert_accel(SCALAR, x[0], x[1], v[1], rf[0, 0], rf[0, 1], rf[0, 2], rf[0, 3], gains, lane_w,
+                                      lim)  # fmt: skip
+            _, finite = _period(prm, batch, b, w, den, ax_n, ay_n)
+            if not finite:
+                bad = step
+                break
+        out_f[b, 0], out_f[b, 1], out_f[b, 2], out_f[b, 3] = rf[0, 5], rf[0, 6], rf[0, 7], rf[0, 8]
+        out_f[b, 4], out_f[b, 5] = st[0, 1], st[0, 2]
+        out_b[b, 0], out_b[b, 1], out_b[b, 2] = sk[0, 3], rb[0, 0], rb[0, 1]
+        out_b[b, 3], out_b[b, 4], out_b[b, 5] = rb[0, 2], rb[0, 3], sk[0, 2]
+        counts[b, 0], counts[b, 1], counts[b, 2] = ri[0, 0], ri[0, 1], ri[0, 2]
+        n_invalid[b] = ri[0, 3]
+        for j in range(breach_flags.shape[1]):
+            breach_flags[b, j] = sk[0, 5 + j]
+        bad_step[b] = bad
+
+
+@numba.njit(nogil=True, error_model="numpy", _nrt=False)
+def _step_rows(prm, batch, rows, proposal, behaviour, finite, w):
+    """:func:`step_kernel`'s rows, on its scratch arrays ``w``."""
+    den = _window(w.times, prm[0])
+    for b in range(rows.x.shape[0]):
+        _load(rows, b, batch, w)
+        behaviour[b], finite[b] = _period(prm, batch, b, w, den, proposal[b, 0], proposal[b, 1])
+        _store(rows, b, w)
+
+
+@row_function
+def _period(prm, batch, b, w, den, ax_n, ay_n):
+    """One control period of row ``b`` on the scratch ``w`` (its state loaded by :func:`_load`) with the nominal
+    proposal ``(ax_n, ay_n)``: the shield (``period_row``), the traffic, the motion, the checks, the running values.
+    Returns the behaviour code and whether the row's state is still finite."""
+    dt, a_a, a_d, p_m, length, conflict, overlap = prm[0], prm[1], prm[2], prm[5], prm[7], prm[8], prm[9]
+    brake_start, open_decel, open_gap = prm[11:14]
     a_o = prm[20]  # the others' maximum braking (a_x_d: the ego's committed braking, its own limits only)
     a_lim = _max(a_a, a_d)
-    gains, lim = ExpertGains(k_p, k_v, gap_frac, brake_comfort, om2, two_om), Limits(a_a, a_d, a_ym, y_safe)
     max_level = _max(conflict, overlap)
-    (x_init, v_init, ego_init, valid, n_connected, f_connected, f_aggressive, uses, promise, chain_margin, margin,
-     is_last, acts, v_desired, promise_decel, promise_accel, decel_last, gap0, lane_valid, lane_margin) = batch
-    _, plan_init, history_init, count_init, st_init, sk_init = start
-    out_f, out_b, counts, n_invalid, breach_flags, bad_step = out
-    bsz, k = x_init.shape
+    valid, n_connected, f_aggressive, margin = batch.valid, batch.n_connected, batch.f_aggressive, batch.margin
+    is_last, acts, v_desired, gap0 = batch.is_last, batch.acts, batch.v_desired, batch.gap0
+    promise_decel, promise_accel, decel_last = batch.promise_decel, batch.promise_accel, batch.decel_last
+    k = valid.shape[1]
     m = k - 1
-    window = history_init.shape[1]
     (x2, v2, f_acc2, f_ts2, f_xe2, f_ve2, acc, cap, general2, pp, sf, sb, chain_x, chain_v, own_x, own_v, own_promise,
      own_nc, history, count, st, sk, plan, snap_x, snap_v, snap_b, snap_nc, bounds_out, no_chain, of, ob, knots, px2,
      pv2, pb2, kn, kax, kay, scratch, lon_t, lon_x, lon_v, lon_a, lat_t, lat_x, lat_v, lat_a, o_t, o_x, o_v, o_a, lo,
-     hi, times) = work  # fmt: skip
+     hi, times, rf, rb, ri) = w  # fmt: skip
     x, v, f_acc, f_ts, f_xe, f_ve = x2[0], v2[0], f_acc2[0], f_ts2[0], f_xe2[0], f_ve2[0]
     general = general2[0]
     consts = (dt, p_m, a_lim, conflict, overlap, length, max_level)
     fleet = (x2, v2, f_acc2, f_ts2, f_xe2)
     bounds = pb2[0]  # the chain's bounds with F's slot (a_o), as period_row leaves them
     kt, kx, kv, ky, kvy = kn[0], kn[1], kn[2], kn[3], kn[4]
-    for j in range(window):
-        times[j] = (j - (window - 1) / 2.0) * dt
-    den = times[0] * times[0]
-    for j in range(1, window):
-        den = den + times[j] * times[j]
-    for b in range(bsz):
-        for i in range(k):
-            x[i], v[i], acc[i], cap[i] = x_init[b, i], v_init[b, i], 0.0, _INF
-        ex, ey, evx, evy = ego_init[b, 0], ego_init[b, 1], ego_init[b, 2], ego_init[b, 3]
-        for j in range(plan.shape[1]):
-            plan[0, j] = plan_init[b, j]
-        for j in range(window):
-            history[0, j] = history_init[b, j]
-        count[0] = count_init[b]
-        for j in range(st.shape[1]):
-            st[0, j] = st_init[b, j]
-        for j in range(sk.shape[1]):
-            sk[0, j] = sk_init[b, j]
-        sb[0, 0] = f_connected[b]  # F trusted where the variant listens: connected (it declares itself collaborative)
-        sb[0, 2], sb[0, 3], sb[0, 4] = uses[b, 0], uses[b, 1], uses[b, 2]
-        link_promise, link_margin = promise[:, b : b + 1], chain_margin[:, b : b + 1]
-        nc = n_connected[b]
-        t_complete = np.nan
-        collided = violated = l_collided = l_violated = False
-        gap_f, gap_l1, lane_ratio = _INF, _INF, _INF
-        n_pro = n_hes = n_abo = n_inv = 0
-        has_last = False
-        bad = -1
-        t = 0.0
-        for step in range(n_steps + 1):
-            if step == n_steps:  # the monitor's view of the last period (core.observe after the run: finish)
-                if has_last:
-                    for i in range(k):
-                        px2[0, i] = x[i]
-                    monitor_row(0, t, dt, mon_tol, px2, snap_x, snap_v, snap_b, snap_nc, st, sk)
-                break
-            # --- observe, the expert planner (planners.base.ExpertPlanner) ---
-            ax_n, ay_n = expert_accel(SCALAR, x[0], x[1], v[1], ex, ey, evx, evy, gains, lane_w, lim)
-            # --- the shield (core.step): one period of shield/_fast_period.period_row ---
-            sf[0, 0], sf[0, 1], sf[0, 2], sf[0, 3], sf[0, 4], sf[0, 5] = ex, ey, evx, evy, x[0], v[0]
-            sf[0, 6], sf[0, 7], sf[0, 8] = v[0], ax_n, ay_n
-            for i in range(m):
-                chain_x[0, i], chain_v[0, i] = x[i + 1], v[i + 1]
-            pp[0] = t
-            completed = sk[0, 3]
-            active = not completed
-            behaviour = period_row(0, pp, times, den, sf, sb, chain_x, chain_v, link_promise, link_margin, own_x, own_v,
-                                   own_promise, own_nc, history, count, st, sk, plan, has_last, snap_x, snap_v, snap_b,
-                                   snap_nc, bounds_out, no_chain, of, ob, knots, px2, pv2, pb2, kn)  # fmt: skip
-            ax_cmd, ay_cmd = of[0, 0], of[0, 1]
-            completing, invalid_active = ob[0, 0], ob[0, 1]
-            # The snapshot the next period's monitor compares with (the caller keeps it: fast_step.step).
-            for i in range(m):
-                snap_x[0, i], snap_v[0, i], snap_b[0, i] = x[i + 1], v[i + 1], bounds[i + 1]
-            snap_nc[0] = nc
-            has_last = True
-            on_plan = behaviour == ABORT
-            if on_plan:  # the held plan's period (knots and samples from period_row): its segment accelerations
-                for j in range(7):
-                    span = kt[j + 1] - kt[j]
-                    kax[j] = piece_acc(SCALAR, kv[j], kv[j + 1], span)
-                    kay[j] = piece_acc(SCALAR, kvy[j], kvy[j + 1], span)
-            # --- traffic (behaviours: worst-case leaders, F) on the running minimum of the chain bounds ---
-            for i in range(k):
-                cap[i] = _min(cap[i], bounds[i])
-            a_last = last_accel(SCALAR, t, brake_start, decel_last[b])
-            for i in range(k):
-                a_i = 0.0
-                if 1 <= i < k - 1 and acts[b, i]:
-                    task = task_core(SCALAR, hold_speed(SCALAR, v[i], v_desired[b, i]), promise_decel[b, i],
-                                     promise_accel[b, i])  # fmt: skip
-                    a_i = _leader_row(x[i + 1] - x[i] - margin[b, i], v[i], v[i + 1], cap[i + 1], cap[i], task,
-                                      False, 0.0, decel_last[b], a_o, dt)  # fmt: skip
-                if is_last[b, i]:
-                    a_i = a_last
-                acc[i] = a_i
-            acc[0] = _follower_row(x[0], v[0], x[1], v[1], ex, evx, f_aggressive[b], completed, gap0[b], False, 0.0,
-                                   False, p_m, a_a, a_o, open_decel, open_gap, dt)  # fmt: skip
-            row_acc = 0.0
-            for i in range(k):
-                f_acc[i], f_ts[i], f_xe[i], f_ve[i] = constant_segment(SCALAR, x[i], v[i], acc[i], dt)
-                row_acc = _max(row_acc, abs(f_acc[i]))
-            # --- the ego's motion: a constant command, or the held plan ---
-            l_acc, l_ts, l_xe, l_ve = constant_segment(SCALAR, ex, evx, ax_cmd, dt)
-            ey1 = ey + evy * dt + 0.5 * ay_cmd * dt * dt
-            evy1 = evy + ay_cmd * dt
-            # --- the checks (checks.ego_checks, lane_checks) ---
-            p_ymax = _motion_max(kt, ky, kvy) if on_plan else 0.0
-            p_xend = kx[7] if on_plan else 0.0
-            p_yend = ky[7] if on_plan else 0.0
-            hit, close, gap_f, gap_l1 = _ego_row(
-                valid, b, x2, v2, 0, (ex, evx), (ex, evx, l_acc, l_ts, l_xe), (ey, evy, ay_cmd, ey1),
-                (on_plan, p_ymax, p_xend, p_yend), fleet, row_acc, consts, (gap_f, gap_l1),
-                general2,
-            )  # fmt: skip
-            for c in range(k):
-                if not general[c]:
-                    continue
-                general[c] = False  # (for the next period)
-                o_t[0], o_t[1], o_t[2] = 0.0, f_ts[c], dt
-                o_x[0], o_x[1], o_x[2] = x[c], f_xe[c], f_xe[c]
-                o_v[0], o_v[1], o_v[2] = v[c], f_ve[c], f_ve[c]
-                o_a[0], o_a[1] = f_acc[c], 0.0
-                for n_level in range(2):
-                    level = conflict if n_level == 0 else overlap
-                    if on_plan:
-                        lo[n_level], hi[n_level] = _general_pair(kt, kx, kv, kax[:7], o_t, o_x, o_v, o_a, kt, ky, kvy,
-                                                                 kay[:7], level, scratch)  # fmt: skip
-                    else:
-                        lon_t[0], lon_t[1], lon_t[2] = 0.0, l_ts, dt
-                        lon_x[0], lon_x[1], lon_x[2] = ex, l_xe, l_xe
-                        lon_v[0], lon_v[1], lon_v[2] = evx, l_ve, l_ve
-                        lon_a[0], lon_a[1] = l_acc, 0.0
-                        lat_t[0], lat_t[1] = 0.0, dt
-                        lat_x[0], lat_x[1] = ey, ey1
-                        lat_v[0], lat_v[1] = evy, evy1
-                        lat_a[0] = ay_cmd
-                        lo[n_level], hi[n_level] = _general_pair(lon_t, lon_x, lon_v, lon_a, o_t, o_x, o_v, o_a, lat_t,
-                                                                 lat_x, lat_v, lat_a, level, scratch)  # fmt: skip
-                hit = hit or (lo[1] < length and hi[1] > -length)
-                close = close or (lo[0] < p_m - DIST_TOL_M and hi[0] > -p_m + DIST_TOL_M)
-                if c == 0:
-                    gap_f = _min(gap_f, -hi[0])
-                elif c == 1:
-                    gap_l1 = _min(gap_l1, lo[0])
-            l_hit, l_close, ratio = _lane_row(lane_valid, lane_margin, b, x2, v2, f_acc2, f_ts2, f_xe2, f_ve2, 0,
-                                              row_acc, dt, length)  # fmt: skip
-            # --- advance (ClosedLoop.check_and_advance) ---
+    link_promise, link_margin = batch.promise[:, b : b + 1], batch.chain_margin[:, b : b + 1]
+    nc = n_connected[b]
+    ex, ey, evx, evy, t = rf[0, 0], rf[0, 1], rf[0, 2], rf[0, 3], rf[0, 4]
+    gap_f, gap_l1 = rf[0, 6], rf[0, 7]
+    # --- the shield (core.step): one period of shield/_fast_period.period_row ---
+    sf[0, 0], sf[0, 1], sf[0, 2], sf[0, 3], sf[0, 4], sf[0, 5] = ex, ey, evx, evy, x[0], v[0]
+    sf[0, 6], sf[0, 7], sf[0, 8] = v[0], ax_n, ay_n
+    for i in range(m):
+        chain_x[0, i], chain_v[0, i] = x[i + 1], v[i + 1]
+    pp[0] = t
+    completed = sk[0, 3]
+    active = not completed
+    behaviour = period_row(0, pp, times, den, sf, sb, chain_x, chain_v, link_promise, link_margin, own_x, own_v,
+                           own_promise, own_nc, history, count, st, sk, plan, rb[0, 4], snap_x, snap_v, snap_b,
+                           snap_nc, bounds_out, no_chain, of, ob, knots, px2, pv2, pb2, kn)  # fmt: skip
+    ax_cmd, ay_cmd = of[0, 0], of[0, 1]
+    completing, invalid_active = ob[0, 0], ob[0, 1]
+    # The snapshot the next period's monitor compares with (the caller keeps it: fast_step.step).
+    for i in range(m):
+        snap_x[0, i], snap_v[0, i], snap_b[0, i] = x[i + 1], v[i + 1], bounds[i + 1]
+    snap_nc[0] = nc
+    rb[0, 4] = True
+    on_plan = behaviour == ABORT
+    if on_plan:  # the held plan's period (knots and samples from period_row): its segment accelerations
+        for j in range(7):
+            span = kt[j + 1] - kt[j]
+            kax[j] = piece_acc(SCALAR, kv[j], kv[j + 1], span)
+            kay[j] = piece_acc(SCALAR, kvy[j], kvy[j + 1], span)
+    # --- traffic (behaviours: worst-case leaders, F) on the running minimum of the chain bounds ---
+    for i in range(k):
+        cap[i] = _min(cap[i], bounds[i])
+    a_last = last_accel(SCALAR, t, brake_start, decel_last[b])
+    for i in range(k):
+        a_i = 0.0
+        if 1 <= i < k - 1 and acts[b, i]:
+            task = task_core(SCALAR, hold_speed(SCALAR, v[i], v_desired[b, i]), promise_decel[b, i],
+                             promise_accel[b, i])  # fmt: skip
+            a_i = _leader_row(x[i + 1] - x[i] - margin[b, i], v[i], v[i + 1], cap[i + 1], cap[i], task,
+                              False, 0.0, decel_last[b], a_o, dt)  # fmt: skip
+        if is_last[b, i]:
+            a_i = a_last
+        acc[i] = a_i
+    acc[0] = _follower_row(x[0], v[0], x[1], v[1], ex, evx, f_aggressive[b], completed, gap0[b], False, 0.0,
+                           False, p_m, a_a, a_o, open_decel, open_gap, dt)  # fmt: skip
+    row_acc = 0.0
+    for i in range(k):
+        f_acc[i], f_ts[i], f_xe[i], f_ve[i] = constant_segment(SCALAR, x[i], v[i], acc[i], dt)
+        row_acc = _max(row_acc, abs(f_acc[i]))
+    # --- the ego's motion: a constant command, or the held plan ---
+    l_acc, l_ts, l_xe, l_ve = constant_segment(SCALAR, ex, evx, ax_cmd, dt)
+    ey1 = ey + evy * dt + 0.5 * ay_cmd * dt * dt
+    evy1 = evy + ay_cmd * dt
+    # --- the checks (checks.ego_checks, lane_checks) ---
+    p_ymax = _motion_max(kt, ky, kvy) if on_plan else 0.0
+    p_xend = kx[7] if on_plan else 0.0
+    p_yend = ky[7] if on_plan else 0.0
+    hit, close, gap_f, gap_l1 = _ego_row(
+        valid, b, x2, v2, 0, (ex, evx), (ex, evx, l_acc, l_ts, l_xe), (ey, evy, ay_cmd, ey1),
+        (on_plan, p_ymax, p_xend, p_yend), fleet, row_acc, consts, (gap_f, gap_l1),
+        general2,
+    )  # fmt: skip
+    for c in range(k):
+        if not general[c]:
+            continue
+        general[c] = False  # (for the next period)
+        o_t[0], o_t[1], o_t[2] = 0.0, f_ts[c], dt
+        o_x[0], o_x[1], o_x[2] = x[c], f_xe[c], f_xe[c]
+        o_v[0], o_v[1], o_v[2] = v[c], f_ve[c], f_ve[c]
+        o_a[0], o_a[1] = f_acc[c], 0.0
+        for n_level in range(2):
+            level = conflict if n_level == 0 else overlap
             if on_plan:
-                ex, evx, ey, evy = kx[7], kv[7], ky[7], kvy[7]
+                lo[n_level], hi[n_level] = _general_pair(kt, kx, kv, kax[:7], o_t, o_x, o_v, o_a, kt, ky, kvy,
+                                                         kay[:7], level, scratch)  # fmt: skip
             else:
-                ex, evx, ey, evy = l_xe, l_ve, ey1, evy1
-            for i in range(k):
-                x[i], v[i] = f_xe[i], f_ve[i]
-            completing = completing and active
-            if completing and not completed:
-                t_complete = t + dt
-            completed = completed or completing
-            collided, violated = collided or hit, violated or close
-            l_collided, l_violated = l_collided or l_hit, l_violated or l_close
-            lane_ratio = _min(lane_ratio, ratio)
-            if behaviour == PROCEED:
-                n_pro += 1
-            elif behaviour == HESITATE:
-                n_hes += 1
-            elif behaviour == ABORT:
-                n_abo += 1
-            if invalid_active:
-                n_inv += 1
-            t = t + dt
-            finite = abs(ex) < _INF and abs(ey) < _INF and abs(evx) < _INF and abs(evy) < _INF
-            for i in range(k):
-                finite = finite and abs(x[i]) < _INF and abs(v[i]) < _INF
-            if not finite:
-                bad = step
-                break
-        out_f[b, 0], out_f[b, 1], out_f[b, 2], out_f[b, 3] = t_complete, gap_f, gap_l1, lane_ratio
-        out_f[b, 4], out_f[b, 5] = st[0, 1], st[0, 2]
-        out_b[b, 0], out_b[b, 1], out_b[b, 2] = sk[0, 3], collided, violated
-        out_b[b, 3], out_b[b, 4], out_b[b, 5] = l_collided, l_violated, sk[0, 2]
-        counts[b, 0], counts[b, 1], counts[b, 2] = n_pro, n_hes, n_abo
-        n_invalid[b] = n_inv
-        for j in range(breach_flags.shape[1]):
-            breach_flags[b, j] = sk[0, 5 + j]
-        bad_step[b] = bad
+                lon_t[0], lon_t[1], lon_t[2] = 0.0, l_ts, dt
+                lon_x[0], lon_x[1], lon_x[2] = ex, l_xe, l_xe
+                lon_v[0], lon_v[1], lon_v[2] = evx, l_ve, l_ve
+                lon_a[0], lon_a[1] = l_acc, 0.0
+                lat_t[0], lat_t[1] = 0.0, dt
+                lat_x[0], lat_x[1] = ey, ey1
+                lat_v[0], lat_v[1] = evy, evy1
+                lat_a[0] = ay_cmd
+                lo[n_level], hi[n_level] = _general_pair(lon_t, lon_x, lon_v, lon_a, o_t, o_x, o_v, o_a, lat_t,
+                                                         lat_x, lat_v, lat_a, level, scratch)  # fmt: skip
+        hit = hit or (lo[1] < length and hi[1] > -length)
+        close = close or (lo[0] < p_m - DIST_TOL_M and hi[0] > -p_m + DIST_TOL_M)
+        if c == 0:
+            gap_f = _min(gap_f, -hi[0])
+        elif c == 1:
+            gap_l1 = _min(gap_l1, lo[0])
+    l_hit, l_close, ratio = _lane_row(batch.lane_valid, batch.lane_margin, b, x2, v2, f_acc2, f_ts2, f_xe2, f_ve2, 0,
+                                      row_acc, dt, length)  # fmt: skip
+    # --- advance (ClosedLoop.check_and_advance) ---
+    if on_plan:
+        ex, evx, ey, evy = kx[7], kv[7], ky[7], kvy[7]
+    else:
+        ex, evx, ey, evy = l_xe, l_ve, ey1, evy1
+    for i in range(k):
+        x[i], v[i] = f_xe[i], f_ve[i]
+    completing = completing and active
+    if completing and not completed:
+        rf[0, 5] = t + dt
+    rb[0, 0], rb[0, 1] = rb[0, 0] or hit, rb[0, 1] or close
+    rb[0, 2], rb[0, 3] = rb[0, 2] or l_hit, rb[0, 3] or l_close
+    rf[0, 6], rf[0, 7], rf[0, 8] = gap_f, gap_l1, _min(rf[0, 8], ratio)
+    if behaviour == PROCEED:
+        ri[0, 0] += 1
+    elif behaviour == HESITATE:
+        ri[0, 1] += 1
+    elif behaviour == ABORT:
+        ri[0, 2] += 1
+    if invalid_active:
+        ri[0, 3] += 1
+    rf[0, 0], rf[0, 1], rf[0, 2], rf[0, 3], rf[0, 4] = ex, ey, evx, evy, t + dt
+    finite = abs(ex) < _INF and abs(ey) < _INF and abs(evx) < _INF and abs(evy) < _INF
+    for i in range(k):
+        finite = finite and abs(x[i]) < _INF and abs(v[i]) < _INF
+    return behaviour, finite

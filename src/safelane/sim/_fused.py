@@ -11,6 +11,7 @@ Everything else — and everything with ``SAFELANE_NO_FUSED=1`` or without numba
 
 from __future__ import annotations
 
+import dataclasses
 import os
 from types import SimpleNamespace
 
@@ -85,7 +86,7 @@ def unclassified(config_cls) -> list[str]:
     return sorted({f for f in fields if named.count(f) != 1} | (set(named) - fields))
 
 
-def reasons(batch, cfg, nominal, traffic, trace: bool, record_observations: bool) -> list[str]:
+def reasons(batch, cfg, nominal, traffic, trace: bool, record_observations: bool, stepping: bool = False) -> list[str]:
     """Why the compiled loop does not run this simulation (empty: it runs it); see the module docstring. Any
     :class:`~safelane.Params` runs compiled (the loop takes the ego's ``a_x_d`` and the others' maximum ``a_o_d``
     apart, as the stages do)."""
@@ -106,7 +107,7 @@ def reasons(batch, cfg, nominal, traffic, trace: bool, record_observations: bool
         out.append("observations are recorded")
     if traffic is not None:
         out.append("a traffic model other than the paper's default")
-    if len(batch) < FUSED_MIN_ROWS:
+    if len(batch) < FUSED_MIN_ROWS and not stepping:
         out.append(f"fewer than {FUSED_MIN_ROWS} scenarios")
     if type(nominal) is not ExpertPlanner:
         out.append(f"the nominal planner {type(nominal).__name__} (the loop runs ExpertPlanner only)")
@@ -148,52 +149,145 @@ def run(sim, n_steps: int, progress: bool = False):
 def run_chunk(sim, n_steps: int) -> dict:
     """The final state's arrays by name, from :func:`._fast_loop.loop_kernel` on :class:`~.step.ClosedLoop`
     ``sim``'s arrays."""
-    from ..shield.fast_step import Packed, period_constants
-    from ..shield.policies import variant_flags
-    from ._fast_loop import OUT_B, OUT_F, PRM, LoopBatch, LoopOut, ShieldStart, loop_kernel
+    from ._fast_loop import OUT_B, OUT_F, LoopOut, loop_kernel
 
-    b, prm, cfg, nominal = sim.b, sim.prm, sim.cfg, sim.nominal
     start = sim.initial_state()
-    traffic = sim.traffic_step  # the paper's, bound to the batch (covers() admits no other)
-    n = len(b)
-    conflict = prm.y_safe + LATERAL_TOL_M
-    overlap = prm.lane_width - prm.vehicle_width
-    values = dict(
-        dt=prm.dt, a_x_a=prm.a_x_a, a_x_d=prm.a_x_d, a_y_m=prm.a_y_m, y_safe=prm.y_safe, p_m=prm.p_m,
-        lane_width=prm.lane_width, vehicle_length=prm.vehicle_length, conflict=conflict, overlap=overlap,
-        monitor_tol=TOL_M, brake_start_s=cfg.brake_start_s, open_decel=cfg.follower_open_decel,
-        open_gap_m=cfg.follower_open_gap_m, k_p=nominal.k_p, k_v=nominal.k_v, gap_fraction=nominal.gap_fraction,
-        brake_comfort=nominal.brake_comfort, omega2=nominal.omega**2, two_omega=2.0 * nominal.omega,
-        a_o_d=prm.others_decel,
-    )  # fmt: skip
-    prm_vec = np.array([float(values[name]) for name in PRM])
-    packed = Packed.of(start.shield)  # the shield's state as its compiled period holds it
-    uses = np.ascontiguousarray(np.stack(variant_flags(b.variant, n), 1))
-    c = np.ascontiguousarray
+    prm_vec, period_prm, batch = kernel_inputs(sim)
+    n = len(sim.b)
     out_f, out_b = np.empty((n, len(OUT_F))), np.empty((n, len(OUT_B)), np.bool_)
     counts, n_invalid = np.empty((n, 3), np.int64), np.empty(n, np.int64)
     flags, bad = np.empty((n, len(BREACH_KINDS)), np.bool_), np.empty(n, np.int64)
+    loop_kernel(n_steps, prm_vec, period_prm, batch, rows_of(start), LoopOut(out_f, out_b, counts, n_invalid, flags,
+                                                                              bad))  # fmt: skip
+    if (bad >= 0).any():
+        step = int(bad[bad >= 0].min())
+        _non_finite(sim, np.flatnonzero(bad == step), (step + 1) * sim.prm.dt)
+    return dict(zip(OUT_F, out_f.T, strict=True), **dict(zip(OUT_B, out_b.T, strict=True)), counts=counts,
+                n_invalid=n_invalid, breach_flags=flags, initial_safe=start.initial_safe)  # fmt: skip
+
+
+def kernel_inputs(sim):
+    """The compiled loop's inputs from :class:`~.step.ClosedLoop` ``sim``: its parameter vector (``_fast_loop.PRM``),
+    the shield's (``shield/_fast_period.PRM``) and the batch's arrays (``_fast_loop.LoopBatch``)."""
+    from ..shield.fast_step import period_constants
+    from ..shield.policies import variant_flags
+    from ._fast_loop import PRM, LoopBatch
+
+    b, prm, cfg, nominal = sim.b, sim.prm, sim.cfg, sim.nominal
+    traffic = sim.traffic_step  # the paper's, bound to the batch (covers() admits no other)
+    gains = nominal if isinstance(nominal, ExpertPlanner) else ExpertPlanner()  # (read by the expert's loop only)
+    values = dict(
+        dt=prm.dt, a_x_a=prm.a_x_a, a_x_d=prm.a_x_d, a_y_m=prm.a_y_m, y_safe=prm.y_safe, p_m=prm.p_m,
+        lane_width=prm.lane_width, vehicle_length=prm.vehicle_length, conflict=prm.y_safe + LATERAL_TOL_M,
+        overlap=prm.lane_width - prm.vehicle_width, monitor_tol=TOL_M, brake_start_s=cfg.brake_start_s,
+        open_decel=cfg.follower_open_decel, open_gap_m=cfg.follower_open_gap_m, k_p=gains.k_p, k_v=gains.k_v,
+        gap_fraction=gains.gap_fraction, brake_comfort=gains.brake_comfort, omega2=gains.omega**2,
+        two_omega=2.0 * gains.omega, a_o_d=prm.others_decel,
+    )  # fmt: skip
+    c = np.ascontiguousarray
     is_last, acts = traffic.roles
     batch = LoopBatch(
         c(b.x), c(b.v), c(np.stack([b.ego_x, b.ego_y, b.ego_vx, b.ego_vy], 1)), c(b.valid),
-        c(b.n_connected.astype(np.int64)), c(b.connected[:, 0]), c(b.follower_aggressive), uses, c(sim.chain_promise),
-        c(sim.chain_margin), c(traffic.margin), c(is_last), c(acts), c(traffic.v_desired), c(b.promise_decel),
-        c(b.promise_accel), c(b.decel_last.astype(np.float64)), c(traffic.gap0), c(sim.lane_pairs[0]),
-        c(sim.lane_pairs[1]),
+        c(b.n_connected.astype(np.int64)), c(b.connected[:, 0]), c(b.follower_aggressive),
+        c(np.stack(variant_flags(b.variant, len(b)), 1)), c(sim.chain_promise), c(sim.chain_margin), c(traffic.margin),
+        c(is_last), c(acts), c(traffic.v_desired), c(b.promise_decel), c(b.promise_accel),
+        c(b.decel_last.astype(np.float64)), c(traffic.gap0), c(sim.lane_pairs[0]), c(sim.lane_pairs[1]),
     )  # fmt: skip
-    shield_start = ShieldStart(period_constants(prm, cfg.shield), c(packed.plan), c(packed.history), c(packed.count),
-                               c(packed.st), c(packed.sk))  # fmt: skip
-    loop_kernel(n_steps, prm_vec, batch, shield_start, LoopOut(out_f, out_b, counts, n_invalid, flags, bad))
-    if (bad >= 0).any():
-        step = int(bad[bad >= 0].min())
-        rows = np.flatnonzero(bad == step)
-        ids = b.scenario_id[rows][:5].tolist()
-        raise FloatingPointError(
-            f"non-finite simulator state at t = {(step + 1) * prm.dt:.1f} s in scenario(s) {ids} ({rows.size} in "
-            "all): a bug in a behaviour model or hook, not an outcome"
-        )
-    return dict(zip(OUT_F, out_f.T, strict=True), **dict(zip(OUT_B, out_b.T, strict=True)), counts=counts,
-                n_invalid=n_invalid, breach_flags=flags, initial_safe=start.initial_safe)
+    return np.array([float(values[name]) for name in PRM]), period_constants(prm, cfg.shield), batch
+
+
+def rows_of(start):
+    """A :class:`~.step.SimState` at the start of a run (its first period not yet run) as the compiled loop's row
+    state (``_fast_loop.Rows``)."""
+    from ..shield.fast_step import Packed
+    from ._fast_loop import RB, RF, RI, Rows
+
+    packed = Packed.of(start.shield)  # the shield's state as its compiled period holds it
+    n, k = start.x.shape
+    c = np.ascontiguousarray
+    rf = np.empty((n, len(RF)))
+    rf[:, :4] = np.stack(start.ego, 1)
+    rf[:, 4], rf[:, 5], rf[:, 6:] = start.t, np.nan, np.inf
+    snap = np.zeros((n, k - 1))
+    return Rows(c(start.x), c(start.v), np.zeros((n, k)), np.full((n, k), np.inf), rf, np.zeros((n, len(RB)), bool),
+                np.zeros((n, len(RI)), np.int64), c(packed.plan), c(packed.history), c(packed.count), c(packed.st),
+                c(packed.sk), snap, snap.copy(), snap.copy(), np.zeros(n, np.int64))  # fmt: skip
+
+
+def _non_finite(sim, rows: np.ndarray, t: float):
+    ids = sim.b.scenario_id[rows][:5].tolist()
+    raise FloatingPointError(
+        f"non-finite simulator state at t = {t:.1f} s in scenario(s) {ids} ({rows.size} in all): a bug in a behaviour "
+        "model or hook, not an outcome"
+    )
+
+
+@dataclasses.dataclass(frozen=True)
+class StepState:
+    """A batch's state in the compiled loop (the arrays of ``_fast_loop.Rows``, the batch first, so that the envs'
+    row surgery ``envs/rows.replace_rows`` replaces rows), with the :class:`~.step.SimState` fields the envs and
+    :meth:`~.step.ClosedLoop.observe` read as views: ``ego``, ``x``, ``v``, ``acc``, ``t`` (``(B,)``: each row
+    its own clock), ``completed``, ``collided``, ``violated``, ``l0`` (``None``: no own lane)."""
+
+    rows: tuple
+
+    @property
+    def ego(self):
+        rf = self.rows.rf
+        return rf[:, 0], rf[:, 1], rf[:, 2], rf[:, 3]
+
+    x = property(lambda self: self.rows.x)
+    v = property(lambda self: self.rows.v)
+    acc = property(lambda self: self.rows.acc)
+    t = property(lambda self: self.rows.rf[:, 4])
+    completed = property(lambda self: self.rows.sk[:, 3])
+    collided = property(lambda self: self.rows.rb[:, 0])
+    violated = property(lambda self: self.rows.rb[:, 1])
+    l0 = None
+
+
+class Stepper:
+    """:class:`~.step.ClosedLoop`'s interface for stepping (``initial_state``, ``step``, ``observe``) on the compiled
+    period (``_fast_loop.step_kernel``): the envs' loop, where :func:`steps_compiled` says it runs. The nominal
+    proposals are the planner's (the envs' ``ActionPlanner``: the agent's actions), passed to the kernel as they are;
+    the state's arithmetic is the closed loop's, bit for bit (``tests/test_env_compiled.py``)."""
+
+    def __init__(self, sim):
+        self.sim = sim
+        self.prm_vec, self.period_prm, self.batch = kernel_inputs(sim)
+
+    def initial_state(self) -> StepState:
+        return StepState(rows_of(self.sim.initial_state()))
+
+    def observe(self, s: StepState):
+        return self.sim.observe(s)
+
+    def step(self, s: StepState):
+        """:meth:`~.step.ClosedLoop.step`: the nominal planner's proposals on this state's observation, one period."""
+        obs = self.sim.observe(s)
+        new, behaviour = self.step_with(s, *self.sim.nominal(obs, self.sim.prm))
+        return new, obs, behaviour
+
+    def step_with(self, s: StepState, a_x, a_y):
+        """One period with the nominal proposals ``a_x``, ``a_y`` ``(B,)`` given (a planner that does not read the
+        observation: the envs' actions): ``(state', behaviour)``; ``s`` is not changed."""
+        from ._fast_loop import Rows, step_kernel
+
+        proposal = np.empty((len(a_x), 2))
+        proposal[:, 0], proposal[:, 1] = a_x, a_y
+        rows = Rows(*[a.copy() for a in s.rows])
+        behaviour, finite = np.empty(len(a_x), np.int64), np.empty(len(a_x), np.bool_)
+        step_kernel(self.prm_vec, self.period_prm, self.batch, rows, proposal, behaviour, finite)
+        if not finite.all():
+            bad = np.flatnonzero(~finite)
+            _non_finite(self.sim, bad, float(rows.rf[bad[0], 4]))
+        return StepState(rows), behaviour
+
+
+def steps_compiled(batch, cfg, traffic) -> list[str]:
+    """Why :class:`Stepper` does not step this batch (empty: it does): :func:`reasons` without the batch size and the
+    planner (the proposals are given)."""
+    return reasons(batch, cfg, ExpertPlanner(), traffic, False, False, stepping=True)
 
 
 def _state(f: dict):
