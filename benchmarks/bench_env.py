@@ -3,8 +3,9 @@
 *Vector*: :class:`safelane.envs.LaneChangeVectorEnv` with ``--envs`` sub-envs (default 1,024) — one batched closed
 loop, the shield on, same-step auto-reset of finished sub-envs included. *Single*: one
 ``gymnasium.make("safelane/LaneChange-v0")`` env (Gymnasium's own wrappers included) stepped ``--single-steps``
-times, resetting when an episode ends. Each twice: on the compiled period (``sim/_fast_loop.step_kernel``, the
-default) and on the NumPy path (``SAFELANE_NO_FUSED=1``: :class:`safelane.sim.step.ClosedLoop`, the baseline).
+times, resetting when an episode ends; the time inside ``step`` and ``reset`` counts, not the policy's. Each twice:
+compiled (the default: the envs' step kernel ``envs/_fast.py``, the closed loop's period with the observation and
+the reward) and on the NumPy path (``SAFELANE_NO_FUSED=1``: :class:`safelane.sim.step.ClosedLoop`, the baseline).
 
 Two action streams: *expert* (the rule-based expert planner's law computed from the observation: lane changes
 that complete in about 3 s, so many resets) and *random* (uniform in the action box: long, hesitant episodes).
@@ -67,17 +68,26 @@ def time_vector(policy, envs: int, steps: int, warmup: int, repeat: int, prm: Pa
 
 
 def time_single(policy, steps: int, prm: Params):
+    """Steps/s of one env: the time inside ``env.step`` and ``env.reset`` only (the policy's own time left out),
+    on the wall clock around each call and in CPU time of the whole loop minus the policy's share of the wall."""
     env = gym.make("safelane/LaneChange-v0")
     rng = np.random.default_rng(0)
     obs, _ = env.reset(seed=0)
     for _ in range(20):  # (compiles on first use)
         obs, _, terminated, truncated, _ = env.step(policy(obs, rng, prm)[0])
-    t0, c0 = time.perf_counter(), time.process_time()
-    for _ in range(steps):
-        obs, _, terminated, truncated, _ = env.step(policy(obs, rng, prm)[0])
         if terminated or truncated:
             obs, _ = env.reset()
-    return steps / (time.perf_counter() - t0), steps / (time.process_time() - c0)
+    inside, clock = 0.0, time.perf_counter
+    t0, c0 = clock(), time.process_time()
+    for _ in range(steps):
+        action = policy(obs, rng, prm)[0]
+        t = clock()
+        obs, _, terminated, truncated, _ = env.step(action)
+        if terminated or truncated:
+            obs, _ = env.reset()
+        inside += clock() - t
+    wall, cpu = clock() - t0, time.process_time() - c0
+    return steps / inside, steps / (cpu - (wall - inside))
 
 
 def main(argv=None) -> None:

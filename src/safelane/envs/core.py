@@ -26,9 +26,10 @@ from pydantic import BaseModel, ConfigDict, Field
 
 from ..params import Params
 from ..planners.base import Observation
-from ..planners.features import FEATURE_NAMES, features
+from ..planners.features import FEATURE_NAMES, features, plan_steps
 from ..planners.variants import VARIANT_NAMES, get_variant
-from ..sim._fused import Stepper, steps_compiled
+from ..safety._backend import ARRAY, jitable
+from ..sim._fused import Stepper, StepState, steps_compiled
 from ..sim.config import SimConfig
 from ..sim.scenario import ScenarioBatch, ScenarioConfig, paper_scenarios
 from ..sim.step import ClosedLoop
@@ -63,6 +64,35 @@ class RewardConfig(BaseModel):
     intervention: float = Field(
         0.0, ge=0.0, description="Penalty per period in which the shield hesitated or aborted instead of proceeding."
     )
+
+
+    def weights(self) -> tuple[float, ...]:
+        """The weights in :func:`outcome_core`'s order."""
+        return self.progress, self.success, self.collision, self.comfort, self.time, self.cost, self.intervention
+
+
+def outcome_core(xp, dt, y_boundary, w_progress, w_success, w_collision, w_comfort, w_time, w_cost, w_intervention,
+                 vx0, y0, vy0, collided0, violated0, completed0, vx1, y1, vy1, collided1, violated1, completed1,
+                 at_horizon, intervened):  # fmt: skip
+    """What one period gives the agent, from the ego's state and flags before (``…0``) and after (``…1``) it: the
+    reward (:class:`RewardConfig`), the executed acceleration ``(a_x, a_y)``, and ``crashed``, ``cost``,
+    ``success``, ``terminated``, ``truncated``. Flags in and out as ``0.0``/``1.0`` (every flag of the state only
+    ever turns on, so "it turned on" is a difference); one row (``xp = SCALAR``, the compiled envs) or a batch."""
+    a_x = (vx1 - vx0) / dt
+    a_y = (vy1 - vy0) / dt
+    crashed = collided1 - collided0
+    cost = xp.maximum(collided1, violated1) - xp.maximum(collided0, violated0)
+    completed = completed1 - completed0
+    success = completed * (1.0 - collided1)
+    terminated = xp.maximum(completed, collided1)
+    truncated = (1.0 - terminated) * at_horizon
+    progress = (y1 - y0) / y_boundary
+    reward = (w_progress * progress + w_success * success - w_collision * crashed - w_comfort * (a_x * a_x + a_y * a_y)
+              * dt - w_time - w_cost * cost - w_intervention * intervened)  # fmt: skip
+    return reward, a_x, a_y, crashed, cost, success, terminated, truncated
+
+
+jitable(outcome_core)
 
 
 class ActionPlanner:
@@ -192,8 +222,8 @@ class StepOutcome:
 def check_action(action, shape: tuple[int, ...], accepted: tuple[int, ...] | None = None) -> np.ndarray:
     """``action`` as a float array of ``shape``; an :class:`~safelane.errors.InputError` naming the action, its
     shape and the expected one otherwise (``accepted``: the shape the caller takes, named in the message)."""
-    if type(action) is np.ndarray and action.dtype == np.float64 and action.shape == shape:
-        return action  # nothing to check or convert (the envs check an action, then hand the array to the task)
+    if type(action) is np.ndarray and action.dtype == np.float64 and action.shape in (shape, accepted):
+        return action.reshape(shape)  # nothing to check or convert (the envs check, then hand the array to the task)
     from ..errors import InputError
 
     want = accepted or shape
@@ -243,6 +273,7 @@ class LaneChangeTask:
         self.batch: ScenarioBatch | None = None
         self.state = None
         self.steps = np.zeros(batch, np.int64)
+        self._bounds = self.action_bounds()
 
     @property
     def n_features(self) -> int:
@@ -265,64 +296,88 @@ class LaneChangeTask:
         docstring for how the shared clock is handled)."""
         fresh = self.sampler.draw_many(rngs)
         self.batch = replace_rows(self.batch, fresh, rows, self.n)
-        start = self._loop(fresh).initial_state()
-        start = shift_plan_clock(start, self.state.t)
+        start = ClosedLoop(fresh, self.seed, self.params, self.config, self.planner, self.traffic).initial_state()
         self.loop = self._loop(self.batch)
+        if isinstance(self.loop, Stepper):  # each row its own clock: the new episodes start at 0
+            start = self.loop.state_of(start)
+        else:
+            start = shift_plan_clock(start, self.state.t)
         self.state = replace_rows(self.state, start, rows, self.n)
         self.steps[rows] = 0
+
+    def _step_compiled(self, proposal: np.ndarray) -> StepOutcome:
+        """:meth:`step` on the compiled loop: the period, the observation and the outcome in one compiled call
+        (``envs/_fast.py``: the same closed forms, bit for bit)."""
+        from ._fast import OUTCOME, env_step_kernel
+
+        loop, n = self.loop, self.n
+        rows = loop.rows_after(self.state)
+        obs, outcome = np.empty((n, len(FEATURE_NAMES))), np.empty((n, len(OUTCOME)))
+        behaviour, finite = np.empty(n, np.int64), np.empty(n, np.bool_)
+        self.steps += 1
+        env_step_kernel(loop.prm_vec, loop.period_prm, loop.batch, rows, proposal, self._env_values, self._view,
+                        self.steps, obs, outcome, behaviour, finite)  # fmt: skip
+        loop.check_finite(rows, finite)
+        self.state = StepState(rows)
+        return StepOutcome(
+            obs=obs.astype(np.float32),
+            reward=outcome[:, 0],
+            terminated=outcome[:, 6] > 0.5,
+            truncated=outcome[:, 7] > 0.5,
+            behaviour=behaviour,
+            intervened=(behaviour == HESITATE) | (behaviour == ABORT),
+            nominal_action=proposal,
+            executed_action=outcome[:, 1:3],
+            cost=outcome[:, 4],
+            crashed=outcome[:, 3] > 0.5,
+            success=outcome[:, 5] > 0.5,
+        )
 
     def _loop(self, batch: ScenarioBatch):
         """The closed loop over ``batch``: compiled (:class:`~safelane.sim._fused.Stepper`) where it covers the
         settings, else :class:`~safelane.sim.step.ClosedLoop` (the same interface, period by period)."""
         loop = ClosedLoop(batch, self.seed, self.params, self.config, self.planner, self.traffic)
-        if not steps_compiled(batch, self.config, self.traffic):
-            return Stepper(loop)
-        return loop
+        if steps_compiled(batch, self.config, self.traffic):
+            return loop
+        prm = self.params
+        self._env_values = np.array([prm.dt, prm.y_boundary, self.max_steps, *self.reward_config.weights()], float)
+        self._view = (np.ascontiguousarray(loop.shares_plan), np.ascontiguousarray(loop.b.connected[:, 0]),
+                      np.array(plan_steps(prm.dt, self.config.l1_plan_steps), np.int64),
+                      np.empty(self.config.l1_plan_steps))  # fmt: skip
+        return Stepper(loop)
 
     def observe(self) -> np.ndarray:
         return features(self.loop.observe(self.state), self.params).astype(np.float32)
 
     def step(self, action: np.ndarray) -> StepOutcome:
         """One control period with the agent's ``(B, 2)`` proposals (clipped to the action box)."""
-        lo, hi = self.action_bounds()
+        lo, hi = self._bounds
         proposal = np.clip(check_action(action, (self.n, 2)), lo, hi)  # NaN stays: an invalid one
+        if isinstance(self.loop, Stepper):
+            return self._step_compiled(proposal)
         self.planner.set(proposal)
         before = self.state
-        if isinstance(self.loop, Stepper):  # (the proposals are given: no observation to build for the planner)
-            self.state, behaviour = self.loop.step_with(before, self.planner.a_x, self.planner.a_y)
-        else:
-            self.state, _, behaviour = self.loop.step(before)
+        self.state, _, behaviour = self.loop.step(before)
         after = self.state
         self.steps += 1
-        dt, prm, rc = self.params.dt, self.params, self.reward_config
-        executed = np.stack([(after.ego[2] - before.ego[2]) / dt, (after.ego[3] - before.ego[3]) / dt], axis=1)
-        crashed = after.collided & ~before.collided
-        cost = ((after.collided | after.violated) & ~(before.collided | before.violated)).astype(float)
-        completed = after.completed & ~before.completed
-        success = completed & ~after.collided
-        terminated = completed | after.collided
-        truncated = ~terminated & (self.steps >= self.max_steps)
-        progress = (after.ego[1] - before.ego[1]) / prm.y_boundary
-        intervened = (behaviour == HESITATE) | (behaviour == ABORT)
-        reward = (
-            rc.progress * progress
-            + rc.success * success
-            - rc.collision * crashed
-            - rc.comfort * (executed**2).sum(1) * dt
-            - rc.time
-            - rc.cost * cost
-            - rc.intervention * intervened
-        )
+        prm, rc = self.params, self.reward_config
+        flag = lambda a: a.astype(float)  # noqa: E731
+        reward, a_x, a_y, crashed, cost, success, terminated, truncated = outcome_core(
+            ARRAY, prm.dt, prm.y_boundary, *rc.weights(), before.ego[2], before.ego[1], before.ego[3],
+            flag(before.collided), flag(before.violated), flag(before.completed), after.ego[2], after.ego[1],
+            after.ego[3], flag(after.collided), flag(after.violated), flag(after.completed),
+            flag(self.steps >= self.max_steps), flag((behaviour == HESITATE) | (behaviour == ABORT)),
+        )  # fmt: skip
         return StepOutcome(
             obs=self.observe(),
             reward=reward,
-            terminated=terminated,
-            truncated=truncated,
+            terminated=terminated > 0.5,
+            truncated=truncated > 0.5,
             behaviour=np.asarray(behaviour, np.int64),
-            intervened=intervened,
+            intervened=(behaviour == HESITATE) | (behaviour == ABORT),
             nominal_action=proposal,
-            executed_action=executed,
+            executed_action=np.stack([a_x, a_y], axis=1),
             cost=cost,
-            crashed=crashed,
-            success=success,
+            crashed=crashed > 0.5,
+            success=success > 0.5,
         )

@@ -31,6 +31,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..params import Params
+from ..safety._backend import ARRAY, jitable
 from .base import Observation
 
 #: Horizons [s] at which ``L1``'s planned speed change is sampled.
@@ -53,12 +54,28 @@ FEATURE_NAMES: tuple[str, ...] = (
 FEATURES_VERSION = 1
 
 
+def plan_steps(dt: float, horizon: int, times_s=PLAN_TIMES_S) -> tuple[int, ...]:
+    """How many periods of an ``H = horizon``-period plan each of ``times_s`` [s] covers (``0``: none)."""
+    return tuple(min(round(t / dt), horizon) for t in times_s)
+
+
+def feature_row(xp, p_x, p_y, v_x, v_y, p_x_l, v_x_l, p_x_f, v_x_f):
+    """The feature map's first seven columns (:data:`FEATURE_NAMES`), for one row (``xp = SCALAR``) or a batch."""
+    return p_y, v_y, v_x, p_x_l - p_x, p_x - p_x_f, v_x_l - v_x, v_x_f - v_x
+
+
+def planned_change(xp, plan_sum, dt, v_x_l):
+    """``L1``'s planned speed change after the periods whose accelerations add up to ``plan_sum`` [m/s²]: ``dt`` times
+    the sum, floored at ``−v_x_l`` (a plan that brakes to a stop stops)."""
+    return xp.maximum(dt * plan_sum, -v_x_l)
+
+
 def plan_speed_change(l1_plan: np.ndarray, v_x_l: np.ndarray, dt: float, times_s=PLAN_TIMES_S) -> np.ndarray:
     """``L1``'s planned speed change [m/s] after each of ``times_s`` [s], shape ``(B, len(times_s))``.
 
     ``l1_plan`` ``(B, H)`` holds planned accelerations [m/s²] for the next ``H`` control periods of ``dt`` [s];
     beyond the plan ``L1`` keeps its speed. The planned speed ``v_x_l + dt·cumsum(plan)`` is floored at zero,
-    so the change is at least ``−v_x_l``. An empty plan (``H = 0``) gives zeros.
+    so the change is at least ``−v_x_l`` (:func:`planned_change`). An empty plan (``H = 0``) gives zeros.
     """
     plan = np.asarray(l1_plan, dtype=np.float64)
     if plan.ndim != 2:
@@ -68,11 +85,10 @@ def plan_speed_change(l1_plan: np.ndarray, v_x_l: np.ndarray, dt: float, times_s
     out = np.zeros((batch, len(times_s)))
     if horizon == 0:
         return out
-    dv = dt * np.cumsum(plan, axis=1)
-    for j, t in enumerate(times_s):
-        steps = min(round(t / dt), horizon)
+    running = np.cumsum(plan, axis=1)  # (a sequential sum: the compiled envs' running sum gives the same bits)
+    for j, steps in enumerate(plan_steps(dt, horizon, times_s)):
         if steps > 0:
-            out[:, j] = np.maximum(dv[:, steps - 1], -v0)
+            out[:, j] = planned_change(ARRAY, running[:, steps - 1], dt, v0)
     return out
 
 
@@ -85,16 +101,8 @@ def features(obs: Observation, params: Params) -> np.ndarray:
     p_x = np.asarray(obs.p_x, dtype=np.float64)
     if p_x.ndim != 1:
         raise ValueError(f"Observation fields must have shape (B,), got p_x with shape {p_x.shape}")
-    v_x = np.asarray(obs.v_x, dtype=np.float64)
-    cols = [
-        np.asarray(obs.p_y, dtype=np.float64),
-        np.asarray(obs.v_y, dtype=np.float64),
-        v_x,
-        obs.p_x_l - p_x,
-        p_x - obs.p_x_f,
-        obs.v_x_l - v_x,
-        obs.v_x_f - v_x,
-    ]
+    cols = feature_row(ARRAY, p_x, np.asarray(obs.p_y, dtype=np.float64), np.asarray(obs.v_x, dtype=np.float64),
+                       np.asarray(obs.v_y, dtype=np.float64), obs.p_x_l, obs.v_x_l, obs.p_x_f, obs.v_x_f)  # fmt: skip
     plan = plan_speed_change(obs.l1_plan, obs.v_x_l, params.dt)
     out = np.empty((p_x.shape[0], len(FEATURE_NAMES)))
     for j, col in enumerate(cols):
@@ -102,3 +110,6 @@ def features(obs: Observation, params: Params) -> np.ndarray:
     out[:, len(cols) : len(cols) + plan.shape[1]] = plan
     out[:, -1] = np.asarray(obs.f_connected, dtype=np.float64)
     return out
+
+
+jitable(feature_row, planned_change)

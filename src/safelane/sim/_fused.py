@@ -12,6 +12,7 @@ Everything else — and everything with ``SAFELANE_NO_FUSED=1`` or without numba
 from __future__ import annotations
 
 import dataclasses
+import functools
 import os
 from types import SimpleNamespace
 
@@ -79,8 +80,10 @@ def setting(cfg, name: str):
     return cfg
 
 
+@functools.cache
 def unclassified(config_cls) -> list[str]:
-    """The fields of ``config_cls`` that the tables above do not name (or name twice)."""
+    """The fields of ``config_cls`` that the tables above do not name (or name twice); a class's answer is kept (the
+    tables are constants: a reset of an env asks again for the same class)."""
     named = [*READ, *FIXED, *ONLY_WITH]
     fields = set(config_fields(config_cls))
     return sorted({f for f in fields if named.count(f) != 1} | (set(named) - fields))
@@ -257,7 +260,13 @@ class Stepper:
         self.prm_vec, self.period_prm, self.batch = kernel_inputs(sim)
 
     def initial_state(self) -> StepState:
-        return StepState(rows_of(self.sim.initial_state()))
+        return self.state_of(self.sim.initial_state())
+
+    @staticmethod
+    def state_of(start) -> StepState:
+        """A :class:`~.step.SimState` at the start of a run (:meth:`~.step.ClosedLoop.initial_state`) as the
+        compiled loop's state."""
+        return StepState(rows_of(start))
 
     def observe(self, s: StepState):
         return self.sim.observe(s)
@@ -271,17 +280,28 @@ class Stepper:
     def step_with(self, s: StepState, a_x, a_y):
         """One period with the nominal proposals ``a_x``, ``a_y`` ``(B,)`` given (a planner that does not read the
         observation: the envs' actions): ``(state', behaviour)``; ``s`` is not changed."""
-        from ._fast_loop import Rows, step_kernel
+        from ._fast_loop import step_kernel
 
         proposal = np.empty((len(a_x), 2))
         proposal[:, 0], proposal[:, 1] = a_x, a_y
-        rows = Rows(*[a.copy() for a in s.rows])
+        rows = self.rows_after(s)
         behaviour, finite = np.empty(len(a_x), np.int64), np.empty(len(a_x), np.bool_)
         step_kernel(self.prm_vec, self.period_prm, self.batch, rows, proposal, behaviour, finite)
+        self.check_finite(rows, finite)
+        return StepState(rows), behaviour
+
+    @staticmethod
+    def rows_after(s: StepState):
+        """A copy of ``s``'s rows for a kernel to advance in place (``s`` stays the state before the period)."""
+        from ._fast_loop import Rows
+
+        return Rows(*[a.copy() for a in s.rows])
+
+    def check_finite(self, rows, finite: np.ndarray) -> None:
+        """A :class:`FloatingPointError` naming the scenarios whose state a kernel found not finite."""
         if not finite.all():
             bad = np.flatnonzero(~finite)
             _non_finite(self.sim, bad, float(rows.rf[bad[0], 4]))
-        return StepState(rows), behaviour
 
 
 def steps_compiled(batch, cfg, traffic) -> list[str]:

@@ -109,6 +109,8 @@ class ClosedLoop:
         self.blame = blame
         self.traffic_step = resolve_traffic(traffic).bind(batch, seed, prm, cfg)
         self.uses_chain = np.array([VARIANTS[name].uses_chain for name in VARIANT_NAMES])[batch.variant]
+        #: The rows whose L1 shares its plan with the ego (the observation's ``l1_plan``: its last acceleration held).
+        self.shares_plan = self.uses_chain & (batch.n_connected >= 1)
         self.shield_config = cfg.shield
         self.delay_periods = delay_periods(cfg, prm)
         self.sensing = cfg.sensing_bounds() if cfg.sensing_error else None
@@ -205,7 +207,7 @@ class ClosedLoop:
     def observe(self, s: SimState) -> Observation:
         b = self.b
         ex, ey, evx, evy = s.ego
-        l1_plan = np.where((self.uses_chain & (b.n_connected >= 1))[:, None], s.acc[:, 1:2], 0.0) * np.ones(
+        l1_plan = np.where(self.shares_plan[:, None], s.acc[:, 1:2], 0.0) * np.ones(
             (1, self.cfg.l1_plan_steps)
         )
         return Observation(

@@ -1,0 +1,83 @@
+"""The envs' compiled step (numba, extra ``fast``): one control period of every row — the closed loop's own period,
+``sim/_fast_loop._period`` — then what the agent gets from it, in the same compiled call.
+
+No rule lives here: the observation is :func:`~safelane.planners.features.feature_row` and
+:func:`~safelane.planners.features.planned_change` (the feature map's closed forms, which
+:func:`~safelane.planners.features.features` evaluates on NumPy arrays), with ``L1``'s shared plan as
+:meth:`~safelane.sim.step.ClosedLoop.observe` builds it (its last acceleration, held for ``l1_plan_steps`` periods,
+summed in order as ``np.cumsum`` sums); the reward, the executed acceleration and the flags are
+:func:`~.core.outcome_core`. ``tests/test_env_compiled.py`` compares every output with the NumPy env's, bit for bit.
+"""
+
+from __future__ import annotations
+
+import numba
+
+from ..planners import features as _features  # noqa: F401  (its closed forms are marked: registered below)
+from ..planners.features import feature_row, planned_change
+from ..safety import _compile
+from ..safety._backend import SCALAR
+from ..safety._fast_base import announce_compile
+from ..shield.decide import ABORT, HESITATE
+from ..sim._fast_loop import _load, _period, _scratch, _store, _window
+from . import core as _core  # noqa: F401  (outcome_core is marked: registered below)
+from .core import outcome_core
+
+_compile.register_rows()
+announce_compile(__file__)
+
+#: The env's scalars (:func:`env_step_kernel`'s ``env``): the period, the lane boundary, the horizon in periods and
+#: :class:`~.core.RewardConfig`'s weights in :meth:`~.core.RewardConfig.weights`' order.
+ENV = ("dt", "y_boundary", "max_steps", "progress", "success", "collision", "comfort", "time", "cost", "intervention")
+#: :func:`env_step_kernel`'s per-row outcome columns (:func:`~.core.outcome_core`'s results, flags as 0.0/1.0).
+OUTCOME = ("reward", "a_x", "a_y", "crashed", "cost", "success", "terminated", "truncated")
+
+
+@numba.njit(cache=True, nogil=True, error_model="numpy")
+def env_step_kernel(prm, period_prm, batch, rows, proposal, env, view, steps, obs, outcome, behaviour, finite):
+    """One period of every row of ``rows`` (``_fast_loop.Rows``, in place) with the agents' proposals ``(B, 2)``,
+    then each row's observation into ``obs`` ``(B, F)`` and its :data:`OUTCOME` into ``outcome``; ``env``:
+    :data:`ENV`'s values; ``view``: ``(shares_plan (B,), f_connected (B,), plan_steps (len(PLAN_TIMES_S),),
+    plan_sums (l1_plan_steps,))`` — the rows whose ``L1`` shares its plan, the follower's flag, how many of the plan's
+    periods each feature's horizon covers, and a scratch array; ``steps``: each row's periods so far, this one
+    included."""
+    _env_rows(prm, batch, rows, proposal, env, view, steps, obs, outcome, behaviour, finite,
+              _scratch(rows, period_prm))  # fmt: skip
+
+
+@numba.njit(nogil=True, error_model="numpy", _nrt=False)
+def _env_rows(prm, batch, rows, proposal, env, view, steps, obs, outcome, behaviour, finite, w):
+    dt, y_boundary, max_steps = env[0], env[1], env[2]
+    w_pro, w_suc, w_col, w_com, w_tim, w_cos, w_int = env[3], env[4], env[5], env[6], env[7], env[8], env[9]
+    shares_plan, f_connected, plan_steps, sums = view
+    den = _window(w.times, prm[0])
+    x, v, rf, rb, sk = w.x2[0], w.v2[0], w.rf, w.rb, w.sk
+    for b in range(rows.x.shape[0]):
+        _load(rows, b, batch, w)
+        vx0, y0, vy0 = rf[0, 2], rf[0, 1], rf[0, 3]
+        c0, v0, d0 = 1.0 if rb[0, 0] else 0.0, 1.0 if rb[0, 1] else 0.0, 1.0 if sk[0, 3] else 0.0
+        code, finite[b] = _period(prm, batch, b, w, den, proposal[b, 0], proposal[b, 1])
+        behaviour[b] = code
+        _store(rows, b, w)
+        ex, ey, evx, evy = rf[0, 0], rf[0, 1], rf[0, 2], rf[0, 3]
+        # --- the observation (ClosedLoop.observe, then features) ---
+        cols = feature_row(SCALAR, ex, ey, evx, evy, x[1], v[1], x[0], v[0])
+        for j in range(7):
+            obs[b, j] = cols[j]
+        a_plan = w.acc[1] if shares_plan[b] else 0.0
+        running = 0.0
+        for h in range(sums.shape[0]):
+            running = running + a_plan
+            sums[h] = running
+        for j in range(plan_steps.shape[0]):
+            n = plan_steps[j]
+            obs[b, 7 + j] = planned_change(SCALAR, sums[n - 1], dt, v[1]) if n > 0 else 0.0
+        obs[b, 7 + plan_steps.shape[0]] = 1.0 if f_connected[b] else 0.0
+        # --- what the agent gets (outcome_core) ---
+        intervened = 1.0 if (code == HESITATE or code == ABORT) else 0.0
+        at_horizon = 1.0 if steps[b] >= max_steps else 0.0
+        c1, v1, d1 = 1.0 if rb[0, 0] else 0.0, 1.0 if rb[0, 1] else 0.0, 1.0 if sk[0, 3] else 0.0
+        out = outcome_core(SCALAR, dt, y_boundary, w_pro, w_suc, w_col, w_com, w_tim, w_cos, w_int, vx0, y0, vy0, c0,
+                           v0, d0, evx, ey, evy, c1, v1, d1, at_horizon, intervened)  # fmt: skip
+        for j in range(8):
+            outcome[b, j] = out[j]
