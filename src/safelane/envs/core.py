@@ -291,12 +291,14 @@ class LaneChangeTask:
         self.steps[:] = 0
         return self.observe()
 
-    def restart(self, rows: np.ndarray, rngs: Sequence[np.random.Generator]) -> None:
+    def restart(self, rows: np.ndarray, rngs: Sequence[np.random.Generator]) -> np.ndarray:
         """Rows ``rows`` start fresh episodes (each drawn from its generator), the others go on (see the module
-        docstring for how the shared clock is handled)."""
+        docstring for how the shared clock is handled); the fresh rows' first observations ``(len(rows), F)``."""
         fresh = self.sampler.draw_many(rngs)
         self.batch = replace_rows(self.batch, fresh, rows, self.n)
-        start = ClosedLoop(fresh, self.seed, self.params, self.config, self.planner, self.traffic).initial_state()
+        first = ClosedLoop(fresh, self.seed, self.params, self.config, self.planner, self.traffic)
+        start = first.initial_state()
+        obs = features(first.observe(start), self.params).astype(np.float32)  # (the clock is not a feature)
         self.loop = self._loop(self.batch)
         if isinstance(self.loop, Stepper):  # each row its own clock: the new episodes start at 0
             start = self.loop.state_of(start)
@@ -304,6 +306,7 @@ class LaneChangeTask:
             start = shift_plan_clock(start, self.state.t)
         self.state = replace_rows(self.state, start, rows, self.n)
         self.steps[rows] = 0
+        return obs
 
     def _step_compiled(self, proposal: np.ndarray) -> StepOutcome:
         """:meth:`step` on the compiled loop: the period, the observation and the outcome in one compiled call

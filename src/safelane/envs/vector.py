@@ -98,7 +98,7 @@ class LaneChangeVectorEnv(VectorEnv):
                 final_obs[i] = obs[i]
             info["final_obs"], info["_final_obs"] = final_obs, done
             info["final_info"], info["_final_info"] = dict(info), done
-            self.task.restart(rows, [self._rngs[i] for i in rows])
+            first = self.task.restart(rows, [self._rngs[i] for i in rows])
             obs = obs.copy()
-            obs[rows] = self.task.observe()[rows]
+            obs[rows] = first
         return obs, out.reward, out.terminated, out.truncated, info
