@@ -274,6 +274,7 @@ class LaneChangeTask:
         self.state = None
         self.steps = np.zeros(batch, np.int64)
         self._bounds = self.action_bounds()
+        self._compiled: bool | None = None  # whether the loop runs compiled (decided at the first batch)
 
     @property
     def n_features(self) -> int:
@@ -340,7 +341,9 @@ class LaneChangeTask:
         """The closed loop over ``batch``: compiled (:class:`~safelane.sim._fused.Stepper`) where it covers the
         settings, else :class:`~safelane.sim.step.ClosedLoop` (the same interface, period by period)."""
         loop = ClosedLoop(batch, self.seed, self.params, self.config, self.planner, self.traffic)
-        if steps_compiled(batch, self.config, self.traffic):
+        if self._compiled is None:  # (decided once: every batch comes from the same sampler and settings)
+            self._compiled = not steps_compiled(batch, self.config, self.traffic)
+        if not self._compiled:
             return loop
         prm = self.params
         self._env_values = np.array([prm.dt, prm.y_boundary, self.max_steps, *self.reward_config.weights()], float)
