@@ -108,6 +108,19 @@ def step_kernel(prm, period_prm, batch, rows, proposal, behaviour, finite):
 
 
 @numba.njit(cache=True, nogil=True, error_model="numpy")
+def finish_kernel(prm, rows):
+    """The monitor's view of the last period of every row of ``rows`` (in place): what :func:`loop_kernel` does after
+    a row's last period (``core.observe`` after the run: ``ClosedLoop.finish``)."""
+    now = np.empty((1, rows.x.shape[1]))
+    for b in range(rows.x.shape[0]):
+        if rows.rb[b, 4]:
+            for i in range(rows.x.shape[1]):
+                now[0, i] = rows.x[b, i]
+            monitor_row(b, rows.rf[b, 4], prm[0], prm[10], now, rows.snap_x, rows.snap_v, rows.snap_b, rows.snap_nc,
+                        rows.st, rows.sk)  # fmt: skip
+
+
+@numba.njit(cache=True, nogil=True, error_model="numpy")
 def _scratch(rows, period_prm):
     """The scratch arrays of one row's period, allocated once per call of a kernel: the rows then run without
     reference counting (every array a period touches would otherwise cost atomic increments and decrements)."""

@@ -92,7 +92,8 @@ def unclassified(config_cls) -> list[str]:
 def reasons(batch, cfg, nominal, traffic, trace: bool, record_observations: bool, stepping: bool = False) -> list[str]:
     """Why the compiled loop does not run this simulation (empty: it runs it); see the module docstring. Any
     :class:`~safelane.Params` runs compiled (the loop takes the ego's ``a_x_d`` and the others' maximum ``a_o_d``
-    apart, as the stages do)."""
+    apart, as the stages do). ``stepping``: why its period (:class:`Stepper`) does not — the batch's size and the
+    nominal planner do not count there (the planner runs between the periods)."""
     missing = unclassified(type(cfg))
     if missing:
         raise RuntimeError(
@@ -112,7 +113,7 @@ def reasons(batch, cfg, nominal, traffic, trace: bool, record_observations: bool
         out.append("a traffic model other than the paper's default")
     if len(batch) < FUSED_MIN_ROWS and not stepping:
         out.append(f"fewer than {FUSED_MIN_ROWS} scenarios")
-    if type(nominal) is not ExpertPlanner:
+    if type(nominal) is not ExpertPlanner and not stepping:
         out.append(f"the nominal planner {type(nominal).__name__} (the loop runs ExpertPlanner only)")
     out.extend(f"config.{name}={setting(cfg, name)!r} (compiled: {value!r})" for name, value in FIXED.items()
                if setting(cfg, name) != value)  # fmt: skip
@@ -255,12 +256,16 @@ class Stepper:
     proposals are the planner's (the envs' ``ActionPlanner``: the agent's actions), passed to the kernel as they are;
     the state's arithmetic is the closed loop's, bit for bit (``tests/test_env_compiled.py``)."""
 
-    def __init__(self, sim):
+    def __init__(self, sim, shared_clock: bool = False):
         self.sim = sim
         self.prm_vec, self.period_prm, self.batch = kernel_inputs(sim)
+        self.shared_clock = shared_clock  # every row started together: observations carry one time, as ClosedLoop's
+        self.initial_safe = None
 
     def initial_state(self) -> StepState:
-        return self.state_of(self.sim.initial_state())
+        start = self.sim.initial_state()
+        self.initial_safe = start.initial_safe
+        return self.state_of(start)
 
     @staticmethod
     def state_of(start) -> StepState:
@@ -269,11 +274,27 @@ class Stepper:
         return StepState(rows_of(start))
 
     def observe(self, s: StepState):
-        return self.sim.observe(s)
+        obs = self.sim.observe(s)
+        return dataclasses.replace(obs, t=float(s.t[0])) if self.shared_clock else obs
+
+    def finish(self, s: StepState):
+        """:meth:`~.step.ClosedLoop.finish`: the state after the last period with the monitor's view of that period,
+        as the fields :func:`~.results.results_table` reads (the compiled loop's, :func:`_state`)."""
+        from ._fast_loop import finish_kernel
+
+        rows = self.rows_after(s)
+        finish_kernel(self.prm_vec, rows)
+        return _state(dict(
+            t_complete=rows.rf[:, 5], min_gap_f=rows.rf[:, 6], min_gap_l1=rows.rf[:, 7], min_lane_ratio=rows.rf[:, 8],
+            first_collaborative_s=rows.st[:, 1], breach_first_s=rows.st[:, 2], completed=rows.sk[:, 3],
+            collided=rows.rb[:, 0], violated=rows.rb[:, 1], leader_collided=rows.rb[:, 2],
+            leader_violated=rows.rb[:, 3], aggressive=rows.sk[:, 2], counts=rows.ri[:, :3], n_invalid=rows.ri[:, 3],
+            breach_flags=rows.sk[:, 5:], initial_safe=self.initial_safe,
+        ))  # fmt: skip
 
     def step(self, s: StepState):
         """:meth:`~.step.ClosedLoop.step`: the nominal planner's proposals on this state's observation, one period."""
-        obs = self.sim.observe(s)
+        obs = self.observe(s)
         new, behaviour = self.step_with(s, *self.sim.nominal(obs, self.sim.prm))
         return new, obs, behaviour
 
@@ -307,7 +328,7 @@ class Stepper:
 def steps_compiled(batch, cfg, traffic) -> list[str]:
     """Why :class:`Stepper` does not step this batch (empty: it does): :func:`reasons` without the batch size and the
     planner (the proposals are given)."""
-    return reasons(batch, cfg, ExpertPlanner(), traffic, False, False, stepping=True)
+    return reasons(batch, cfg, None, traffic, False, False, stepping=True)
 
 
 def _state(f: dict):

@@ -26,8 +26,9 @@ class SimResult:
     observations: list[Observation] = field(default_factory=list)
     preset: str | None = None
     nominal: str | None = None
-    #: Which engine ran it: ``"compiled loop"`` (sim/_fused.py), ``"period by period"`` (with ``engine_reasons``,
-    #: why the compiled loop did not take it), or ``None`` (split over workers).
+    #: Which engine ran it: ``"compiled loop"`` (sim/_fused.py), ``"compiled period"`` (the periods compiled, the
+    #: nominal planner, the trace or the observations between them: ``sim/_fused.Stepper``), ``"period by period"``
+    #: (with ``engine_reasons``, why the compiled loop did not take it), or ``None`` (split over workers).
     engine: str | None = None
     engine_reasons: tuple = ()
 
@@ -118,7 +119,7 @@ def trace_rows(b: ScenarioBatch, s, behaviour, limit: int) -> pd.DataFrame:
         {
             "scenario_id": b.scenario_id[:n],
             "planner": np.asarray(VARIANT_NAMES)[b.variant[:n]],
-            "t": s.t,
+            "t": s.t if np.ndim(s.t) == 0 else s.t[:n],  # (the compiled loop's state: each row's clock)
             "ego_x": ex[:n],
             "ego_y": ey[:n],
             "ego_vx": evx[:n],
