@@ -63,6 +63,12 @@ CASES = {
             nominal=ExpertPlanner(k_p=0.4, k_v=0.6, omega=0.8, gap_fraction=0.3, brake_comfort=3.0),
         ),
     ),
+    "the paper's vehicles, its completion rule, the monitor off (a_N+1 = 6)": (
+        lambda: _mixed(3, 6.0, seed=5),
+        dict(params=Params(a_x_a=3.0, a_x_d=6.151, a_y_m=2.629, lane_width=3.5, vehicle_width=1.8, vehicle_length=4.8,
+                           p_m=7.4, p_m_human=10.0),
+             config=SimConfig(completion="paper_evasion", monitor=False, horizon_s=11.148)),
+    ),
 }
 
 
@@ -122,10 +128,9 @@ UNCOVERED = {
     "sensor noise": dict(cfg=SimConfig(sensor_noise_std=0.1)),
     "unsupervised": dict(cfg=SimConfig(supervised=False)),
     "reactive leaders": dict(cfg=SimConfig(leader_rule="reactive")),
-    "paper completion": dict(cfg=SimConfig(completion="paper_evasion")),
+    "the completion rule paper_body_across": dict(cfg=SimConfig(completion="paper_body_across")),
     "true assessment": dict(cfg=SimConfig(assessment="truth")),
     "slow assessment": dict(cfg=SimConfig(assessment="slow")),
-    "monitor off": dict(cfg=SimConfig(monitor=False)),
     "F ignores the ego": dict(cfg=SimConfig(follower_ignores_ego=True)),
     "a traffic model": dict(traffic="paper"),
     "another planner": dict(nominal=lambda obs, prm: (np.zeros(len(obs.p_x)), np.zeros(len(obs.p_x)))),

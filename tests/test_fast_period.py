@@ -114,6 +114,8 @@ def same(a, b, where: str) -> None:
         (9, 48, 2, "CV_none", {}, True),
         (10, 40, 3, "CV_all", {"own_lane": False}, True),
         (11, 48, 3, "CV_all", {"assessment": "truth"}, True),
+        (12, 64, 3, "CV_all", {"completion": "paper_evasion"}, False),
+        (13, 48, 2, ("CV_follow", "CV_all", "CV_none", "No_agg_assess") * 12, {"completion": "paper_evasion"}, True),
     ],
 )
 def test_compiled_period_is_the_stages(seed, n, m, variant, config, own):
@@ -180,7 +182,7 @@ def test_every_config_field_is_classified():
     ("config", "reason"),
     [
         ({"assessment": "slow"}, "ShieldConfig.assessment='slow'"),
-        ({"completion": "paper_evasion"}, "ShieldConfig.completion='paper_evasion'"),
+        ({"completion": "paper_body_across"}, "ShieldConfig.completion='paper_body_across'"),
         ({"enabled": False}, "ShieldConfig.enabled=False"),
         ({"actuation_delay_s": 0.2}, "ShieldConfig.actuation_delay_s=0.2"),
     ],

@@ -15,6 +15,7 @@ from safelane import Params
 from safelane.errors import InputError
 from safelane.planners.base import ExpertPlanner
 from safelane.sim import ScenarioConfig, SimConfig, _fused, concat, paper_scenarios, simulate_batch
+from safelane.sim.preset import load_preset
 from test_fast_core import needs_numba
 
 pytestmark = [pytest.mark.compiled, needs_numba, pytest.mark.filterwarnings("ignore:a_x_N\\+1_d")]
@@ -132,3 +133,24 @@ def test_the_others_maximum_braking_apart_from_a_x_d_runs_compiled(monkeypatch):
     assert same.engine == "compiled loop", same.engine_reasons
     assert same.table.equals(simulate_batch(_batch(), seed=3).table)
     assert not harder.table.equals(same.table)  # the others' braking reaches the table
+
+
+@pytest.mark.parametrize(("name", "value"), [(n, v) for n in sorted(_fused.FIXED) for v in _fused.implemented(n)[1:]])
+def test_every_other_value_the_loop_implements_runs_compiled_with_the_numpy_paths_table(monkeypatch, name, value):
+    """On the paper preset's vehicles, where the paper's completion rule changes outcomes (its crossings are checked
+    by the evasion alone)."""
+    for env in ("SAFELANE_NO_NUMBA", "SAFELANE_NO_FUSED"):
+        monkeypatch.delenv(env, raising=False)
+    field = name.removeprefix("shield.")
+    cfg = SimConfig(shield={field: value}) if name.startswith("shield.") else SimConfig(**{name: value})
+    prm = load_preset("paper").params
+    cells = (("CV_all", 3, 6.0), ("CV_none", 1, 6.0), ("No_agg_assess", 3, 6.0), ("CV_follow", 1, 5.0))
+    mixed = ScenarioConfig(follower_connected_share=0.5)
+    batch = concat([paper_scenarios(v, n, a, 100, np.random.default_rng(k), mixed, first_id=1000 * k)
+                    for k, (v, n, a) in enumerate(cells)])  # fmt: skip
+    compiled = simulate_batch(batch, seed=3, params=prm, config=cfg)
+    assert compiled.engine == "compiled loop", compiled.engine_reasons
+    monkeypatch.setenv("SAFELANE_NO_NUMBA", "1")
+    reference = simulate_batch(batch, seed=3, params=prm, config=cfg)
+    assert compiled.table.equals(reference.table), name
+    assert not reference.table.equals(simulate_batch(batch, seed=3, params=prm).table), "the value changes nothing"

@@ -62,6 +62,7 @@ _INF = np.inf
 PRM = (
     "t", "dt", "a_x_a", "a_x_d", "a_y_m", "y_safe", "p_m", "p_m_human", "y_boundary", "lane_width", "a_o_d",
     "lat_tol", "tol", "monitor_tol", "assess_threshold", "monitor", "own_level", "own_margin", "truth",
+    "paper_evasion",
 )  # fmt: skip
 #: Columns of the situation's per-row floats ``sf``.
 SIT_F = ("ego_x", "ego_y", "ego_vx", "ego_vy", "f_x", "f_v", "f_observed", "a_x", "a_y")
@@ -192,6 +193,7 @@ def period_row(b, prm, times, den, sf, sb, chain_x, chain_v, link_promise, link_
     window; ``x2, v2, b2, kn``: scratch (``b2`` holds the chain's bounds with F's slot after the call)."""
     t, dt, a_a, a_d, a_ym, y_safe, p_m, _, y_bound, lane_w, a_o, lat_tol, tol, mon_tol, thr, mon = prm[:16]
     own_level, own_margin = prm[16], prm[17]
+    paper = prm[19] > 0.0  # ShieldConfig.completion == "paper_evasion" (else "commit_guard")
     lim = Limits(a_a, a_d, a_ym, y_safe)
     window = times.shape[0]
     kt, kx, kv, ky, kvy = kn[0], kn[1], kn[2], kn[3], kn[4]
@@ -274,7 +276,9 @@ def period_row(b, prm, times, den, sf, sb, chain_x, chain_v, link_promise, link_
                 )  # fmt: skip
                 bits = (bits5[0], bits5[1], bits5[2], bits5[3], bits5[4], False)
                 ox = ov = own_gap = 0.0
-            if crossing:
+            if crossing and paper:  # the completion rule paper_evasion: the evasion check decides this step too
+                keep = period_ok and bits[0]
+            elif crossing:  # commit_guard
                 keep = period_ok and commit_guard_core(SCALAR, state[0], state[2], state[4], state[5], l1_decel,
                                                        state[6], state[7], p_m, a_d, tol)  # fmt: skip
             else:

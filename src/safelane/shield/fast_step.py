@@ -41,7 +41,7 @@ COMPILED: dict[str, tuple | None] = {
     "assess_window": None,
     "assess_threshold": None,
     "monitor": None,
-    "completion": ("commit_guard",),
+    "completion": ("commit_guard", "paper_evasion"),
     "assess_delay_s": None,  # read by the 'slow' assessment only
     "assess_miss": None,  # read by the 'slow' assessment only
     "enabled": (True,),
@@ -212,7 +212,7 @@ def period_constants(prm: Params, cfg: ShieldConfig) -> np.ndarray:
     out = np.array([0.0, prm.dt, prm.a_x_a, prm.a_x_d, prm.a_y_m, prm.y_safe, prm.p_m, prm.p_m_human, prm.y_boundary,
                     prm.lane_width, prm.others_decel, LATERAL_TOL_M, FEASIBILITY_TOL_M, TOL_M, cfg.assess_threshold,
                     float(cfg.monitor), max(own_completion_level(prm), prm.y_boundary), own_margin(prm),
-                    float(cfg.assessment == "truth")])  # fmt: skip
+                    float(cfg.assessment == "truth"), float(cfg.completion == "paper_evasion")])  # fmt: skip
     out.flags.writeable = False
     return out
 
