@@ -44,6 +44,10 @@ def _three_paths(monkeypatch, batch, **kwargs):
 CASES = {
     "N = 3, a_N+1 = 5": (lambda: _mixed(3, 5.0), {}),
     "N = 1, a_N+1 = 9 > a_x_d (breaches)": (lambda: _mixed(1, 9.0, seed=1), {}),
+    "reactive leaders, N = 5, a_N+1 = 7": (
+        lambda: _mixed(5, 7.0, seed=6),
+        dict(config=SimConfig(leader_rule="reactive")),
+    ),
     "N = 5, a_N+1 = 3, human-driven leaders": (
         lambda: _mixed(5, 3.0, scenario=ScenarioConfig(follower_connected_share=0.5, human_share=0.5)),
         {},
@@ -63,11 +67,11 @@ CASES = {
             nominal=ExpertPlanner(k_p=0.4, k_v=0.6, omega=0.8, gap_fraction=0.3, brake_comfort=3.0),
         ),
     ),
-    "the paper's vehicles, its completion rule, the monitor off (a_N+1 = 6)": (
+    "the paper's vehicles, completion rule and reactive leaders, the monitor off (a_N+1 = 6)": (
         lambda: _mixed(3, 6.0, seed=5),
         dict(params=Params(a_x_a=3.0, a_x_d=6.151, a_y_m=2.629, lane_width=3.5, vehicle_width=1.8, vehicle_length=4.8,
                            p_m=7.4, p_m_human=10.0),
-             config=SimConfig(completion="paper_evasion", monitor=False, horizon_s=11.148)),
+             config=SimConfig(completion="paper_evasion", monitor=False, horizon_s=11.148, leader_rule="reactive")),
     ),
 }
 
@@ -127,7 +131,6 @@ UNCOVERED = {
     "V2X latency": dict(cfg=SimConfig(v2x_latency_periods=1)),
     "sensor noise": dict(cfg=SimConfig(sensor_noise_std=0.1)),
     "unsupervised": dict(cfg=SimConfig(supervised=False)),
-    "reactive leaders": dict(cfg=SimConfig(leader_rule="reactive")),
     "the completion rule paper_body_across": dict(cfg=SimConfig(completion="paper_body_across")),
     "true assessment": dict(cfg=SimConfig(assessment="truth")),
     "slow assessment": dict(cfg=SimConfig(assessment="slow")),

@@ -40,7 +40,7 @@ from ._fast_checks import _ego_row, _lane_row
 from ._fast_general import _general_pair
 from ._fast_held import _motion_max
 from ._fast_traffic import _follower_row, _leader_row
-from .behaviours import hold_speed, last_accel, task_core
+from .behaviours import hold_speed, last_accel, link_decel, reactive_core, task_core
 from .kinematics import constant_segment, piece_acc
 
 _compile.register_rows()
@@ -51,7 +51,7 @@ _INF = np.inf
 PRM = (
     "dt", "a_x_a", "a_x_d", "a_y_m", "y_safe", "p_m", "lane_width", "vehicle_length", "conflict", "overlap",
     "monitor_tol", "brake_start_s", "open_decel", "open_gap_m", "k_p", "k_v", "gap_fraction", "brake_comfort",
-    "omega2", "two_omega", "a_o_d",
+    "omega2", "two_omega", "a_o_d", "reactive",
 )  # fmt: skip
 #: The batch's inputs of :func:`loop_kernel`, per scenario (:class:`~.step.ClosedLoop`'s arrays; ``promise``,
 #: ``chain_margin``: ``(N, B)``; ``uses``: ``(B, 3)`` the variant's flags).
@@ -316,20 +316,35 @@ def _period(prm, batch, b, w, den, ax_n, ay_n):
             span = kt[j + 1] - kt[j]
             kax[j] = piece_acc(SCALAR, kv[j], kv[j + 1], span)
             kay[j] = piece_acc(SCALAR, kvy[j], kvy[j + 1], span)
-    # --- traffic (behaviours: worst-case leaders, F) on the running minimum of the chain bounds ---
+    # --- traffic (behaviours: the leaders by their rule, F) ---
     for i in range(k):
         cap[i] = _min(cap[i], bounds[i])
     a_last = last_accel(SCALAR, t, brake_start, decel_last[b])
-    for i in range(k):
-        a_i = 0.0
-        if 1 <= i < k - 1 and acts[b, i]:
-            task = task_core(SCALAR, hold_speed(SCALAR, v[i], v_desired[b, i]), promise_decel[b, i],
-                             promise_accel[b, i])  # fmt: skip
-            a_i = _leader_row(x[i + 1] - x[i] - margin[b, i], v[i], v[i + 1], cap[i + 1], cap[i], task,
-                              False, 0.0, decel_last[b], a_o, dt)  # fmt: skip
-        if is_last[b, i]:
-            a_i = a_last
-        acc[i] = a_i
+    if prm[21] > 0.0:  # SimConfig.leader_rule "reactive" (behaviours.reactive_leader_accels): front to back
+        for i in range(k - 1, 0, -1):
+            a_i = 0.0
+            if is_last[b, i]:
+                a_i = a_last
+            elif acts[b, i]:
+                z = 0.0
+                if i + 1 < k:
+                    z = link_decel(SCALAR, x[i + 1] - x[i] - margin[b, i], v[i], v[i + 1], _max(-acc[i + 1], 0.0),
+                                   a_o)  # fmt: skip
+                task = task_core(SCALAR, hold_speed(SCALAR, v[i], v_desired[b, i]), promise_decel[b, i],
+                                 promise_accel[b, i])  # fmt: skip
+                a_i = reactive_core(SCALAR, task, z)
+            acc[i] = a_i
+    else:  # "worst_case" (behaviours.leader_accels), on the running minimum of the chain bounds
+        for i in range(k):
+            a_i = 0.0
+            if 1 <= i < k - 1 and acts[b, i]:
+                task = task_core(SCALAR, hold_speed(SCALAR, v[i], v_desired[b, i]), promise_decel[b, i],
+                                 promise_accel[b, i])  # fmt: skip
+                a_i = _leader_row(x[i + 1] - x[i] - margin[b, i], v[i], v[i + 1], cap[i + 1], cap[i], task,
+                                  False, 0.0, decel_last[b], a_o, dt)  # fmt: skip
+            if is_last[b, i]:
+                a_i = a_last
+            acc[i] = a_i
     acc[0] = _follower_row(x[0], v[0], x[1], v[1], ex, evx, f_aggressive[b], completed, gap0[b], False, 0.0,
                            False, p_m, a_a, a_o, open_decel, open_gap, dt)  # fmt: skip
     row_acc = 0.0

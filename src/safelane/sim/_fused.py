@@ -4,8 +4,8 @@
 The loop covers batches of :data:`FUSED_MIN_ROWS` scenarios or more with the expert planner (``ExpertPlanner``
 itself, any gains), the paper's traffic without hooks, unexpected promise violations or L(N+1) profiles, the
 paper's four variants and the default settings (the observed assessment, the commit guard or the paper's completion
-rule, the monitor on or off, the
-worst-case leader rule, supervised, none of the real-world settings), without a trace or recorded observations.
+rule, the monitor on or off, either leader rule, supervised, none of the real-world settings), without a trace or
+recorded observations (those, and other planners, run its period: :class:`Stepper`).
 Everything else — and everything with ``SAFELANE_NO_FUSED=1`` or without numba — runs period by period
 (:mod:`.step`), whose parts are compiled where they have kernels. Importing this module does not import numba.
 """
@@ -37,11 +37,11 @@ PROGRESS_CHUNK = 4096
 #: ``tests/test_fused_dispatch.py`` builds its cases from the field list).
 #: The loop reads these fields' values (any value runs compiled):
 READ = frozenset({"horizon_s", "brake_start_s", "shield.assess_window", "shield.assess_threshold",
-                  "follower_open_decel", "follower_open_gap_m", "shield.monitor"})  # fmt: skip
+                  "follower_open_decel", "follower_open_gap_m", "shield.monitor", "leader_rule"})  # fmt: skip
 #: The loop implements these fields at this value (or these values) only; any other value runs period by period:
 FIXED = {
     "shield.assessment": "observed", "shield.completion": ("commit_guard", "paper_evasion"), "sensor_noise_std": 0.0,
-    "shield.enabled": True, "v2x_loss": 0.0, "v2x_latency_periods": 0, "leader_rule": "worst_case",
+    "shield.enabled": True, "v2x_loss": 0.0, "v2x_latency_periods": 0,
     "follower_ignores_ego": False, "own_lane": False, "sensing_error": False,
     "actuation_delay_s": 0.0, "shield.actuation_delay_s": 0.0, "neighbours": False,
 }  # fmt: skip
@@ -193,7 +193,7 @@ def kernel_inputs(sim):
         overlap=prm.lane_width - prm.vehicle_width, monitor_tol=TOL_M, brake_start_s=cfg.brake_start_s,
         open_decel=cfg.follower_open_decel, open_gap_m=cfg.follower_open_gap_m, k_p=gains.k_p, k_v=gains.k_v,
         gap_fraction=gains.gap_fraction, brake_comfort=gains.brake_comfort, omega2=gains.omega**2,
-        two_omega=2.0 * gains.omega, a_o_d=prm.others_decel,
+        two_omega=2.0 * gains.omega, a_o_d=prm.others_decel, reactive=cfg.leader_rule == "reactive",
     )  # fmt: skip
     c = np.ascontiguousarray
     is_last, acts = traffic.roles
