@@ -57,12 +57,17 @@ def assert_same(a, b):
             np.testing.assert_array_equal(x[4][key], y[4][key], err_msg=key)
 
 
-@pytest.mark.parametrize("seed", [3, 12])
-def test_single_env_compiled_is_the_numpy_env_bit_for_bit(seed, monkeypatch):
-    compiled, kind = run_single(seed, 400, **KW)
+PAPER_SETTINGS = {"leader_rule": "reactive", "assessment": "slow", "assess_delay_s": 3.0, "assess_miss": 0.231,
+                  "completion": "paper_evasion", "monitor": False}  # (the paper preset's settings)
+
+
+@pytest.mark.parametrize(("seed", "settings"), [(3, {}), (12, {}), (5, PAPER_SETTINGS)])
+def test_single_env_compiled_is_the_numpy_env_bit_for_bit(seed, settings, monkeypatch):
+    kw = dict(KW, sim_config=settings)
+    compiled, kind = run_single(seed, 400, **kw)
     assert kind is Stepper
     monkeypatch.setenv("SAFELANE_NO_FUSED", "1")
-    reference, kind = run_single(seed, 400, **KW)
+    reference, kind = run_single(seed, 400, **kw)
     assert kind is ClosedLoop
     assert_same(compiled, reference)
     behaviours = {step[4]["behaviour"] for step in compiled if isinstance(step, tuple)}
@@ -112,7 +117,7 @@ def test_vector_env_sub_envs_are_single_envs_exactly():
 
 @pytest.mark.parametrize(
     "kwargs",
-    [dict(shield=False), dict(sim_config={"sensor_noise_std": 0.1}), dict(sim_config={"leader_rule": "reactive"}),
+    [dict(shield=False), dict(sim_config={"sensor_noise_std": 0.1}), dict(sim_config={"own_lane": True}),
      dict(p_v=0.01), dict(variant="RSS_matched")],
 )  # fmt: skip
 def test_settings_the_compiled_period_does_not_cover_step_in_numpy(kwargs):

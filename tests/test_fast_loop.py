@@ -67,11 +67,12 @@ CASES = {
             nominal=ExpertPlanner(k_p=0.4, k_v=0.6, omega=0.8, gap_fraction=0.3, brake_comfort=3.0),
         ),
     ),
-    "the paper's vehicles, completion rule and reactive leaders, the monitor off (a_N+1 = 6)": (
+    "the paper preset's settings: its vehicles, slow assessment, completion rule, reactive leaders, monitor off": (
         lambda: _mixed(3, 6.0, seed=5),
         dict(params=Params(a_x_a=3.0, a_x_d=6.151, a_y_m=2.629, lane_width=3.5, vehicle_width=1.8, vehicle_length=4.8,
                            p_m=7.4, p_m_human=10.0),
-             config=SimConfig(completion="paper_evasion", monitor=False, horizon_s=11.148, leader_rule="reactive")),
+             config=SimConfig(completion="paper_evasion", monitor=False, horizon_s=11.148, leader_rule="reactive",
+                              assessment="slow", assess_delay_s=3.0, assess_miss=0.231)),
     ),
 }
 
@@ -132,8 +133,6 @@ UNCOVERED = {
     "sensor noise": dict(cfg=SimConfig(sensor_noise_std=0.1)),
     "unsupervised": dict(cfg=SimConfig(supervised=False)),
     "the completion rule paper_body_across": dict(cfg=SimConfig(completion="paper_body_across")),
-    "true assessment": dict(cfg=SimConfig(assessment="truth")),
-    "slow assessment": dict(cfg=SimConfig(assessment="slow")),
     "F ignores the ego": dict(cfg=SimConfig(follower_ignores_ego=True)),
     "a traffic model": dict(traffic="paper"),
     "another planner": dict(nominal=lambda obs, prm: (np.zeros(len(obs.p_x)), np.zeros(len(obs.p_x)))),

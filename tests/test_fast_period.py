@@ -116,6 +116,8 @@ def same(a, b, where: str) -> None:
         (11, 48, 3, "CV_all", {"assessment": "truth"}, True),
         (12, 64, 3, "CV_all", {"completion": "paper_evasion"}, False),
         (13, 48, 2, ("CV_follow", "CV_all", "CV_none", "No_agg_assess") * 12, {"completion": "paper_evasion"}, True),
+        (14, 64, 3, "CV_all", {"assessment": "slow", "assess_delay_s": 0.5, "assess_miss": 0.1}, False),
+        (15, 48, 3, "No_agg_assess", {"assessment": "slow", "assess_delay_s": 3.0, "assess_miss": 0.231}, True),
     ],
 )
 def test_compiled_period_is_the_stages(seed, n, m, variant, config, own):
@@ -141,7 +143,11 @@ def test_compiled_period_is_the_stages(seed, n, m, variant, config, own):
         behaviours.update(ref.behaviour.tolist())
         advance(world, ref, rng, params.dt)
     if n > 1:  # the worlds reach every behaviour (the conservative variants and L0 rarely complete): every branch ran
-        assert behaviours >= ({0, 1, 2, -1} if variant == "CV_all" and not own else {0, 1, 2}), behaviours
+        slow = config.get("assessment") == "slow"  # (F stays "aggressive" longer: completions are rare)
+        assert behaviours >= ({0, 1, 2, -1} if variant == "CV_all" and not own and not slow else {0, 1, 2}), behaviours
+    if config.get("assessment") == "slow":  # the per-scenario draws were compared; they vary (its release: the loop's
+        belief = shield.state.belief  # paper-preset case in test_fast_loop.py, where F is found collaborative)
+        assert belief.missed.any() and not belief.missed.all() and np.unique(belief.delay_s).size > n // 2
     if own and config.get("own_lane", True):  # aborts on plans made with L0 (the profile that follows it) compared
         assert own_aborts > 0
 
@@ -181,7 +187,6 @@ def test_every_config_field_is_classified():
 @pytest.mark.parametrize(
     ("config", "reason"),
     [
-        ({"assessment": "slow"}, "ShieldConfig.assessment='slow'"),
         ({"completion": "paper_body_across"}, "ShieldConfig.completion='paper_body_across'"),
         ({"enabled": False}, "ShieldConfig.enabled=False"),
         ({"actuation_delay_s": 0.2}, "ShieldConfig.actuation_delay_s=0.2"),

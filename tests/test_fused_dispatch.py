@@ -22,7 +22,7 @@ pytestmark = [pytest.mark.compiled, needs_numba, pytest.mark.filterwarnings("ign
 
 #: One valid non-default value for every SimConfig field (and what else it needs to be valid).
 ALTERNATIVES = {
-    "horizon_s": 6.0, "brake_start_s": 0.7, "shield.assessment": "slow", "shield.assess_delay_s": 0.5,
+    "horizon_s": 6.0, "brake_start_s": 0.7, "shield.assessment": "truth", "shield.assess_delay_s": 0.5,
     "shield.assess_miss": 0.3, "shield.completion": "paper_body_across", "sensor_noise_std": 0.3,
     "shield.assess_window": 7, "shield.assess_threshold": 0.35, "follower_open_decel": 1.0, "follower_open_gap_m": 5.0,
     "l1_plan_steps": 4, "shield.enabled": False, "v2x_loss": 0.2, "v2x_latency_periods": 2, "v2x_max_age_s": 0.0,
@@ -142,7 +142,8 @@ def test_every_other_value_the_loop_implements_runs_compiled_with_the_numpy_path
     for env in ("SAFELANE_NO_NUMBA", "SAFELANE_NO_FUSED"):
         monkeypatch.delenv(env, raising=False)
     field = name.removeprefix("shield.")
-    cfg = SimConfig(shield={field: value}) if name.startswith("shield.") else SimConfig(**{name: value})
+    extra = {"assess_delay_s": 3.0, "assess_miss": 0.231} if value == "slow" else {}  # (the paper preset's)
+    cfg = SimConfig(shield={field: value, **extra}) if name.startswith("shield.") else SimConfig(**{name: value})
     prm = load_preset("paper").params
     cells = (("CV_all", 3, 6.0), ("CV_none", 1, 6.0), ("No_agg_assess", 3, 6.0), ("CV_follow", 1, 5.0))
     mixed = ScenarioConfig(follower_connected_share=0.5)

@@ -20,7 +20,9 @@ from pathlib import Path
 
 import numba
 import numpy as np
+from llvmlite import ir
 from numba import types
+from numba.extending import intrinsic
 
 from . import _backend, _compile
 from .chain import braked_position
@@ -35,7 +37,7 @@ def _compiled_sources() -> tuple[Path, ...]:
     """Every module with a compiled kernel or its helpers: the ``_fast*.py`` modules, the backend and its numba
     registration, and every module with a closed form marked ``jitable`` (compiled into the kernels that call it)."""
     found = {_PACKAGE / "_motion.py"}  # advance_core and stop_time_core are compiled into the kernels
-    for sub in ("safety", "shield", "sim"):
+    for sub in ("safety", "shield", "sim", "planners", "envs"):  # (the expert's law, the envs' features and reward)
         for path in (_PACKAGE / sub).glob("*.py"):
             if path.name.startswith("_fast") or path.name in ("_backend.py", "_compile.py"):
                 found.add(path)
@@ -95,6 +97,18 @@ def announce_compile(source: str, stream=None) -> bool:
 #: arrays and create views, never allocate.
 row_function = numba.njit(error_model="numpy", nogil=True, _nrt=False, forceinline=True)
 
+
+
+@intrinsic
+def float_bits(typingctx, x):
+    """The IEEE-754 bits of a float64 as a uint64 (NumPy's ``x.view(np.uint64)`` for one compiled value)."""
+    if x != types.float64:
+        return None
+
+    def codegen(context, builder, signature, args):
+        return builder.bitcast(args[0], ir.IntType(64))
+
+    return types.uint64(types.float64), codegen
 
 
 @numba.njit(inline="always")

@@ -30,7 +30,7 @@ import numpy as np
 
 from ..safety import _compile
 from ..safety._backend import SCALAR, Limits, _clip
-from ..safety._fast_base import announce_compile, row_function, sort_short
+from ..safety._fast_base import announce_compile, float_bits, row_function, sort_short
 from ..safety._fast_responsible import _responsible_bound
 from ..safety.chain import chain_link
 from ..safety.own_lane import own_period
@@ -51,6 +51,7 @@ from .decide import (
     hesitate_core,
     plan_switches,
 )
+from .policies import slow_belief, slow_draws
 from .proposals import proposal_core
 from .stages import lane_keep_accel, worst_case_core
 
@@ -62,7 +63,7 @@ _INF = np.inf
 PRM = (
     "t", "dt", "a_x_a", "a_x_d", "a_y_m", "y_safe", "p_m", "p_m_human", "y_boundary", "lane_width", "a_o_d",
     "lat_tol", "tol", "monitor_tol", "assess_threshold", "monitor", "own_level", "own_margin", "truth",
-    "paper_evasion",
+    "paper_evasion", "slow", "assess_delay_s", "assess_miss", "time_tol",
 )  # fmt: skip
 #: Columns of the situation's per-row floats ``sf``.
 SIT_F = ("ego_x", "ego_y", "ego_vx", "ego_vy", "f_x", "f_v", "f_observed", "a_x", "a_y")
@@ -76,15 +77,16 @@ PLAN = (
     "y_acc_2", "t_y_end", "own_p", "own_v", "own_decel", "follows_own", "continues", "min_gap_own",
 )  # fmt: skip
 #: Per-row float state ``st``: the held plan's start, the assessment's first collaborative verdict, the breach's
-#: first instant, and the monitor's snapshot of F and the plan (F's position and speed, a responsible F's limit,
-#: the plan's L1 deceleration).
+#: first instant, the monitor's snapshot of F and the plan (F's position and speed, a responsible F's limit,
+#: the plan's L1 deceleration), and the slow assessment's extra delay.
 STATE_F = (
     "plan_t0", "first_collaborative_s", "first_breach_s", "snap_f_x", "snap_f_v", "snap_f_limit", "snap_l1_decel",
+    "slow_delay_s",
 )  # fmt: skip
 #: Per-row flag state ``sk``: the plan's F type, the assessment's latch and belief, the lane change completed, the
-#: snapshot's activity, then the breach flags (``monitor.BREACH_KINDS``).
+#: snapshot's activity, the breach flags (``monitor.BREACH_KINDS``), then the slow assessment's miss and belief.
 STATE_B = ("plan_f_aggr", "latched", "aggressive", "completed", "snap_active", "l1_decel", "leader_bound", "last_decel",
-           "follower", "stale_v2x")  # fmt: skip
+           "follower", "stale_v2x", "slow_missed", "slow_aggressive")  # fmt: skip
 #: Per-row outputs ``of``: the commands, the proposal as checked, L1's worst case.
 OUT_F = ("a_x", "a_y", "nominal_x", "nominal_y", "l1_decel")
 #: Per-row output flags ``ob``: completing, invalid, F assumed aggressive, the chain unsafe.
@@ -209,6 +211,12 @@ def period_row(b, prm, times, den, sf, sb, chain_x, chain_v, link_promise, link_
     sk[b, 1], sk[b, 2] = belief_core(SCALAR, num / den, count[b] >= window, sk[b, 1], sk[b, 2], thr)
     if st[b, 1] != st[b, 1] and not sk[b, 2]:
         st[b, 1] = t
+    if prm[20] > 0.0:  # the 'slow' assessment (policies.SlowAssessment): its draws at F's first observation
+        if count[b] == 1:
+            key_x, key_v = fx - ex, sf[b, 6]
+            st[b, 7], sk[b, 10] = slow_draws(SCALAR, key_x, key_v, prm[21], prm[22], float_bits(key_x),
+                                             float_bits(key_v))  # fmt: skip
+        sk[b, 11] = slow_belief(SCALAR, t, st[b, 1], st[b, 7], prm[23], sk[b, 2], sk[b, 10])
     # --- the chain analysis (stages.chain_analysis), F in slot 0 ---
     m = chain_x.shape[1]
     x2[0, 0], v2[0, 0] = fx, fv
@@ -230,7 +238,8 @@ def period_row(b, prm, times, den, sf, sb, chain_x, chain_v, link_promise, link_
     broken = sk[b, 5] or sk[b, 6] or sk[b, 7] or sk[b, 8] or sk[b, 9]
     broken = broken and mon > 0.0  # ShieldConfig.monitor
     trusted = sb[b, 3] and sb[b, 0]
-    assessed = sk[b, 2] if prm[18] == 0.0 else sb[b, 5]  # the observed belief, or (the 'truth' assessment) F's type
+    # the observed belief, the slow one's, or (the 'truth' assessment) F's type
+    assessed = sk[b, 11] if prm[20] > 0.0 else (sk[b, 2] if prm[18] == 0.0 else sb[b, 5])
     l1_decel, f_aggr = worst_case_core(SCALAR, sb[b, 2], unsafe, b2[0, 1], a_o, trusted, sb[b, 4], assessed,
                                        broken)  # fmt: skip
     l0x, l0v, l0_decel = own_x[b, 0], own_v[b, 0], a_o  # (stages.own_leader; +inf: no L0)

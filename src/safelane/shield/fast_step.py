@@ -28,6 +28,7 @@ from ..safety._backend import FEASIBILITY_TOL_M
 from ..safety.evasion import fast_kernel
 from ..safety.lateral import LATERAL_TOL_M
 from ..safety.plan import EvasionPlan
+from ..tolerances import TIME_TOL_S
 from .assessment import AssessmentState
 from .config import ShieldConfig
 from .decide import ABORT, own_completion_level, own_margin
@@ -37,13 +38,13 @@ from .rules import rule_rows
 
 #: Each :class:`ShieldConfig` field and the values the compiled period implements (``None``: every value).
 COMPILED: dict[str, tuple | None] = {
-    "assessment": ("observed", "truth"),
+    "assessment": ("observed", "truth", "slow"),
     "assess_window": None,
     "assess_threshold": None,
     "monitor": None,
     "completion": ("commit_guard", "paper_evasion"),
-    "assess_delay_s": None,  # read by the 'slow' assessment only
-    "assess_miss": None,  # read by the 'slow' assessment only
+    "assess_delay_s": None,  # read by the 'slow' assessment
+    "assess_miss": None,  # read by the 'slow' assessment
     "enabled": (True,),
     "actuation_delay_s": (0.0,),
     "own_lane": None,
@@ -119,21 +120,27 @@ class Packed:
     st: np.ndarray  # (B, len(STATE_F))
     sk: np.ndarray  # (B, len(STATE_B)) bool
     snapshot: tuple | None  # (chain_x, chain_v, bounds, n_connected) of the last period, or None
+    slow: bool = False  # the belief is the 'slow' assessment's (policies.SlowState): its draws and belief packed too
 
     @classmethod
     def of(cls, state) -> Packed:
-        from ._fast_period import PLAN
+        from ._fast_period import PLAN, STATE_B, STATE_F
+        from .policies import SlowState
 
         n = len(state.completed)
         plan = np.empty((n, len(PLAN)), order="F")
         for j, name in enumerate(PLAN):
             plan[:, j] = getattr(state.plan, name)
         last, belief, breach = state.last, state.belief, state.breach
-        st = np.empty((n, 7))
-        st[:, 0], st[:, 1], st[:, 2] = state.plan_t0, belief.first_collaborative_s, breach.first_s
-        sk = np.empty((n, 10), bool)
-        sk[:, 0], sk[:, 1], sk[:, 2], sk[:, 3] = state.plan_f_aggr, belief.latched, belief.aggressive, state.completed
-        sk[:, 5:] = breach.flags
+        slow = isinstance(belief, SlowState)
+        inner = belief.inner if slow else belief
+        st = np.empty((n, len(STATE_F)))
+        st[:, 0], st[:, 1], st[:, 2] = state.plan_t0, inner.first_collaborative_s, breach.first_s
+        st[:, 7] = belief.delay_s if slow else 0.0
+        sk = np.empty((n, len(STATE_B)), bool)
+        sk[:, 0], sk[:, 1], sk[:, 2], sk[:, 3] = state.plan_f_aggr, inner.latched, inner.aggressive, state.completed
+        sk[:, 5:10] = breach.flags
+        sk[:, 10], sk[:, 11] = (belief.missed, belief.aggressive) if slow else (False, inner.aggressive)
         snapshot = None
         if last is None:
             st[:, 3:], sk[:, 4] = 0.0, False
@@ -141,14 +148,14 @@ class Packed:
             st[:, 3], st[:, 4], st[:, 5], st[:, 6] = last.f_x, last.f_v, last.f_limit, last.plan_l1_decel
             sk[:, 4] = last.active
             snapshot = (last.chain_x, last.chain_v, last.bounds, np.asarray(last.n_connected, np.int64))
-        return cls(float(state.t), plan, belief.history.copy(), np.asarray(belief.count, np.int64).copy(), st, sk,
-                   snapshot)  # fmt: skip
+        return cls(float(state.t), plan, inner.history.copy(), np.asarray(inner.count, np.int64).copy(), st, sk,
+                   snapshot, slow)  # fmt: skip
 
     def take(self, rows) -> Packed:
         """The rows ``rows`` only, in that order (copies)."""
         snapshot = None if self.snapshot is None else tuple(a[rows] for a in self.snapshot)
         return Packed(self.t, np.asfortranarray(self.plan[rows]), self.history[rows], self.count[rows],
-                      self.st[rows], self.sk[rows], snapshot)  # fmt: skip
+                      self.st[rows], self.sk[rows], snapshot, self.slow)  # fmt: skip
 
     def join(self, other: Packed) -> Packed:
         """These rows, then ``other``'s (its time is this one's; both have a snapshot, or neither)."""
@@ -158,7 +165,8 @@ class Packed:
             np.concatenate([a, b]) for a, b in zip(self.snapshot, other.snapshot, strict=True))  # fmt: skip
         return Packed(self.t, np.asfortranarray(np.concatenate([self.plan, other.plan])),
                       np.concatenate([self.history, other.history]), np.concatenate([self.count, other.count]),
-                      np.concatenate([self.st, other.st]), np.concatenate([self.sk, other.sk]), snapshot)  # fmt: skip
+                      np.concatenate([self.st, other.st]), np.concatenate([self.sk, other.sk]), snapshot,
+                      self.slow)  # fmt: skip
 
     def plan_of(self, params: Params) -> EvasionPlan:
         from ._fast_period import PLAN
@@ -170,7 +178,7 @@ class Packed:
         return EvasionPlan(**fields, params=params)
 
     def breach(self) -> Breach:
-        return Breach(flags=self.sk[:, 5:], first_s=self.st[:, 2])
+        return Breach(flags=self.sk[:, 5:10], first_s=self.st[:, 2])
 
     def state(self, params: Params, decision: Decision | None = None):
         """The :class:`~.core.ShieldState` (copies: later periods do not change it). With the period's ``decision``,
@@ -186,6 +194,10 @@ class Packed:
                             active=p.sk[:, 4])  # fmt: skip
         belief = AssessmentState(history=self.history.copy(), count=self.count.copy(), aggressive=p.sk[:, 2],
                                  latched=p.sk[:, 1], first_collaborative_s=p.st[:, 1])  # fmt: skip
+        if self.slow:
+            from .policies import SlowState
+
+            belief = SlowState(belief, p.st[:, 7], p.sk[:, 10], p.sk[:, 11])
         plan, breach = (p.plan_of(params), p.breach()) if decision is None else (decision.plan, decision.breach)
         return ShieldState(t=p.t, plan=plan, plan_t0=p.st[:, 0], plan_f_aggr=p.sk[:, 0], belief=belief, breach=breach,
                            completed=p.sk[:, 3], last=last, pending=None)  # fmt: skip
@@ -212,7 +224,8 @@ def period_constants(prm: Params, cfg: ShieldConfig) -> np.ndarray:
     out = np.array([0.0, prm.dt, prm.a_x_a, prm.a_x_d, prm.a_y_m, prm.y_safe, prm.p_m, prm.p_m_human, prm.y_boundary,
                     prm.lane_width, prm.others_decel, LATERAL_TOL_M, FEASIBILITY_TOL_M, TOL_M, cfg.assess_threshold,
                     float(cfg.monitor), max(own_completion_level(prm), prm.y_boundary), own_margin(prm),
-                    float(cfg.assessment == "truth"), float(cfg.completion == "paper_evasion")])  # fmt: skip
+                    float(cfg.assessment == "truth"), float(cfg.completion == "paper_evasion"),
+                    float(cfg.assessment == "slow"), cfg.assess_delay_s, cfg.assess_miss, TIME_TOL_S])  # fmt: skip
     out.flags.writeable = False
     return out
 
@@ -250,7 +263,7 @@ def step(packed: Packed, situation, proposal, params: Params, config: ShieldConf
     else:
         own = _no_own(n)
     out = Packed(s.t + prm.dt, packed.plan.copy(order="F"), packed.history.copy(), packed.count.copy(),
-                 packed.st.copy(), packed.sk.copy(), None)  # fmt: skip
+                 packed.st.copy(), packed.sk.copy(), None, packed.slow)  # fmt: skip
     snap = packed.snapshot
     if snap is None:
         snap = (np.zeros((n, m)), np.zeros((n, m)), np.zeros((n, m)), np.zeros(n, np.int64))
@@ -279,7 +292,7 @@ def step(packed: Packed, situation, proposal, params: Params, config: ShieldConf
     decision = Decision(
         behaviour=behaviour, a_x=of[:, 0], a_y=of[:, 1], completing=ob[:, 0], invalid=ob[:, 1],
         _plan=functools.partial(out.plan_of, prm), plan_t0=out.st[:, 0].copy(), l1_decel=of[:, 4],
-        f_aggressive=ob[:, 2], breach=Breach(flags=out.sk[:, 5:].copy(), first_s=out.st[:, 2].copy()),
+        f_aggressive=ob[:, 2], breach=Breach(flags=out.sk[:, 5:10].copy(), first_s=out.st[:, 2].copy()),
         nominal_x=of[:, 2], nominal_y=of[:, 3], _abort=abort,
     )  # fmt: skip
     return out, decision

@@ -31,6 +31,7 @@ from typing import Protocol
 import numpy as np
 
 from ..planners.variants import VARIANT_NAMES, VARIANTS, get_variant
+from ..safety._backend import ARRAY, jitable
 from ..tolerances import TIME_TOL_S
 from . import assessment as assess
 from .decide import commit_guard
@@ -74,14 +75,35 @@ class TruthAssessment(ObservedAssessment):
 
 def _scenario_uniform(x0, v0, salt: int) -> np.ndarray:
     """A uniform draw in ``[0, 1)`` per row, keyed by the bits of F's first observed state (so a scenario's draw does
-    not depend on the batch it is simulated in, and needs no id); splitmix64 finaliser."""
+    not depend on the batch it is simulated in, and needs no id): :func:`uniform_of_bits` of their bits."""
+    bits = lambda a: np.asarray(a, np.float64).view(np.uint64)  # noqa: E731
     with np.errstate(over="ignore"):
-        h = np.asarray(x0, np.float64).view(np.uint64) * np.uint64(0x9E3779B97F4A7C15)
-        h ^= np.asarray(v0, np.float64).view(np.uint64) + np.uint64(salt)
-        for shift, mult in ((30, 0xBF58476D1CE4E5B9), (27, 0x94D049BB133111EB)):
-            h = (h ^ (h >> np.uint64(shift))) * np.uint64(mult)
-        h ^= h >> np.uint64(31)
-    return (h >> np.uint64(11)).astype(np.float64) * (1.0 / 2**53)
+        return uniform_of_bits(bits(x0), bits(v0), salt)
+
+
+def uniform_of_bits(hx, hv, salt):
+    """A uniform in ``[0, 1)`` from two 64-bit keys (uint64 arrays, or one compiled uint64 each) and a ``salt``: the
+    splitmix64 finaliser (unsigned products wrap, as intended)."""
+    h = hx * np.uint64(0x9E3779B97F4A7C15)
+    h = h ^ (hv + np.uint64(salt))
+    h = (h ^ (h >> np.uint64(30))) * np.uint64(0xBF58476D1CE4E5B9)
+    h = (h ^ (h >> np.uint64(27))) * np.uint64(0x94D049BB133111EB)
+    h = h ^ (h >> np.uint64(31))
+    return (h >> np.uint64(11)) * (1.0 / 2**53)
+
+
+def slow_draws(xp, key_x, key_v, delay_s, miss, hx, hv):
+    """The slow assessment's per-scenario draws at F's first observation: the extra delay of a collaborative verdict
+    (uniform on ``[0.5, 1.5] · delay_s``) and whether a collaborative F is never recognised (probability ``miss``);
+    ``hx``, ``hv``: the bits of ``key_x``, ``key_v``."""
+    return delay_s * (0.5 + uniform_of_bits(hx, hv, 1)), uniform_of_bits(hx, hv, 2) < miss
+
+
+def slow_belief(xp, t, first_collaborative_s, delay_s, time_tol, aggressive, missed):
+    """The slow assessment's released belief: aggressive unless the observed one says collaborative, the scenario's
+    F is not missed and its verdict is ``delay_s`` old."""
+    released = (t - first_collaborative_s) >= delay_s - time_tol
+    return xp.where(released, aggressive | missed, True)
 
 
 @dataclass(frozen=True)
@@ -112,10 +134,13 @@ class SlowAssessment(ObservedAssessment):
         fresh = inner.count == 1  # a row's first observation: draw its delay and miss
         if fresh.any():
             key_x, key_v = situation.f_x - situation.ego_x, situation.observed_f_speed
-            delay = np.where(fresh, config.assess_delay_s * (0.5 + _scenario_uniform(key_x, key_v, 1)), delay)
-            missed = np.where(fresh, _scenario_uniform(key_x, key_v, 2) < config.assess_miss, missed)
-        released = (situation.t - inner.first_collaborative_s) >= delay - TIME_TOL_S
-        aggressive = inner.aggressive | missed | ~released
+            bits = lambda a: np.asarray(a, np.float64).view(np.uint64)  # noqa: E731
+            with np.errstate(over="ignore"):
+                d, m = slow_draws(ARRAY, key_x, key_v, config.assess_delay_s, config.assess_miss, bits(key_x),
+                                  bits(key_v))  # fmt: skip
+            delay, missed = np.where(fresh, d, delay), np.where(fresh, m, missed)
+        aggressive = slow_belief(ARRAY, situation.t, inner.first_collaborative_s, delay, TIME_TOL_S, inner.aggressive,
+                                 missed)  # fmt: skip
         return SlowState(inner, delay, missed, aggressive)
 
     def aggressive(self, state, situation) -> np.ndarray:
@@ -193,3 +218,6 @@ def check_policy(kind: str, name: str, registry: dict) -> str:
     if name not in registry:
         raise ValueError(f"unknown {kind} {name!r}; choose one of {', '.join(registry)}")
     return name
+
+
+jitable(uniform_of_bits, slow_draws, slow_belief)

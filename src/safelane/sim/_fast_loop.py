@@ -86,9 +86,11 @@ Scratch = collections.namedtuple("Scratch", (
 #: ``breach_flags (B, 5)`` and ``bad_step`` (the first period whose state is not finite, ``-1`` if none).
 LoopOut = collections.namedtuple("LoopOut", ("f", "b", "counts", "n_invalid", "breach_flags", "bad_step"))
 #: Float outputs per scenario.
-OUT_F = ("t_complete", "min_gap_f", "min_gap_l1", "min_lane_ratio", "first_collaborative_s", "breach_first_s")
+OUT_F = ("t_complete", "min_gap_f", "min_gap_l1", "min_lane_ratio", "first_collaborative_s", "breach_first_s",
+         "slow_delay_s")  # fmt: skip
 #: Bool outputs per scenario.
-OUT_B = ("completed", "collided", "violated", "leader_collided", "leader_violated", "aggressive")
+OUT_B = ("completed", "collided", "violated", "leader_collided", "leader_violated", "aggressive", "slow_missed",
+         "slow_aggressive")  # fmt: skip
 
 
 @numba.njit(cache=True, nogil=True, error_model="numpy")
@@ -170,6 +172,7 @@ def _load(rows, b, batch, w):
     snap_nc[0] = rows.snap_nc[b]
     sb[0, 0] = batch.f_connected[b]  # F trusted where the variant listens: connected (it declares itself collaborative)
     sb[0, 2], sb[0, 3], sb[0, 4] = batch.uses[b, 0], batch.uses[b, 1], batch.uses[b, 2]
+    sb[0, 5] = batch.f_aggressive[b]  # F's true type (read by the 'truth' assessment only)
 
 
 @row_function
@@ -243,9 +246,10 @@ def _loop_rows(n_steps, prm, batch, start, out, w):
                 bad = step
                 break
         out_f[b, 0], out_f[b, 1], out_f[b, 2], out_f[b, 3] = rf[0, 5], rf[0, 6], rf[0, 7], rf[0, 8]
-        out_f[b, 4], out_f[b, 5] = st[0, 1], st[0, 2]
+        out_f[b, 4], out_f[b, 5], out_f[b, 6] = st[0, 1], st[0, 2], st[0, 7]
         out_b[b, 0], out_b[b, 1], out_b[b, 2] = sk[0, 3], rb[0, 0], rb[0, 1]
         out_b[b, 3], out_b[b, 4], out_b[b, 5] = rb[0, 2], rb[0, 3], sk[0, 2]
+        out_b[b, 6], out_b[b, 7] = sk[0, 10], sk[0, 11]
         counts[b, 0], counts[b, 1], counts[b, 2] = ri[0, 0], ri[0, 1], ri[0, 2]
         n_invalid[b] = ri[0, 3]
         for j in range(breach_flags.shape[1]):

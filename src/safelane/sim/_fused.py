@@ -3,9 +3,10 @@
 
 The loop covers batches of :data:`FUSED_MIN_ROWS` scenarios or more with the expert planner (``ExpertPlanner``
 itself, any gains), the paper's traffic without hooks, unexpected promise violations or L(N+1) profiles, the
-paper's four variants and the default settings (the observed assessment, the commit guard or the paper's completion
-rule, the monitor on or off, either leader rule, supervised, none of the real-world settings), without a trace or
-recorded observations (those, and other planners, run its period: :class:`Stepper`).
+paper's four variants and the settings of the default and paper presets (any assessment, the
+commit guard or the paper's completion rule, the monitor on or off, either leader rule, supervised, none of the
+real-world settings), without a trace or recorded observations (those, and other planners, run its period:
+:class:`Stepper`).
 Everything else — and everything with ``SAFELANE_NO_FUSED=1`` or without numba — runs period by period
 (:mod:`.step`), whose parts are compiled where they have kernels. Importing this module does not import numba.
 """
@@ -24,6 +25,7 @@ from ..planners.variants import VARIANT_NAMES, VARIANTS
 from ..safety.evasion import fast_kernel
 from ..safety.lateral import LATERAL_TOL_M
 from ..shield.monitor import BREACH_KINDS, TOL_M, Breach
+from ..shield.policies import SlowState
 
 #: :func:`covers` takes batches from this many scenarios on.
 FUSED_MIN_ROWS = 64
@@ -37,10 +39,12 @@ PROGRESS_CHUNK = 4096
 #: ``tests/test_fused_dispatch.py`` builds its cases from the field list).
 #: The loop reads these fields' values (any value runs compiled):
 READ = frozenset({"horizon_s", "brake_start_s", "shield.assess_window", "shield.assess_threshold",
-                  "follower_open_decel", "follower_open_gap_m", "shield.monitor", "leader_rule"})  # fmt: skip
+                  "follower_open_decel", "follower_open_gap_m", "shield.monitor", "leader_rule",
+                  "shield.assess_delay_s", "shield.assess_miss", "shield.assessment"})  # fmt: skip
 #: The loop implements these fields at this value (or these values) only; any other value runs period by period:
 FIXED = {
-    "shield.assessment": "observed", "shield.completion": ("commit_guard", "paper_evasion"), "sensor_noise_std": 0.0,
+    "shield.completion": ("commit_guard", "paper_evasion"),
+    "sensor_noise_std": 0.0,
     "shield.enabled": True, "v2x_loss": 0.0, "v2x_latency_periods": 0,
     "follower_ignores_ego": False, "own_lane": False, "sensing_error": False,
     "actuation_delay_s": 0.0, "shield.actuation_delay_s": 0.0, "neighbours": False,
@@ -48,7 +52,6 @@ FIXED = {
 #: These fields act only through another setting; while the fields named (or the nominal planner: ``"nominal"``)
 #: are at the loop's values they change nothing, so any value runs compiled:
 ONLY_WITH = {
-    "shield.assess_delay_s": ("shield.assessment",), "shield.assess_miss": ("shield.assessment",),
     "v2x_max_age_s": ("v2x_loss", "v2x_latency_periods"),  # no message is ever late without the V2X emulation
     "l1_plan_steps": ("nominal",),  # L1's shared plan feeds the neural planners' features; the expert ignores it
     "l0_gap_min_m": ("own_lane",), "l0_gap_max_m": ("own_lane",), "l0_speed_spread_mps": ("own_lane",),
@@ -146,7 +149,7 @@ def run(sim, n_steps: int, progress: bool = False):
     batch; with ``progress``, in chunks of :data:`PROGRESS_CHUNK` scenarios behind a
     bar (the same table: the scenarios are independent)."""
     if not progress or len(sim.b) <= PROGRESS_CHUNK:
-        return _state(run_chunk(sim, n_steps))
+        return _state(run_chunk(sim, n_steps), _slow(sim))
     from .._progress import track
     from .step import ClosedLoop
 
@@ -154,7 +157,7 @@ def run(sim, n_steps: int, progress: bool = False):
     chunk = lambda rows: ClosedLoop(sim.b.take(rows), sim.seed, sim.prm, sim.cfg, sim.nominal)  # noqa: E731
     bar = track(parts, f"simulating {len(sim.b)} scenarios")
     done = [run_chunk(chunk(rows), n_steps) for rows in bar]
-    return _state({name: np.concatenate([fields[name] for fields in done]) for name in done[0]})
+    return _state({name: np.concatenate([fields[name] for fields in done]) for name in done[0]}, _slow(sim))
 
 
 def run_chunk(sim, n_steps: int) -> dict:
@@ -223,6 +226,10 @@ def rows_of(start):
     return Rows(c(start.x), c(start.v), np.zeros((n, k)), np.full((n, k), np.inf), rf, np.zeros((n, len(RB)), bool),
                 np.zeros((n, len(RI)), np.int64), c(packed.plan), c(packed.history), c(packed.count), c(packed.st),
                 c(packed.sk), snap, snap.copy(), snap.copy(), np.zeros(n, np.int64))  # fmt: skip
+
+
+def _slow(sim) -> bool:
+    return sim.cfg.shield.assessment == "slow"
 
 
 def _non_finite(sim, rows: np.ndarray, t: float):
@@ -296,8 +303,9 @@ class Stepper:
             first_collaborative_s=rows.st[:, 1], breach_first_s=rows.st[:, 2], completed=rows.sk[:, 3],
             collided=rows.rb[:, 0], violated=rows.rb[:, 1], leader_collided=rows.rb[:, 2],
             leader_violated=rows.rb[:, 3], aggressive=rows.sk[:, 2], counts=rows.ri[:, :3], n_invalid=rows.ri[:, 3],
-            breach_flags=rows.sk[:, 5:], initial_safe=self.initial_safe,
-        ))  # fmt: skip
+            breach_flags=rows.sk[:, 5:10], initial_safe=self.initial_safe, slow_delay_s=rows.st[:, 7],
+            slow_missed=rows.sk[:, 10], slow_aggressive=rows.sk[:, 11],
+        ), _slow(self.sim))  # fmt: skip
 
     def step(self, s: StepState):
         """:meth:`~.step.ClosedLoop.step`: the nominal planner's proposals on this state's observation, one period."""
@@ -338,10 +346,12 @@ def steps_compiled(batch, cfg, traffic) -> list[str]:
     return reasons(batch, cfg, None, traffic, False, False, stepping=True)
 
 
-def _state(f: dict):
+def _state(f: dict, slow: bool):
     """The fields :func:`~.results.results_table` reads (a :class:`~.step.SimState`'s), from :func:`run_chunk`'s
-    arrays."""
+    arrays; ``slow``: the belief is the 'slow' assessment's (``policies.SlowState``, which derives what it reports)."""
     belief = SimpleNamespace(aggressive=f["aggressive"], first_collaborative_s=f["first_collaborative_s"])
+    if slow:
+        belief = SlowState(belief, f["slow_delay_s"], f["slow_missed"], f["slow_aggressive"])
     breach = Breach(flags=f["breach_flags"], first_s=f["breach_first_s"])
     names = ("completed", "collided", "violated", "leader_collided", "leader_violated", "t_complete", "min_gap_f",
              "min_gap_l1", "min_lane_ratio", "counts", "n_invalid", "initial_safe")  # fmt: skip
