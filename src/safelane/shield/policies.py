@@ -30,6 +30,7 @@ from typing import Protocol
 
 import numpy as np
 
+from .._splitmix import mix64, unit_of
 from ..planners.variants import VARIANT_NAMES, VARIANTS, get_variant
 from ..safety._backend import ARRAY, jitable
 from ..tolerances import TIME_TOL_S
@@ -82,14 +83,9 @@ def _scenario_uniform(x0, v0, salt: int) -> np.ndarray:
 
 
 def uniform_of_bits(hx, hv, salt):
-    """A uniform in ``[0, 1)`` from two 64-bit keys (uint64 arrays, or one compiled uint64 each) and a ``salt``: the
-    splitmix64 finaliser (unsigned products wrap, as intended)."""
-    h = hx * np.uint64(0x9E3779B97F4A7C15)
-    h = h ^ (hv + np.uint64(salt))
-    h = (h ^ (h >> np.uint64(30))) * np.uint64(0xBF58476D1CE4E5B9)
-    h = (h ^ (h >> np.uint64(27))) * np.uint64(0x94D049BB133111EB)
-    h = h ^ (h >> np.uint64(31))
-    return (h >> np.uint64(11)) * (1.0 / 2**53)
+    """A uniform in ``[0, 1)`` from two 64-bit keys (uint64 arrays, or one compiled uint64 each) and a ``salt``:
+    SplitMix64's finaliser (``sim/rng.mix64``; unsigned products wrap, as intended)."""
+    return unit_of(mix64((hx * np.uint64(0x9E3779B97F4A7C15)) ^ (hv + np.uint64(salt))))
 
 
 def slow_draws(xp, key_x, key_v, delay_s, miss, hx, hv):

@@ -29,6 +29,7 @@ import collections
 import numba
 import numpy as np
 
+from .._splitmix import counter_uniform4
 from ..planners.base import ExpertGains, expert_accel
 from ..safety import _compile
 from ..safety._backend import SCALAR, Limits
@@ -40,7 +41,7 @@ from ._fast_checks import _ego_row, _lane_row
 from ._fast_general import _general_pair
 from ._fast_held import _motion_max
 from ._fast_traffic import _follower_row, _leader_row
-from .behaviours import hold_speed, last_accel, link_decel, reactive_core, task_core
+from .behaviours import hold_speed, last_accel, link_decel, reactive_core, task_core, violation_accel
 from .kinematics import constant_segment, piece_acc
 
 _compile.register_rows()
@@ -58,6 +59,7 @@ PRM = (
 LoopBatch = collections.namedtuple("LoopBatch", (
     "x", "v", "ego", "valid", "n_connected", "f_connected", "f_aggressive", "uses", "promise", "chain_margin", "margin",
     "is_last", "acts", "v_desired", "promise_decel", "promise_accel", "decel_last", "gap0", "lane_valid", "lane_margin",
+    "p_v", "scenario_id", "key",
 ))  # fmt: skip
 #: A row's whole state between periods, one array per part with the batch first (the compiled loop's only state):
 #: the target lane ``x``, ``v``, the last period's accelerations ``acc`` and the running minimum of the chain bounds
@@ -72,8 +74,8 @@ Rows = collections.namedtuple("Rows", (
 RF = ("ego_x", "ego_y", "ego_vx", "ego_vy", "t", "t_complete", "min_gap_f", "min_gap_l1", "min_lane_ratio")
 #: A row's running flags (``has_last``: the monitor has a snapshot of a last period).
 RB = ("collided", "violated", "leader_collided", "leader_violated", "has_last")
-#: A row's counts: periods that proceeded, hesitated, aborted; invalid proposals.
-RI = ("proceed", "hesitate", "abort", "invalid")
+#: A row's counts: periods that proceeded, hesitated, aborted; invalid proposals; periods run (the draws' counter).
+RI = ("proceed", "hesitate", "abort", "invalid", "step")
 #: The scratch arrays of one row's period (:func:`_scratch`), by name.
 Scratch = collections.namedtuple("Scratch", (
     "x2", "v2", "f_acc2", "f_ts2", "f_xe2", "f_ve2", "acc", "cap", "general2", "pp", "sf", "sb", "chain_x", "chain_v",
@@ -268,6 +270,13 @@ def _step_rows(prm, batch, rows, proposal, behaviour, finite, w):
 
 
 @row_function
+def _draw(batch, b, step, slot, salt):
+    """The closed loop's counter-based draw of row ``b`` (``rng.counter_uniform(seed, scenario id, step, slot, salt)``:
+    promise violations, salts 7 and 8)."""
+    return counter_uniform4(batch.key[0], batch.scenario_id[b], step, slot, salt)
+
+
+@row_function
 def _period(prm, batch, b, w, den, ax_n, ay_n):
     """One control period of row ``b`` on the scratch ``w`` (its state loaded by :func:`_load`) with the nominal
     proposal ``(ax_n, ay_n)``: the shield (``period_row``), the traffic, the motion, the checks, the running values.
@@ -324,6 +333,7 @@ def _period(prm, batch, b, w, den, ax_n, ay_n):
     for i in range(k):
         cap[i] = _min(cap[i], bounds[i])
     a_last = last_accel(SCALAR, t, brake_start, decel_last[b])
+    p_v, step = batch.p_v[b], ri[0, 4]
     if prm[21] > 0.0:  # SimConfig.leader_rule "reactive" (behaviours.reactive_leader_accels): front to back
         for i in range(k - 1, 0, -1):
             a_i = 0.0
@@ -334,9 +344,12 @@ def _period(prm, batch, b, w, den, ax_n, ay_n):
                 if i + 1 < k:
                     z = link_decel(SCALAR, x[i + 1] - x[i] - margin[b, i], v[i], v[i + 1], _max(-acc[i + 1], 0.0),
                                    a_o)  # fmt: skip
-                task = task_core(SCALAR, hold_speed(SCALAR, v[i], v_desired[b, i]), promise_decel[b, i],
-                                 promise_accel[b, i])  # fmt: skip
-                a_i = reactive_core(SCALAR, task, z)
+                if p_v > 0.0 and _draw(batch, b, step, i, 7) < p_v:  # an unexpected violation replaces the rule
+                    a_i = violation_accel(SCALAR, z, decel_last[b], _draw(batch, b, step, i, 8))
+                else:
+                    task = task_core(SCALAR, hold_speed(SCALAR, v[i], v_desired[b, i]), promise_decel[b, i],
+                                     promise_accel[b, i])  # fmt: skip
+                    a_i = reactive_core(SCALAR, task, z)
             acc[i] = a_i
     else:  # "worst_case" (behaviours.leader_accels), on the running minimum of the chain bounds
         for i in range(k):
@@ -344,8 +357,10 @@ def _period(prm, batch, b, w, den, ax_n, ay_n):
             if 1 <= i < k - 1 and acts[b, i]:
                 task = task_core(SCALAR, hold_speed(SCALAR, v[i], v_desired[b, i]), promise_decel[b, i],
                                  promise_accel[b, i])  # fmt: skip
+                breaks = p_v > 0.0 and _draw(batch, b, step, i, 7) < p_v  # an unexpected violation
+                pick = _draw(batch, b, step, i, 8) if breaks else 0.0
                 a_i = _leader_row(x[i + 1] - x[i] - margin[b, i], v[i], v[i + 1], cap[i + 1], cap[i], task,
-                                  False, 0.0, decel_last[b], a_o, dt)  # fmt: skip
+                                  breaks, pick, decel_last[b], a_o, dt)  # fmt: skip
             if is_last[b, i]:
                 a_i = a_last
             acc[i] = a_i
@@ -421,6 +436,7 @@ def _period(prm, batch, b, w, den, ax_n, ay_n):
         ri[0, 2] += 1
     if invalid_active:
         ri[0, 3] += 1
+    ri[0, 4] += 1
     rf[0, 0], rf[0, 1], rf[0, 2], rf[0, 3], rf[0, 4] = ex, ey, evx, evy, t + dt
     finite = abs(ex) < _INF and abs(ey) < _INF and abs(evx) < _INF and abs(evy) < _INF
     for i in range(k):

@@ -2,7 +2,7 @@
 :class:`~.step.ClosedLoop`'s arrays to :func:`._fast_loop.loop_kernel` and returns what the results table reads.
 
 The loop covers batches of :data:`FUSED_MIN_ROWS` scenarios or more with the expert planner (``ExpertPlanner``
-itself, any gains), the paper's traffic without hooks, unexpected promise violations or L(N+1) profiles, the
+itself, any gains), the paper's traffic without hooks or L(N+1) profiles (with unexpected promise violations), the
 paper's four variants and the settings of the default and paper presets (any assessment, the
 commit guard or the paper's completion rule, the monitor on or off, either leader rule, supervised, none of the
 real-world settings), without a trace or recorded observations (those, and other planners, run its period:
@@ -131,8 +131,6 @@ def reasons(batch, cfg, nominal, traffic, trace: bool, record_observations: bool
         out.append("own-lane leaders in the batch")
     if batch.last_profile_t is not None:
         out.append("L(N+1) braking profiles")
-    if (batch.p_v > 0.0).any():
-        out.append("promise violations (p_v > 0)")
     ruled = [name for name in np.asarray(VARIANT_NAMES)[np.unique(batch.variant)] if VARIANTS[name].rule != "paper"]
     if ruled:
         out.append(f"variants decided by another rule: {ruled}")
@@ -206,6 +204,7 @@ def kernel_inputs(sim):
         c(np.stack(variant_flags(b.variant, len(b)), 1)), c(sim.chain_promise), c(sim.chain_margin), c(traffic.margin),
         c(is_last), c(acts), c(traffic.v_desired), c(b.promise_decel), c(b.promise_accel),
         c(b.decel_last.astype(np.float64)), c(traffic.gap0), c(sim.lane_pairs[0]), c(sim.lane_pairs[1]),
+        c(b.p_v.astype(np.float64)), c(b.scenario_id.astype(np.int64)), np.array([sim.seed % 2**64], np.uint64),
     )  # fmt: skip
     return np.array([float(values[name]) for name in PRM]), period_constants(prm, cfg.shield), batch
 

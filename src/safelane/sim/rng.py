@@ -9,15 +9,7 @@ from __future__ import annotations
 
 import numpy as np
 
-_GOLDEN = np.uint64(0x9E3779B97F4A7C15)
-_M1 = np.uint64(0xBF58476D1CE4E5B9)
-_M2 = np.uint64(0x94D049BB133111EB)
-
-
-def _mix(z: np.ndarray) -> np.ndarray:
-    z = (z ^ (z >> np.uint64(30))) * _M1
-    z = (z ^ (z >> np.uint64(27))) * _M2
-    return z ^ (z >> np.uint64(31))
+from .._splitmix import _GOLDEN, counter_uniform4, mix64, unit_of  # noqa: F401  (counter_uniform4: the compiled draw)
 
 
 def counter_uniform(key: int, *counters) -> np.ndarray:
@@ -25,8 +17,8 @@ def counter_uniform(key: int, *counters) -> np.ndarray:
     with np.errstate(over="ignore"):
         h = np.asarray(np.uint64(key % 2**64))
         for c in counters:
-            h = _mix(h ^ (np.asarray(c).astype(np.uint64) * _GOLDEN + _GOLDEN))
-    return (h >> np.uint64(11)).astype(np.float64) * (1.0 / 2**53)
+            h = mix64(h ^ (np.asarray(c).astype(np.uint64) * _GOLDEN + _GOLDEN))
+        return unit_of(h)
 
 
 def counter_normal(key: int, *counters) -> np.ndarray:
@@ -34,3 +26,4 @@ def counter_normal(key: int, *counters) -> np.ndarray:
     u1 = counter_uniform(key, *counters, 1)
     u2 = counter_uniform(key, *counters, 2)
     return np.sqrt(-2.0 * np.log1p(-u1)) * np.cos(2.0 * np.pi * u2)
+
