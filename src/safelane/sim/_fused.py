@@ -308,8 +308,11 @@ class Stepper:
 
     def step(self, s: StepState):
         """:meth:`~.step.ClosedLoop.step`: the nominal planner's proposals on this state's observation, one period."""
+        from ..shield.proposals import proposal_arrays
+
         obs = self.observe(s)
-        new, behaviour = self.step_with(s, *self.sim.nominal(obs, self.sim.prm))
+        proposal = proposal_arrays(self.sim.planner_name, self.sim.nominal(obs, self.sim.prm), len(self.sim.b))
+        new, behaviour = self.step_with(s, *proposal)  # (checked as the shield checks it: errors name the planner)
         return new, obs, behaviour
 
     def step_with(self, s: StepState, a_x, a_y):
