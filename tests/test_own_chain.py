@@ -239,3 +239,23 @@ def test_the_chains_draws_are_independent_of_each_other_and_of_l0s():
     r = np.corrcoef(drawn.T)
     assert np.abs(r[~np.eye(len(r), dtype=bool)]).max() < 0.08
     assert (b.own_promise == PRM.a_x_d).all()
+
+
+def test_only_the_connected_vehicles_links_count_where_the_chain_is_shorter_than_its_slots():
+    """A batch with three slots ahead of L0 but one vehicle there (own_n_connected = 1: L0 connected, the head
+    ahead of it, two empty slots): L0's running bound after a period is the reference chain's over (L0, head) with
+    the head at a_o_d — the head's link to the empty slot beyond it is no connected link."""
+    b = with_own_lane(_batch(32, seed=6), 4, _config(3, l0_gap_min_m=10.0, l0_gap_max_m=25.0), PRM)
+    x = b.own_ahead_x.copy()
+    x[:, 1:] = np.inf
+    b = dataclasses.replace(b, own_ahead_x=x, own_n_connected=np.ones(32, np.int64))
+    check_chain(b, PRM)
+    cfg = _config(3, l0_gap_min_m=10.0, l0_gap_max_m=25.0)
+    loop = ClosedLoop(b, 4, PRM, cfg, ExpertPlanner())
+    s0 = loop.initial_state()
+    s1 = loop.step(s0)[0]
+    p = np.column_stack([s0.l0[0][:, 0], s0.l0[0][:, 1]])
+    v = np.column_stack([s0.l0[1][:, 0], s0.l0[1][:, 1]])
+    ref = ref_leader_chain(p, v, b.own_promise[:, :1], PRM).decel[:, 0]
+    np.testing.assert_allclose(s1.own_cap[:, 0], ref, rtol=0, atol=1e-6)
+    assert (ref > b.own_promise[:, 0] + 0.1).any()  # the head's worst case forces more than L0's promise somewhere
