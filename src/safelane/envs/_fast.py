@@ -1,12 +1,16 @@
 """The envs' compiled step (numba, extra ``fast``): one control period of every row — the closed loop's own period,
 ``sim/_fast_loop._period`` — then what the agent gets from it, in the same compiled call.
 
-No rule lives here: the observation is :func:`~safelane.planners.features.feature_row` and
-:func:`~safelane.planners.features.planned_change` (the feature map's closed forms, which
-:func:`~safelane.planners.features.features` evaluates on NumPy arrays), with ``L1``'s shared plan as
-:meth:`~safelane.sim.step.ClosedLoop.observe` builds it (its last acceleration, held for ``l1_plan_steps`` periods,
-summed in order as ``np.cumsum`` sums); the reward, the executed acceleration and the flags are
-:func:`~.core.outcome_core`. ``tests/test_env_compiled.py`` compares every output with the NumPy env's, bit for bit.
+No rule lives here: the period is the closed loop's own; the observation is
+:func:`~safelane.planners.features.feature_row` and :func:`~safelane.planners.features.planned_change` (the feature
+map's closed forms, which :func:`~safelane.planners.features.features` evaluates on NumPy arrays); the reward, the
+executed acceleration and the flags are :func:`~.core.outcome_core`. One piece mirrors NumPy code, and only its
+bookkeeping: ``L1``'s shared plan — :meth:`~safelane.sim.step.ClosedLoop.observe` holds L1's last acceleration
+for ``l1_plan_steps`` periods (where ``ClosedLoop.shares_plan``) and
+:func:`~safelane.planners.features.plan_speed_change` sums it with ``np.cumsum`` — is summed here period by period
+in the same order, because a compiled row cannot call NumPy's cumsum on a ``(B, H)`` plan it never builds. The
+horizons come from :func:`~safelane.planners.features.plan_steps`, the rows from ``shares_plan``, so only the running
+sum is written twice. ``tests/test_env_compiled.py`` compares every output with the NumPy env's, bit for bit.
 """
 
 from __future__ import annotations
@@ -19,7 +23,8 @@ from ..safety import _compile
 from ..safety._backend import SCALAR
 from ..safety._fast_base import announce_compile
 from ..shield.decide import ABORT, HESITATE
-from ..sim._fast_loop import _load, _period, _scratch, _store, _window
+from ..sim._fast_loop import _period
+from ..sim._fast_rows import _load, _scratch, _store, _window
 from . import core as _core  # noqa: F401  (outcome_core is marked: registered below)
 from .core import outcome_core
 
@@ -35,7 +40,7 @@ OUTCOME = ("reward", "a_x", "a_y", "crashed", "cost", "success", "terminated", "
 
 @numba.njit(cache=True, nogil=True, error_model="numpy")
 def env_step_kernel(prm, period_prm, batch, rows, proposal, env, view, steps, obs, outcome, behaviour, finite):
-    """One period of every row of ``rows`` (``_fast_loop.Rows``, in place) with the agents' proposals ``(B, 2)``,
+    """One period of every row of ``rows`` (``_fast_rows.Rows``, in place) with the agents' proposals ``(B, 2)``,
     then each row's observation into ``obs`` ``(B, F)`` and its :data:`OUTCOME` into ``outcome``; ``env``:
     :data:`ENV`'s values; ``view``: ``(shares_plan (B,), f_connected (B,), plan_steps (len(PLAN_TIMES_S),),
     plan_sums (l1_plan_steps,))`` — the rows whose ``L1`` shares its plan, the follower's flag, how many of the plan's

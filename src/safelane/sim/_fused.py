@@ -211,9 +211,9 @@ def kernel_inputs(sim):
 
 def rows_of(start):
     """A :class:`~.step.SimState` at the start of a run (its first period not yet run) as the compiled loop's row
-    state (``_fast_loop.Rows``)."""
+    state (``_fast_rows.Rows``)."""
     from ..shield.fast_step import Packed
-    from ._fast_loop import RB, RF, RI, Rows
+    from ._fast_rows import RB, RF, RI, Rows
 
     packed = Packed.of(start.shield)  # the shield's state as its compiled period holds it
     n, k = start.x.shape
@@ -241,7 +241,7 @@ def _non_finite(sim, rows: np.ndarray, t: float):
 
 @dataclasses.dataclass(frozen=True)
 class StepState:
-    """A batch's state in the compiled loop (the arrays of ``_fast_loop.Rows``, the batch first, so that the envs'
+    """A batch's state in the compiled loop (the arrays of ``_fast_rows.Rows``, the batch first, so that the envs'
     row surgery ``envs/rows.replace_rows`` replaces rows), with the :class:`~.step.SimState` fields the envs and
     :meth:`~.step.ClosedLoop.observe` read as views: ``ego``, ``x``, ``v``, ``acc``, ``t`` (``(B,)``: each row
     its own clock), ``completed``, ``collided``, ``violated``, ``l0`` (``None``: no own lane)."""
@@ -331,7 +331,7 @@ class Stepper:
     @staticmethod
     def rows_after(s: StepState):
         """A copy of ``s``'s rows for a kernel to advance in place (``s`` stays the state before the period)."""
-        from ._fast_loop import Rows
+        from ._fast_rows import Rows
 
         return Rows(*[a.copy() for a in s.rows])
 

@@ -1,0 +1,134 @@
+"""The compiled closed loop's row layout (numba, extra ``fast``): a row's whole state between periods (:data:`Rows`)
+and the scratch arrays of one row's period (:data:`Scratch`), with the moves between them — :func:`_load` a row into
+the scratch, :func:`_store` it back — and the assessment's window (:func:`_window`). ``sim/_fast_loop.py``'s kernels
+(the episode loop, one period, ``envs/_fast.py``'s step) run ``_fast_loop._period`` on this layout; nothing here
+computes a rule."""
+
+from __future__ import annotations
+
+import collections
+
+import numba
+import numpy as np
+
+from ..safety._fast_base import announce_compile, row_function
+
+announce_compile(__file__)
+
+_INF = np.inf
+#: A row's whole state between periods, one array per part with the batch first (the compiled loop's only state):
+#: the target lane ``x``, ``v``, the last period's accelerations ``acc`` and the running minimum of the chain bounds
+#: ``cap`` ``(B, K)``; the running values ``rf`` (:data:`RF`), ``rb`` (:data:`RB`), ``ri`` (:data:`RI`); the
+#: shield's state as :func:`~safelane.shield._fast_period.period_row` holds it (``shield/fast_step.Packed``:
+#: ``plan``, ``history``, ``count``, ``st``, ``sk``) and the monitor's snapshot of the last period (``snap_*``).
+Rows = collections.namedtuple("Rows", (
+    "x", "v", "acc", "cap", "rf", "rb", "ri", "plan", "history", "count", "st", "sk", "snap_x", "snap_v", "snap_b",
+    "snap_nc",
+))  # fmt: skip
+#: A row's running floats: the ego's state, the row's clock, the results' times and smallest gaps.
+RF = ("ego_x", "ego_y", "ego_vx", "ego_vy", "t", "t_complete", "min_gap_f", "min_gap_l1", "min_lane_ratio")
+#: A row's running flags (``has_last``: the monitor has a snapshot of a last period).
+RB = ("collided", "violated", "leader_collided", "leader_violated", "has_last")
+#: A row's counts: periods that proceeded, hesitated, aborted; invalid proposals; periods run (the draws' counter).
+RI = ("proceed", "hesitate", "abort", "invalid", "step")
+#: The scratch arrays of one row's period (:func:`_scratch`), by name.
+Scratch = collections.namedtuple("Scratch", (
+    "x2", "v2", "f_acc2", "f_ts2", "f_xe2", "f_ve2", "acc", "cap", "general2", "pp", "sf", "sb", "chain_x", "chain_v",
+    "own_x", "own_v", "own_promise", "own_nc", "history", "count", "st", "sk", "plan", "snap_x", "snap_v", "snap_b",
+    "snap_nc", "bounds_out", "no_chain", "of", "ob", "knots", "px2", "pv2", "pb2", "kn", "kax", "kay", "scratch",
+    "lon_t", "lon_x", "lon_v", "lon_a", "lat_t", "lat_x", "lat_v", "lat_a", "o_t", "o_x", "o_v", "o_a", "lo", "hi",
+    "times", "rf", "rb", "ri",
+))  # fmt: skip
+
+
+@numba.njit(cache=True, nogil=True, error_model="numpy")
+def _scratch(rows, period_prm):
+    """The scratch arrays of one row's period, allocated once per call of a kernel: the rows then run without
+    reference counting (every array a period touches would otherwise cost atomic increments and decrements)."""
+    k = rows.x.shape[1]
+    m = k - 1
+    window = rows.history.shape[1]
+    return Scratch(
+        np.empty((1, k)), np.empty((1, k)), np.empty((1, k)), np.empty((1, k)), np.empty((1, k)), np.empty((1, k)),
+        np.empty(k), np.empty(k), np.zeros((1, k), np.bool_), period_prm.copy(), np.empty((1, 9)),
+        np.zeros((1, 6), np.bool_), np.empty((1, m)), np.empty((1, m)), np.full((1, 1), _INF), np.zeros((1, 1)),
+        np.empty((1, 0)), np.zeros(1, np.int64), np.empty((1, window)), np.empty(1, np.int64),
+        np.empty((1, rows.st.shape[1])), np.empty((1, rows.sk.shape[1]), np.bool_),
+        np.empty((1, rows.plan.shape[1])), np.empty((1, m)), np.empty((1, m)), np.empty((1, m)), np.empty(1, np.int64),
+        np.empty((1, m)), np.zeros(0, np.bool_), np.empty((1, 5)), np.empty((1, 4), np.bool_), np.empty((1, 5, 8)),
+        np.empty((1, m + 1)), np.empty((1, m + 1)), np.empty((1, m + 1)), np.empty((5, 8)), np.empty(7), np.empty(7),
+        np.empty(64), np.empty(3), np.empty(3), np.empty(3), np.empty(2), np.empty(2), np.empty(2), np.empty(2),
+        np.empty(1), np.empty(3), np.empty(3), np.empty(3), np.empty(2), np.empty(2), np.empty(2), np.empty(window),
+        np.empty((1, len(RF))), np.empty((1, len(RB)), np.bool_), np.empty((1, len(RI)), np.int64),
+    )  # fmt: skip
+
+
+@row_function
+def _load(rows, b, batch, w):
+    """Row ``b`` of ``rows`` into the scratch ``w`` (and the row's situation flags from ``batch``)."""
+    x2, v2, acc, cap, sb, rf, rb, ri = w.x2, w.v2, w.acc, w.cap, w.sb, w.rf, w.rb, w.ri
+    history, count, st, sk, plan = w.history, w.count, w.st, w.sk, w.plan
+    snap_x, snap_v, snap_b, snap_nc = w.snap_x, w.snap_v, w.snap_b, w.snap_nc
+    for i in range(x2.shape[1]):
+        x2[0, i], v2[0, i], acc[i], cap[i] = rows.x[b, i], rows.v[b, i], rows.acc[b, i], rows.cap[b, i]
+    for j in range(rf.shape[1]):
+        rf[0, j] = rows.rf[b, j]
+    for j in range(rb.shape[1]):
+        rb[0, j] = rows.rb[b, j]
+    for j in range(ri.shape[1]):
+        ri[0, j] = rows.ri[b, j]
+    for j in range(plan.shape[1]):
+        plan[0, j] = rows.plan[b, j]
+    for j in range(history.shape[1]):
+        history[0, j] = rows.history[b, j]
+    count[0] = rows.count[b]
+    for j in range(st.shape[1]):
+        st[0, j] = rows.st[b, j]
+    for j in range(sk.shape[1]):
+        sk[0, j] = rows.sk[b, j]
+    for j in range(snap_x.shape[1]):
+        snap_x[0, j], snap_v[0, j], snap_b[0, j] = rows.snap_x[b, j], rows.snap_v[b, j], rows.snap_b[b, j]
+    snap_nc[0] = rows.snap_nc[b]
+    sb[0, 0] = batch.f_connected[b]  # F trusted where the variant listens: connected (it declares itself collaborative)
+    sb[0, 2], sb[0, 3], sb[0, 4] = batch.uses[b, 0], batch.uses[b, 1], batch.uses[b, 2]
+    sb[0, 5] = batch.f_aggressive[b]  # F's true type (read by the 'truth' assessment only)
+
+
+@row_function
+def _store(rows, b, w):
+    """The scratch ``w`` back into row ``b`` of ``rows`` (:func:`_load`'s inverse)."""
+    x2, v2, acc, cap, rf, rb, ri = w.x2, w.v2, w.acc, w.cap, w.rf, w.rb, w.ri
+    history, count, st, sk, plan = w.history, w.count, w.st, w.sk, w.plan
+    snap_x, snap_v, snap_b, snap_nc = w.snap_x, w.snap_v, w.snap_b, w.snap_nc
+    for i in range(x2.shape[1]):
+        rows.x[b, i], rows.v[b, i], rows.acc[b, i], rows.cap[b, i] = x2[0, i], v2[0, i], acc[i], cap[i]
+    for j in range(rf.shape[1]):
+        rows.rf[b, j] = rf[0, j]
+    for j in range(rb.shape[1]):
+        rows.rb[b, j] = rb[0, j]
+    for j in range(ri.shape[1]):
+        rows.ri[b, j] = ri[0, j]
+    for j in range(plan.shape[1]):
+        rows.plan[b, j] = plan[0, j]
+    for j in range(history.shape[1]):
+        rows.history[b, j] = history[0, j]
+    rows.count[b] = count[0]
+    for j in range(st.shape[1]):
+        rows.st[b, j] = st[0, j]
+    for j in range(sk.shape[1]):
+        rows.sk[b, j] = sk[0, j]
+    for j in range(snap_x.shape[1]):
+        rows.snap_x[b, j], rows.snap_v[b, j], rows.snap_b[b, j] = snap_x[0, j], snap_v[0, j], snap_b[0, j]
+    rows.snap_nc[b] = snap_nc[0]
+
+
+@row_function
+def _window(times, dt):
+    """The assessment's window of sample times centred on 0 (``times``, filled) and the sum of their squares."""
+    window = times.shape[0]
+    for j in range(window):
+        times[j] = (j - (window - 1) / 2.0) * dt
+    den = times[0] * times[0]
+    for j in range(1, window):
+        den = den + times[j] * times[j]
+    return den
