@@ -25,13 +25,19 @@ def unit_of(h):
     return (h >> np.uint64(11)) * (1.0 / 2**53)
 
 
+def absorb(h, c):
+    """The hash ``h`` after one more counter ``c`` (both uint64): one step of
+    :func:`safelane.sim.rng.counter_uniform`."""
+    return mix64(h ^ (c * _GOLDEN + _GOLDEN))
+
+
 def counter_uniform4(key, c1, c2, c3, c4):
     """:func:`safelane.sim.rng.counter_uniform` with four integer counters, for one compiled draw (``key``: the
     seed as a uint64)."""
-    h = mix64(key ^ (np.uint64(c1) * _GOLDEN + _GOLDEN))
-    h = mix64(h ^ (np.uint64(c2) * _GOLDEN + _GOLDEN))
-    h = mix64(h ^ (np.uint64(c3) * _GOLDEN + _GOLDEN))
-    return unit_of(mix64(h ^ (np.uint64(c4) * _GOLDEN + _GOLDEN)))
+    h = absorb(key, np.uint64(c1))
+    h = absorb(h, np.uint64(c2))
+    h = absorb(h, np.uint64(c3))
+    return unit_of(absorb(h, np.uint64(c4)))
 
 
-jitable(mix64, unit_of, counter_uniform4)
+jitable(mix64, unit_of, absorb, counter_uniform4)

@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .._splitmix import _GOLDEN, counter_uniform4, mix64, unit_of  # noqa: F401  (counter_uniform4: the compiled draw)
+from .._splitmix import absorb, unit_of
 
 
 def counter_uniform(key: int, *counters) -> np.ndarray:
@@ -17,7 +17,7 @@ def counter_uniform(key: int, *counters) -> np.ndarray:
     with np.errstate(over="ignore"):
         h = np.asarray(np.uint64(key % 2**64))
         for c in counters:
-            h = mix64(h ^ (np.asarray(c).astype(np.uint64) * _GOLDEN + _GOLDEN))
+            h = absorb(h, np.asarray(c).astype(np.uint64))
         return unit_of(h)
 
 
