@@ -118,7 +118,7 @@ def test_vector_env_sub_envs_are_single_envs_exactly():
 @pytest.mark.parametrize(
     "kwargs",
     [dict(shield=False), dict(sim_config={"sensor_noise_std": 0.1}), dict(sim_config={"own_lane": True}),
-     dict(sim_config={"v2x_loss": 0.2}), dict(variant="RSS_matched")],
+     dict(sim_config={"v2x_loss": 0.2}), dict(sim_config={"actuation_delay_s": 0.1})],
 )  # fmt: skip
 def test_settings_the_compiled_period_does_not_cover_step_in_numpy(kwargs):
     env = LaneChangeEnv(**kwargs)

@@ -37,7 +37,8 @@ def _compiled_sources() -> tuple[Path, ...]:
     """Every module with a compiled kernel or its helpers: the ``_fast*.py`` modules, the backend and its numba
     registration, and every module with a closed form marked ``jitable`` (compiled into the kernels that call it)."""
     found = {_PACKAGE / "_motion.py", _PACKAGE / "_splitmix.py"}  # (compiled into the kernels)
-    for sub in ("safety", "shield", "sim", "planners", "envs"):  # (the expert's law, the envs' features and reward)
+    # (the expert's law, the envs' features and reward, RSS's rule)
+    for sub in ("safety", "shield", "sim", "planners", "envs", "baselines"):
         for path in (_PACKAGE / sub).glob("*.py"):
             if path.name.startswith("_fast") or path.name in ("_backend.py", "_compile.py"):
                 found.add(path)

@@ -1,12 +1,12 @@
 """The compiled closed loop's Python side: where it runs (:func:`covers`), and :func:`run`, which hands a
 :class:`~.step.ClosedLoop`'s arrays to :func:`._fast_loop.loop_kernel` and returns what the results table reads.
 
-The loop covers batches of :data:`FUSED_MIN_ROWS` scenarios or more with the expert planner (``ExpertPlanner``
-itself, any gains), the paper's traffic without hooks or L(N+1) profiles (with unexpected promise violations), the
-paper's four variants and the settings of the default and paper presets (any assessment, the
-commit guard or the paper's completion rule, the monitor on or off, either leader rule, supervised, none of the
-real-world settings), without a trace or recorded observations (those, and other planners, run its period:
-:class:`Stepper`).
+The loop covers batches of :data:`FUSED_MIN_ROWS` scenarios or more with the expert planner (``ExpertPlanner`` itself,
+any gains), the paper's traffic without hooks or L(N+1) profiles (with unexpected promise violations), the paper's
+four variants and the RSS variants (their rule: ``shield/_fast_rules.py``), the settings of the default and paper
+presets (any assessment, the commit guard or the paper's completion rule, the monitor on or off, either leader rule,
+supervised, none of the real-world settings) and an F that ignores the ego, without a trace or recorded observations
+(those, and other planners, run its period: :class:`Stepper`).
 Everything else — and everything with ``SAFELANE_NO_FUSED=1`` or without numba — runs period by period
 (:mod:`.step`), whose parts are compiled where they have kernels. Importing this module does not import numba.
 """
@@ -21,11 +21,11 @@ from types import SimpleNamespace
 import numpy as np
 
 from ..planners.base import ExpertPlanner
-from ..planners.variants import VARIANT_NAMES, VARIANTS
 from ..safety.evasion import fast_kernel
 from ..safety.lateral import LATERAL_TOL_M
 from ..shield.monitor import BREACH_KINDS, TOL_M, Breach
 from ..shield.policies import SlowState
+from ..shield.rules import rule_rows, rule_table, uncompiled_rules
 
 #: :func:`covers` takes batches from this many scenarios on.
 FUSED_MIN_ROWS = 64
@@ -40,13 +40,14 @@ PROGRESS_CHUNK = 4096
 #: The loop reads these fields' values (any value runs compiled):
 READ = frozenset({"horizon_s", "brake_start_s", "shield.assess_window", "shield.assess_threshold",
                   "follower_open_decel", "follower_open_gap_m", "shield.monitor", "leader_rule",
-                  "shield.assess_delay_s", "shield.assess_miss", "shield.assessment"})  # fmt: skip
+                  "shield.assess_delay_s", "shield.assess_miss", "shield.assessment",
+                  "follower_ignores_ego"})  # fmt: skip
 #: The loop implements these fields at this value (or these values) only; any other value runs period by period:
 FIXED = {
     "shield.completion": ("commit_guard", "paper_evasion"),
     "sensor_noise_std": 0.0,
     "shield.enabled": True, "v2x_loss": 0.0, "v2x_latency_periods": 0,
-    "follower_ignores_ego": False, "own_lane": False, "sensing_error": False,
+    "own_lane": False, "sensing_error": False,
     "actuation_delay_s": 0.0, "shield.actuation_delay_s": 0.0, "neighbours": False,
 }  # fmt: skip
 #: These fields act only through another setting; while the fields named (or the nominal planner: ``"nominal"``)
@@ -131,9 +132,9 @@ def reasons(batch, cfg, nominal, traffic, trace: bool, record_observations: bool
         out.append("own-lane leaders in the batch")
     if batch.last_profile_t is not None:
         out.append("L(N+1) braking profiles")
-    ruled = [name for name in np.asarray(VARIANT_NAMES)[np.unique(batch.variant)] if VARIANTS[name].rule != "paper"]
-    if ruled:
-        out.append(f"variants decided by another rule: {ruled}")
+    other = uncompiled_rules(rule_rows(batch.variant, len(batch)))
+    if other:
+        out.append(f"variants decided by a rule the loop does not implement: {other}")
     return out
 
 
@@ -195,6 +196,7 @@ def kernel_inputs(sim):
         open_decel=cfg.follower_open_decel, open_gap_m=cfg.follower_open_gap_m, k_p=gains.k_p, k_v=gains.k_v,
         gap_fraction=gains.gap_fraction, brake_comfort=gains.brake_comfort, omega2=gains.omega**2,
         two_omega=2.0 * gains.omega, a_o_d=prm.others_decel, reactive=cfg.leader_rule == "reactive",
+        ignores_ego=cfg.follower_ignores_ego,
     )  # fmt: skip
     c = np.ascontiguousarray
     is_last, acts = traffic.roles
@@ -205,6 +207,7 @@ def kernel_inputs(sim):
         c(is_last), c(acts), c(traffic.v_desired), c(b.promise_decel), c(b.promise_accel),
         c(b.decel_last.astype(np.float64)), c(traffic.gap0), c(sim.lane_pairs[0]), c(sim.lane_pairs[1]),
         c(b.p_v.astype(np.float64)), c(b.scenario_id.astype(np.int64)), np.array([sim.seed % 2**64], np.uint64),
+        rule_table(rule_rows(b.variant, len(b)), len(b), prm),
     )  # fmt: skip
     return np.array([float(values[name]) for name in PRM]), period_constants(prm, cfg.shield), batch
 
