@@ -7,13 +7,16 @@ into observations, rewards, costs and flags. :class:`~safelane.envs.LaneChangeEn
 :class:`~safelane.envs.LaneChangeVectorEnv` is the same task over the whole batch.
 
 Resets (the vector env's auto-reset): the rows that finished get fresh scenarios, sampled row by row from their own
-generators exactly as a single env samples them; a new ``ClosedLoop`` is built for the whole batch (its constant
-arrays), and the finished rows of the state are overwritten by the initial state of their new scenarios (where the
-initial state has no record at all — the shield's memory of the previous period — the rows' record is emptied, see
-:func:`.rows.vacate_rows`). The batch
-shares one clock, so a row that restarts at batch time ``T`` runs its episode at ``T, T + dt, …``: its plan's clock
-is shifted by ``T`` and nothing else in the closed loop reads the absolute time — as long as ``L(N+1)`` brakes
-from ``t = 0`` (``SimConfig.brake_start_s = 0``) and V2X is perfect, which the vector env therefore requires.
+generators exactly as a single env samples them, and a ``ClosedLoop`` over those rows alone gives their initial
+state and first observation. On the compiled loop (:class:`~safelane.sim._fused.Stepper`) the fresh rows' kernel
+inputs and state are spliced into the running batch's arrays (:meth:`~safelane.sim._fused.Stepper.splice`); each row
+keeps its own clock, so a restarted row runs exactly the single env's episode. Period by period in NumPy a new
+``ClosedLoop`` is built for the whole batch (its constant arrays), and the finished rows of the state are overwritten
+by the initial state of their new scenarios (where the initial state has no record at all — the shield's memory of
+the previous period — the rows' record is emptied, see :func:`.rows.vacate_rows`). That batch shares one clock, so a
+row that restarts at batch time ``T`` runs its episode at ``T, T + dt, …``: its plan's clock is shifted by ``T`` and
+nothing else in the closed loop reads the absolute time — as long as ``L(N+1)`` brakes from ``t = 0``
+(``SimConfig.brake_start_s = 0``) and V2X is perfect, which the vector env therefore requires.
 """
 
 from __future__ import annotations
@@ -29,7 +32,7 @@ from ..planners.base import Observation
 from ..planners.features import FEATURE_NAMES, features, plan_steps
 from ..planners.variants import VARIANT_NAMES, get_variant
 from ..safety._backend import ARRAY, jitable
-from ..sim._fused import Stepper, StepState, steps_compiled
+from ..sim._fused import Stepper, steps_compiled
 from ..sim.config import SimConfig
 from ..sim.scenario import ScenarioBatch, ScenarioConfig, paper_scenarios
 from ..sim.step import ClosedLoop
@@ -159,19 +162,25 @@ class ScenarioSampler:
         a third of a vector step at 1,024 envs)."""
         cfg, k = self.scenario, self.width
         m = len(rngs)
-        n, decel = np.zeros(m, np.int64), np.zeros(m)
-        gap, ego_vx, f_conn_u, f_aggr_u = (np.zeros(m) for _ in range(4))
-        human = np.zeros((m, k), bool)
+        n = np.full(m, self.n_leaders[0], np.int64)
+        # Each row's uniforms in one row of u: (decel, gap, ego_vx, f_conn, f_aggr, one per leader); a fixed decel
+        # draws none (its column stays 0.0), and the columns past a row's own leaders stay 1.0 (masked below).
+        u = np.ones((m, 5 + max(self.n_leaders)))
+        u[:, 0] = 0.0
         sid = np.zeros(m, np.int64)
         lo, hi = self.decel
+        first = 0 if hi > lo else 1
+        several = len(self.n_leaders) > 1
         for i, rng in enumerate(rngs):
-            # The draws of _settings and paper_scenarios(samples=1), in their order, as one call: uniform(a, b) is
-            # a + (b - a)·random() on the same stream (the equality is tested).
-            n[i] = self.n_leaders[rng.integers(len(self.n_leaders))] if len(self.n_leaders) > 1 else self.n_leaders[0]
-            u = rng.random(5 + n[i]) if hi > lo else np.concatenate([[0.0], rng.random(4 + n[i])])
-            decel[i], gap[i], ego_vx[i], f_conn_u[i], f_aggr_u[i] = u[:5]
-            human[i, 1 : n[i] + 1] = u[5:] < cfg.human_share
+            # The draws of _settings and paper_scenarios(samples=1), in their order, the uniforms as one call:
+            # uniform(a, b) is a + (b - a)·random() on the same stream (the equality is tested).
+            if several:
+                n[i] = self.n_leaders[rng.integers(len(self.n_leaders))]
+            rng.random(out=u[i, first : 5 + n[i]])
             sid[i] = rng.integers(0, 2**62)
+        decel, gap, ego_vx, f_conn_u, f_aggr_u = u[:, :5].T
+        human = np.zeros((m, k), bool)
+        human[:, 1 : u.shape[1] - 4] = (u[:, 5:] < cfg.human_share) & (np.arange(u.shape[1] - 5) < n[:, None])
         decel = lo + (hi - lo) * decel if hi > lo else np.full(m, lo)
         gap = cfg.gap[0] + (cfg.gap[1] - cfg.gap[0]) * gap
         ego_vx = cfg.ego_speed[0] + (cfg.ego_speed[1] - cfg.ego_speed[0]) * ego_vx
@@ -300,12 +309,15 @@ class LaneChangeTask:
         first = ClosedLoop(fresh, self.seed, self.params, self.config, self.planner, self.traffic)
         start = first.initial_state()
         obs = features(first.observe(start), self.params).astype(np.float32)  # (the clock is not a feature)
-        self.loop = self._loop(self.batch)
-        if isinstance(self.loop, Stepper):  # each row its own clock: the new episodes start at 0
-            start = self.loop.state_of(start)
+        if isinstance(self.loop, Stepper):  # the fresh rows' inputs and state spliced in; each row its own clock
+            self.loop.splice(rows, Stepper(first))
+            shares_plan, f_connected = self._view[:2]
+            shares_plan[rows], f_connected[rows] = first.shares_plan, first.b.connected[:, 0]
+            for into, new in zip(self.state.rows, self.loop.state_of(start).rows, strict=True):
+                into[rows] = new
         else:
-            start = shift_plan_clock(start, self.state.t)
-        self.state = replace_rows(self.state, start, rows, self.n)
+            self.loop = self._loop(self.batch)
+            self.state = replace_rows(self.state, shift_plan_clock(start, self.state.t), rows, self.n)
         self.steps[rows] = 0
         return obs
 
@@ -315,16 +327,15 @@ class LaneChangeTask:
         from ._fast import OUTCOME, env_step_kernel
 
         loop, n = self.loop, self.n
-        rows = loop.rows_after(self.state)
-        obs, outcome = np.empty((n, len(FEATURE_NAMES))), np.empty((n, len(OUTCOME)))
+        rows = self.state.rows  # advanced in place: the task keeps no state of the period before
+        obs, outcome = np.empty((n, len(FEATURE_NAMES)), np.float32), np.empty((n, len(OUTCOME)))
         behaviour, finite = np.empty(n, np.int64), np.empty(n, np.bool_)
         self.steps += 1
         env_step_kernel(loop.prm_vec, loop.period_prm, loop.batch, rows, proposal, self._env_values, self._view,
                         self.steps, obs, outcome, behaviour, finite)  # fmt: skip
         loop.check_finite(rows, finite)
-        self.state = StepState(rows)
         return StepOutcome(
-            obs=obs.astype(np.float32),
+            obs=obs,
             reward=outcome[:, 0],
             terminated=outcome[:, 6] > 0.5,
             truncated=outcome[:, 7] > 0.5,
@@ -347,7 +358,7 @@ class LaneChangeTask:
             return loop
         prm = self.params
         self._env_values = np.array([prm.dt, prm.y_boundary, self.max_steps, *self.reward_config.weights()], float)
-        self._view = (np.ascontiguousarray(loop.shares_plan), np.ascontiguousarray(loop.b.connected[:, 0]),
+        self._view = (np.array(loop.shares_plan), np.array(loop.b.connected[:, 0]),  # (ours: restart splices rows)
                       np.array(plan_steps(prm.dt, self.config.l1_plan_steps), np.int64),
                       np.empty(self.config.l1_plan_steps))  # fmt: skip
         return Stepper(loop)
