@@ -113,6 +113,15 @@ class ActionPlanner:
         return self.a_x, self.a_y
 
 
+#: The bit generators whose raw words (``random_raw``) are the 64-bit draws their ``Generator`` builds on (all of
+#: NumPy's but ``MT19937``, whose raw words have 32 bits): for them ``Generator.random()`` is ``(word >> 11)·2⁻⁵³``
+#: and ``Generator.integers(0, 2**62)`` is ``word >> 2`` (Lemire's bounded draw with a power-of-two range: one word,
+#: never rejected), so :meth:`ScenarioSampler.draw_many` takes a row's draws in one call
+#: (``tests/test_envs.py`` checks the scenarios against :meth:`ScenarioSampler.draw` for each generator).
+_WORD_GENERATORS = (np.random.PCG64, np.random.PCG64DXSM, np.random.Philox, np.random.SFC64)
+_DOUBLE_UNIT = 1.0 / 9007199254740992.0  # 2⁻⁵³
+
+
 @dataclasses.dataclass(frozen=True)
 class ScenarioSampler:
     """Draws one scenario from a generator: the paper's sampler with ``N`` drawn from ``n_leaders`` and
@@ -163,24 +172,36 @@ class ScenarioSampler:
         cfg, k = self.scenario, self.width
         m = len(rngs)
         n = np.full(m, self.n_leaders[0], np.int64)
-        # Each row's uniforms in one row of u: (decel, gap, ego_vx, f_conn, f_aggr, one per leader); a fixed decel
-        # draws none (its column stays 0.0), and the columns past a row's own leaders stay 1.0 (masked below).
-        u = np.ones((m, 5 + max(self.n_leaders)))
-        u[:, 0] = 0.0
-        sid = np.zeros(m, np.int64)
         lo, hi = self.decel
-        first = 0 if hi > lo else 1
+        first = 0 if hi > lo else 1  # a fixed decel draws no uniform: u's first column stays 0.0
         several = len(self.n_leaders) > 1
-        for i, rng in enumerate(rngs):
-            # The draws of _settings and paper_scenarios(samples=1), in their order, the uniforms as one call:
-            # uniform(a, b) is a + (b - a)·random() on the same stream (the equality is tested).
+        # Per row, the draws of _settings and paper_scenarios(samples=1) in their order: N (where several), the
+        # uniforms (decel, gap, ego_vx, F connected, F aggressive, one per leader; uniform(a, b) is a + (b - a)·random()
+        # on the same stream) and the id. Each row's uniforms land in a row of u; past a row's own leaders u is masked.
+        if all(type(getattr(rng, "bit_generator", None)) in _WORD_GENERATORS for rng in rngs):
+            # The same draws as words: one call per row (see _WORD_GENERATORS)
+            words = np.zeros((m, 6 + max(self.n_leaders)), np.uint64)
             if several:
-                n[i] = self.n_leaders[rng.integers(len(self.n_leaders))]
-            rng.random(out=u[i, first : 5 + n[i]])
-            sid[i] = rng.integers(0, 2**62)
+                for i, rng in enumerate(rngs):
+                    n[i] = self.n_leaders[rng.integers(len(self.n_leaders))]
+                    words[i, first : 6 + n[i]] = rng.bit_generator.random_raw(6 + n[i] - first)
+            elif m:
+                words[:, first:] = [rng.bit_generator.random_raw(words.shape[1] - first) for rng in rngs]
+            u = (words >> np.uint64(11)) * _DOUBLE_UNIT
+            sid = (words[np.arange(m), 5 + n] >> np.uint64(2)).astype(np.int64)
+        else:
+            u, sid = np.ones((m, 5 + max(self.n_leaders))), np.zeros(m, np.int64)
+            for i, rng in enumerate(rngs):
+                if several:
+                    n[i] = self.n_leaders[rng.integers(len(self.n_leaders))]
+                rng.random(out=u[i, first : 5 + n[i]])
+                sid[i] = rng.integers(0, 2**62)
+        if first:
+            u[:, 0] = 0.0
         decel, gap, ego_vx, f_conn_u, f_aggr_u = u[:, :5].T
+        leaders = max(self.n_leaders)
         human = np.zeros((m, k), bool)
-        human[:, 1 : u.shape[1] - 4] = (u[:, 5:] < cfg.human_share) & (np.arange(u.shape[1] - 5) < n[:, None])
+        human[:, 1 : leaders + 1] = (u[:, 5 : 5 + leaders] < cfg.human_share) & (np.arange(leaders) < n[:, None])
         decel = lo + (hi - lo) * decel if hi > lo else np.full(m, lo)
         gap = cfg.gap[0] + (cfg.gap[1] - cfg.gap[0]) * gap
         ego_vx = cfg.ego_speed[0] + (cfg.ego_speed[1] - cfg.ego_speed[0]) * ego_vx
@@ -282,7 +303,7 @@ class LaneChangeTask:
         self.batch: ScenarioBatch | None = None
         self.state = None
         self.steps = np.zeros(batch, np.int64)
-        self._bounds = self.action_bounds()
+        self._bounds = tuple(bound[:, None] for bound in self.action_bounds())  # (per action column, see step)
         self._compiled: bool | None = None  # whether the loop runs compiled (decided at the first batch)
 
     @property
@@ -369,7 +390,10 @@ class LaneChangeTask:
     def step(self, action: np.ndarray) -> StepOutcome:
         """One control period with the agent's ``(B, 2)`` proposals (clipped to the action box)."""
         lo, hi = self._bounds
-        proposal = np.clip(check_action(action, (self.n, 2)), lo, hi)  # NaN stays: an invalid one
+        # Clipped column by column (a (B, 2) array's inner loop of 2 would cost NumPy ~10x); NaN stays: an invalid one.
+        proposal = np.empty((2, self.n))
+        np.clip(check_action(action, (self.n, 2)).T, lo, hi, out=proposal)
+        proposal = proposal.T
         if isinstance(self.loop, Stepper):
             return self._step_compiled(proposal)
         self.planner.set(proposal)
