@@ -174,7 +174,7 @@ def run_chunk(sim, n_steps: int) -> dict:
                                                                               bad))  # fmt: skip
     if (bad >= 0).any():
         step = int(bad[bad >= 0].min())
-        _non_finite(sim, np.flatnonzero(bad == step), (step + 1) * sim.prm.dt)
+        _non_finite(sim.b.scenario_id, np.flatnonzero(bad == step), (step + 1) * sim.prm.dt)
     return dict(zip(OUT_F, out_f.T, strict=True), **dict(zip(OUT_B, out_b.T, strict=True)), counts=counts,
                 n_invalid=n_invalid, breach_flags=flags, initial_safe=start.initial_safe)  # fmt: skip
 
@@ -212,6 +212,12 @@ def kernel_inputs(sim):
     return np.array([float(values[name]) for name in PRM]), period_constants(prm, cfg.shield), batch
 
 
+#: ``_fast_loop.LoopBatch``'s fields with the batch on the last axis (the chain's inputs, vehicle-major as
+#: :class:`~.step.ClosedLoop` keeps them) and those shared by every row (the key of the draws: the seed's); every
+#: other field has the batch first (:meth:`Stepper.splice`).
+BATCH_LAST, BATCH_SHARED = ("promise", "chain_margin"), ("key",)
+
+
 def rows_of(start):
     """A :class:`~.step.SimState` at the start of a run (its first period not yet run) as the compiled loop's row
     state (``_fast_rows.Rows``)."""
@@ -234,8 +240,8 @@ def _slow(sim) -> bool:
     return sim.cfg.shield.assessment == "slow"
 
 
-def _non_finite(sim, rows: np.ndarray, t: float):
-    ids = sim.b.scenario_id[rows][:5].tolist()
+def _non_finite(scenario_id: np.ndarray, rows: np.ndarray, t: float):
+    ids = scenario_id[rows][:5].tolist()
     raise FloatingPointError(
         f"non-finite simulator state at t = {t:.1f} s in scenario(s) {ids} ({rows.size} in all): a bug in a behaviour "
         "model or hook, not an outcome"
@@ -277,8 +283,10 @@ class Stepper:
         self.prm_vec, self.period_prm, self.batch = kernel_inputs(sim)
         self.shared_clock = shared_clock  # every row started together: observations carry one time, as ClosedLoop's
         self.initial_safe = None
+        self.spliced = False  # rows of other scenarios spliced in (splice): sim no longer describes the batch
 
     def initial_state(self) -> StepState:
+        self._whole("initial_state")
         start = self.sim.initial_state()
         self.initial_safe = start.initial_safe
         return self.state_of(start)
@@ -290,6 +298,7 @@ class Stepper:
         return StepState(rows_of(start))
 
     def observe(self, s: StepState):
+        self._whole("observe")
         obs = self.sim.observe(s)
         return dataclasses.replace(obs, t=float(s.t[0])) if self.shared_clock else obs
 
@@ -298,6 +307,7 @@ class Stepper:
         as the fields :func:`~.results.results_table` reads (the compiled loop's, :func:`_state`)."""
         from ._fast_loop import finish_kernel
 
+        self._whole("finish")
         rows = self.rows_after(s)
         finish_kernel(self.prm_vec, rows)
         return _state(dict(
@@ -331,6 +341,32 @@ class Stepper:
         self.check_finite(rows, finite)
         return StepState(rows), behaviour
 
+    def splice(self, rows: np.ndarray, part: Stepper) -> None:
+        """Rows ``rows`` of the batch become ``part``'s rows, in place: ``part`` steps ``len(rows)`` other scenarios
+        (same settings and seed) and its kernel inputs replace those rows' (:func:`kernel_inputs` per row, so the
+        rows' inputs are what a :class:`Stepper` over the spliced batch would hold); the envs' resets, which would
+        otherwise rebuild the whole batch's inputs for a few rows. ``sim`` then describes the batch before the
+        splice: :meth:`observe`, :meth:`step` and :meth:`finish`, which read it, refuse (the envs step with
+        :meth:`step_with` and the kernels; :meth:`check_finite` reads the spliced scenario ids)."""
+        same = (part.sim.seed == self.sim.seed and part.batch.x.shape[1] == self.batch.x.shape[1]
+                and np.array_equal(part.prm_vec, self.prm_vec) and np.array_equal(part.period_prm, self.period_prm))
+        if not same:
+            raise ValueError("Stepper.splice: the part has other settings, another seed or another number of vehicle "
+                             "slots than this batch")  # fmt: skip
+        if not self.spliced:  # (kernel_inputs may hand over the ClosedLoop's own arrays: from now on, ours)
+            self.batch = type(self.batch)(*[a.copy() for a in self.batch])
+        for name, into, new in zip(self.batch._fields, self.batch, part.batch, strict=True):
+            if name in BATCH_LAST:
+                into[:, rows] = new
+            elif name not in BATCH_SHARED:
+                into[rows] = new
+        self.spliced = True
+
+    def _whole(self, what: str) -> None:
+        if self.spliced:
+            raise RuntimeError(f"Stepper.{what}: rows were spliced into this batch (splice), so its ClosedLoop no "
+                               "longer describes them; build a Stepper over the batch as it is now")  # fmt: skip
+
     @staticmethod
     def rows_after(s: StepState):
         """A copy of ``s``'s rows for a kernel to advance in place (``s`` stays the state before the period)."""
@@ -342,7 +378,7 @@ class Stepper:
         """A :class:`FloatingPointError` naming the scenarios whose state a kernel found not finite."""
         if not finite.all():
             bad = np.flatnonzero(~finite)
-            _non_finite(self.sim, bad, float(rows.rf[bad[0], 4]))
+            _non_finite(self.batch.scenario_id, bad, float(rows.rf[bad[0], 4]))
 
 
 def steps_compiled(batch, cfg, traffic) -> list[str]:
