@@ -61,9 +61,11 @@ PAPER_SETTINGS = {"leader_rule": "reactive", "assessment": "slow", "assess_delay
                   "completion": "paper_evasion", "monitor": False}  # (the paper preset's settings)
 
 
-@pytest.mark.parametrize(("seed", "settings"), [(3, {}), (12, {}), (5, PAPER_SETTINGS)])
-def test_single_env_compiled_is_the_numpy_env_bit_for_bit(seed, settings, monkeypatch):
-    kw = dict(KW, sim_config=settings)
+@pytest.mark.parametrize(("seed", "settings", "variant"), [(3, {}, "CV_all"), (12, {}, "CV_all"),
+                                                        (5, PAPER_SETTINGS, "CV_all"), (8, {}, "RSS_V2X_matched"),
+                                                        (9, {"follower_ignores_ego": True}, "RSS")])  # fmt: skip
+def test_single_env_compiled_is_the_numpy_env_bit_for_bit(seed, settings, variant, monkeypatch):
+    kw = dict(KW, sim_config=settings, variant=variant)
     compiled, kind = run_single(seed, 400, **kw)
     assert kind is Stepper
     monkeypatch.setenv("SAFELANE_NO_FUSED", "1")
