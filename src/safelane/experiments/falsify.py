@@ -159,6 +159,22 @@ def evaluate(spec: dict, setting: Setting) -> tuple[pd.DataFrame, dict]:
     return outcome, space.take(spec, outcome["row"].to_numpy(np.int64))
 
 
+def evaluate_round(specs: list[dict], setting: Setting) -> tuple[list[pd.DataFrame], list[dict]]:
+    """:func:`evaluate` of each spec of ``specs``, simulated as one batch: per spec its outcome (``row``: its index in
+    that spec) and its kept rows, as :func:`evaluate` gives them for that spec alone."""
+    sizes = [len(s["n"]) for s in specs]
+    outcome, _ = evaluate(space.concat_specs(specs), setting)
+    rows = outcome["row"].to_numpy(np.int64)
+    edges = np.cumsum([0, *sizes])
+    outcomes, kept = [], []
+    for spec, lo, hi in zip(specs, edges[:-1], edges[1:], strict=True):
+        part = outcome[(rows >= lo) & (rows < hi)].reset_index(drop=True)
+        part["row"] = part["row"].to_numpy(np.int64) - lo
+        outcomes.append(part)
+        kept.append(space.take(spec, part["row"].to_numpy(np.int64)))
+    return outcomes, kept
+
+
 def score(outcome: pd.DataFrame) -> np.ndarray:
     """What the optimiser minimises: the smallest gap over its margin (ego and sampled lane gaps); a collision or
     violation scores below any gap, a scenario that never entered the conflict zone scores 3."""
@@ -250,6 +266,10 @@ def falsify(
     start = time.perf_counter()
     index = 0
     while report.simulated < scenarios or time.perf_counter() - start < 60.0 * minutes:
+        # One round: every method's batch drawn first (none depends on another's outcome this round: the
+        # cross-entropy search reads the outcomes of its own previous batch), then simulated as one batch (the
+        # scenarios are independent: the same rows, the same bits; fewer, larger calls of the simulator).
+        drawn = []
         for m in methods:
             rng = np.random.default_rng([seed, stream, METHODS.index(m), index])
             # Without profiles, L(N+1)'s sudden braking starts at one instant per batch (period-aligned or not).
@@ -263,7 +283,9 @@ def falsify(
             else:
                 u = cem.ask(rng, batch_size) if m == "cem" else rng.uniform(size=(batch_size, dim))
                 spec = space.decode(u, prm, brake_start, setting.world)
-            outcome, kept = evaluate(spec, setting)
+            drawn.append((m, spec, u))
+        outcomes, kept_rows = evaluate_round([spec for _, spec, _ in drawn], setting)
+        for (m, _, u), outcome, kept in zip(drawn, outcomes, kept_rows, strict=True):
             if m == "cem":
                 scores = np.full(batch_size, np.inf)
                 scores[outcome["row"].to_numpy()] = score(outcome)

@@ -160,18 +160,24 @@ def hooks_for(spec: dict, prm: Params, recorder=None):
     ``recorder``: an object with ``observe(view, params)``, called every period (the lane-gap sampler)."""
     from ..sim.traffic import TrafficHooks
 
+    waves = {}  # the leaders' per-slot columns, made once per slot count (the same numbers every period)
+
+    def columns(k: int) -> tuple:
+        if k not in waves:
+            pd_, pa = _leaders(spec["promise_decel"], k), _leaders(spec["promise_accel"], k)
+            # Each leader's wave is shifted by a slot-dependent share of the period.
+            phase = spec["task_phase"][:, None] + 0.37 * np.arange(k)[None, :]
+            waves[k] = (-pd_, pd_ + pa, _leaders(spec["task_hi"], k), _leaders(spec["task_lo"], k), phase,
+                        spec["task_period_s"][:, None])  # fmt: skip
+        return waves[k]
+
     def leader_task(view, params):
         if recorder is not None:
             recorder.observe(view, params)
         ids = view.scenario_id
-        k = view.x.shape[1]
-        pd_, pa = _leaders(spec["promise_decel"][ids], k), _leaders(spec["promise_accel"][ids], k)
-        hi, lo = _leaders(spec["task_hi"][ids], k), _leaders(spec["task_lo"][ids], k)
-        # Each leader's wave is shifted by a slot-dependent share of the period.
-        phase = spec["task_phase"][ids][:, None] + 0.37 * np.arange(k)[None, :]
-        up = square_wave(view.t, spec["task_period_s"][ids][:, None], phase) > 0
-        level = np.where(up, hi, lo)
-        return -pd_ + level * (pd_ + pa)
+        low, span, hi, lo, phase, period = (a[ids] for a in columns(view.x.shape[1]))
+        up = square_wave(view.t, period, phase) > 0
+        return low + np.where(up, hi, lo) * span  # −promise_decel + level · (promise_decel + promise_accel)
 
     def follower_wish(view, params):
         ids = view.scenario_id
