@@ -56,18 +56,15 @@ def hooks_live() -> bool:
 
 class LaneGapRecorder:
     """Running minimum of each scenario's target-lane gaps over their margins (F–L1, L_i–L(i+1)), sampled at the
-    start of every period through the leader-task hook. The exact in-period check is the simulator's
-    ``leader_violation``; this sample only ranks scenarios for the optimiser."""
+    start of every period by the traffic hooks (:func:`~.falsify_build.hooks_for`: ``WaveHooks``, which the compiled
+    closed loop samples as the NumPy path does). The exact in-period check is the simulator's ``leader_violation``;
+    this sample only ranks scenarios for the optimiser."""
 
     def __init__(self, batch, prm: Params):
         self.margin = np.where(batch.human, prm.p_m_human, prm.p_m)[:, :-1]
         self.pairs = batch.valid[:, 1:] & batch.valid[:, :-1]
         self.min_ratio = np.full(len(batch), np.inf)
 
-    def observe(self, view, params) -> None:
-        ids = view.scenario_id
-        ratio = np.where(self.pairs[ids], (view.x[:, 1:] - view.x[:, :-1]) / self.margin[ids], np.inf)
-        self.min_ratio[ids] = np.minimum(self.min_ratio[ids], ratio.min(1))
 
 
 @dataclass(frozen=True)
@@ -134,7 +131,7 @@ def evaluate(spec: dict, setting: Setting) -> tuple[pd.DataFrame, dict]:
         recorder = None
         if hooks:
             recorder = LaneGapRecorder(sub, prm)
-            kwargs["traffic"] = built.hooks_for(sub_spec, prm, recorder)
+            kwargs["traffic"] = built.hooks_for(sub_spec, prm, recorder, k=sub.x.shape[1])
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")  # decel_last beyond a_x_d is intended where it is asked for
             table = simulate_batch(
