@@ -1,18 +1,19 @@
-"""Closed-loop scenarios per second of the falsifier (docs/falsification.md), one core, beside a baseline measured in
-the same run on the same scenarios.
+"""Closed-loop scenarios per second of the falsifier (docs/falsification.md), one core, beside the path it took before,
+measured in the same run on the same scenarios.
 
 For each world (``--worlds``) the same ``--rounds`` rounds of specs (one batch of ``--batch-size`` rows per method:
-random, cross-entropy from its prior, knife edges; seeded) are simulated three ways, interleaved round by round so
+random, cross-entropy from its prior, knife edges; seeded) are simulated these ways, interleaved round by round so
 that all see the same state of the machine:
 
 * ``round``: the falsifier's path, :func:`safelane.experiments.falsify.evaluate_round` (a round's three batches as
-  one simulation);
-* ``per batch``: the previous path, :func:`~safelane.experiments.falsify.evaluate` per method's batch;
-* ``numpy`` (``--numpy``): ``per batch`` in a child process with ``SAFELANE_NO_NUMBA=1`` (the NumPy reference; its
-  outcomes are compared with the others', bit for bit).
+  one simulation; in the paper's world on the compiled period: hooks as data, L(N+1)'s profiles compiled);
+* ``per batch``: :func:`~safelane.experiments.falsify.evaluate` per method's batch;
+* ``before``: ``per batch`` period by period (``SAFELANE_NO_FUSED=1``: the engine every falsifier run took before
+  the hooks and profiles were compiled, with its part kernels);
+* ``numpy`` (``--numpy``): ``per batch`` in a child process with ``SAFELANE_NO_NUMBA=1`` (the NumPy reference).
 
 Rates are simulated scenarios (rows inside the assumptions at ``t = 0``) over wall time, the first round (numba's
-compilation, the caches) left out; every way's outcomes must be equal, row for row, or it stops.
+compilation, the caches) left out; every way's outcomes must be equal, row for row and bit for bit, or it stops.
 
     .venv/bin/python benchmarks/bench_falsify.py [--worlds paper realistic] [--rounds 4] [--batch-size 2048] [--numpy]
 """
@@ -104,17 +105,23 @@ def main() -> None:
     for world in args.worlds:
         setting = _setting(world)
         rounds = round_specs(world, args.rounds + 1, args.batch_size)
-        walls = {"round": [], "per batch": []}
+        ways = {"round": (per_round, None), "per batch": (per_batch, None), "before": (per_batch, "SAFELANE_NO_FUSED")}
+        walls = {name: [] for name in ways}
         sims, outs = [], []
         for specs in rounds:
-            wall_b, out_b = timed(per_batch, specs, setting)
-            wall_r, out_r = timed(per_round, specs, setting)
-            if not same(out_b, out_r):
-                raise SystemExit(f"{world}: the round's outcomes differ from the batches' (a bug)")
-            walls["per batch"].append(wall_b)
-            walls["round"].append(wall_r)
-            sims.append(sum(len(o) for o in out_r))
-            outs.append(out_r)
+            got = {}
+            for name, (fn, env) in ways.items():
+                if env:
+                    os.environ[env] = "1"
+                try:
+                    wall, got[name] = timed(fn, specs, setting)
+                finally:
+                    os.environ.pop(env or "", None)
+                walls[name].append(wall)
+            if not all(same(got["round"], out) for out in got.values()):
+                raise SystemExit(f"{world}: the ways' outcomes differ (a bug)")
+            sims.append(sum(len(o) for o in got["round"]))
+            outs.append(got["round"])
         if args.numpy:
             env = dict(os.environ, SAFELANE_NO_NUMBA="1")
             cmd = [sys.executable, __file__, "--child", world, "--rounds", str(args.rounds + 1), "--batch-size",
@@ -123,12 +130,12 @@ def main() -> None:
             if not all(same(a, b) for a, b in zip(ref, outs, strict=True)):
                 raise SystemExit(f"{world}: the NumPy path's outcomes differ from the compiled paths' (a bug)")
         n = sum(sims[1:])
-        print(f"{world}: {args.rounds} rounds x 3 batches x {args.batch_size} rows, {n} simulated "
-              f"(first round left out){'; outcomes equal to the NumPy path' if args.numpy else ''}")  # fmt: skip
-        base = sum(walls["per batch"][1:])
+        print(f"{world}: {args.rounds} rounds x 3 batches x {args.batch_size} rows, {n} simulated (first round left "
+              f"out); outcomes equal{' (and to the NumPy path)' if args.numpy else ''}")  # fmt: skip
+        base = sum(walls["before"][1:])
         for name, wall in walls.items():
             total = sum(wall[1:])
-            print(f"  {name:10s} {total:7.2f} s  {n / total:8.0f} scenarios/s  ({base / total:.2f}x per batch)")
+            print(f"  {name:10s} {total:7.2f} s  {n / total:8.0f} scenarios/s  ({base / total:.2f}x before)")
 
 
 if __name__ == "__main__":

@@ -66,7 +66,6 @@ class LaneGapRecorder:
         self.min_ratio = np.full(len(batch), np.inf)
 
 
-
 @dataclass(frozen=True)
 class Setting:
     """What every evaluation shares: limits, simulation settings, and what lies outside the assumptions."""
