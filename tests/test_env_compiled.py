@@ -61,9 +61,11 @@ PAPER_SETTINGS = {"leader_rule": "reactive", "assessment": "slow", "assess_delay
                   "completion": "paper_evasion", "monitor": False}  # (the paper preset's settings)
 
 
-@pytest.mark.parametrize(("seed", "settings"), [(3, {}), (12, {}), (5, PAPER_SETTINGS)])
-def test_single_env_compiled_is_the_numpy_env_bit_for_bit(seed, settings, monkeypatch):
-    kw = dict(KW, sim_config=settings)
+@pytest.mark.parametrize(("seed", "settings", "variant"), [(3, {}, "CV_all"), (12, {}, "CV_all"),
+                                                        (5, PAPER_SETTINGS, "CV_all"), (8, {}, "RSS_V2X_matched"),
+                                                        (9, {"follower_ignores_ego": True}, "RSS")])  # fmt: skip
+def test_single_env_compiled_is_the_numpy_env_bit_for_bit(seed, settings, variant, monkeypatch):
+    kw = dict(KW, sim_config=settings, variant=variant)
     compiled, kind = run_single(seed, 400, **kw)
     assert kind is Stepper
     monkeypatch.setenv("SAFELANE_NO_FUSED", "1")
@@ -75,10 +77,11 @@ def test_single_env_compiled_is_the_numpy_env_bit_for_bit(seed, settings, monkey
     assert sum(isinstance(step, np.ndarray) for step in compiled) >= 4  # several episodes
 
 
-def test_vector_env_sub_envs_are_single_envs_exactly():
+@pytest.mark.parametrize(("n", "steps", "seed"), [(6, 150, 5), (24, 150, 17)])
+def test_vector_env_sub_envs_are_single_envs_exactly(n, steps, seed):
     """Each sub-env keeps its own clock in the compiled loop: every episode, not only the first, is the single env's
-    bit for bit (the NumPy vector env shares one clock: later episodes agree to its rounding, test_envs.py)."""
-    n, steps, seed = 6, 150, 5
+    bit for bit (the NumPy vector env shares one clock: later episodes agree to its rounding, test_envs.py); the
+    restarted rows are spliced into the running batch (Stepper.splice), several in one step in the larger case."""
     acts = actions(steps, n, seed)
     venv = LaneChangeVectorEnv(n, **KW)
     assert type(venv.task.loop) is not ClosedLoop
@@ -118,7 +121,7 @@ def test_vector_env_sub_envs_are_single_envs_exactly():
 @pytest.mark.parametrize(
     "kwargs",
     [dict(shield=False), dict(sim_config={"sensor_noise_std": 0.1}), dict(sim_config={"own_lane": True}),
-     dict(sim_config={"v2x_loss": 0.2}), dict(variant="RSS_matched")],
+     dict(sim_config={"v2x_loss": 0.2}), dict(sim_config={"actuation_delay_s": 0.1})],
 )  # fmt: skip
 def test_settings_the_compiled_period_does_not_cover_step_in_numpy(kwargs):
     env = LaneChangeEnv(**kwargs)
@@ -137,3 +140,23 @@ def test_a_non_finite_state_is_an_error_naming_the_scenario():
     task.state = dataclasses.replace(task.state, rows=rows._replace(x=x))
     with pytest.raises(FloatingPointError, match=str(task.batch.scenario_id[0])):
         env.step(np.zeros(2))
+
+
+def test_a_spliced_stepper_refuses_what_reads_its_closed_loop():
+    """After a reset splices fresh rows into the vector env's batch, the Stepper's ClosedLoop describes the batch
+    before: what reads it refuses; a part with another number of vehicle slots is refused."""
+    from safelane.envs.core import ScenarioSampler
+
+    venv = LaneChangeVectorEnv(4, **KW)
+    venv.reset(seed=1)
+    task = venv.task
+    task.restart(np.array([2]), [np.random.default_rng(9)])
+    loop = task.loop
+    assert loop.spliced
+    for call in (lambda: loop.observe(task.state), lambda: loop.finish(task.state), loop.initial_state):
+        with pytest.raises(RuntimeError, match="spliced"):
+            call()
+    wider = ScenarioSampler.build(n_leaders=5).draw_many([np.random.default_rng(0)])
+    part = Stepper(ClosedLoop(wider, task.seed, task.params, task.config, task.planner))
+    with pytest.raises(ValueError, match="vehicle slots"):
+        loop.splice(np.array([0]), part)

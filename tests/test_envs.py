@@ -97,6 +97,28 @@ def test_batched_sampler_draws_the_paper_samplers_scenarios(n_leaders, decel, sc
         assert (a is None and b is None) or (np.array_equal(a, b) and a.dtype == b.dtype), f.name
 
 
+@pytest.mark.parametrize("bits", ["PCG64", "PCG64DXSM", "Philox", "SFC64", "MT19937"])
+@pytest.mark.parametrize(("n_leaders", "decel"), [((0, 1, 3, 10), (2.0, 6.0)), ((3,), 4.0)])
+def test_batched_sampler_draws_the_same_with_every_bit_generator(bits, n_leaders, decel):
+    """draw_many takes a row's draws as raw words where the generator's words are its 64-bit draws (MT19937's are
+    not: the generator's own calls); the scenarios are draw's, and the generators are left in the same state."""
+    import dataclasses
+
+    from safelane.envs.core import ScenarioSampler
+    from safelane.envs.rows import stack_rows
+
+    sampler = ScenarioSampler.build("CV_all", n_leaders, decel, {"human_share": 0.5}, p_v=0.1)
+    make = lambda s: np.random.Generator(getattr(np.random, bits)(s))  # noqa: E731
+    fast_rngs, reference_rngs = [make(s) for s in range(30)], [make(s) for s in range(30)]
+    for _ in range(3):  # several episodes: each draw continues its generator's stream
+        fast = sampler.draw_many(fast_rngs)
+        reference = stack_rows([sampler.draw(rng) for rng in reference_rngs])
+        for f in dataclasses.fields(fast):
+            a, b = getattr(fast, f.name), getattr(reference, f.name)
+            assert (a is None and b is None) or (np.array_equal(a, b) and a.dtype == b.dtype), f.name
+    assert [r.random() for r in fast_rngs] == [r.random() for r in reference_rngs]
+
+
 def run_episode(env, actions, seed):
     obs, _ = env.reset(seed=seed)
     rows = [obs]

@@ -43,7 +43,12 @@ def test_nothing_is_announced_where_nothing_compiles_here(tmp_path, monkeypatch,
 def test_every_kernel_module_announces():
     from safelane.safety._fast_base import KERNEL_SOURCES
 
+    kernel_modules = 0
     for source in KERNEL_SOURCES:
         text = source.read_text()
-        if "cache=True" in text:
+        if source.name == "_fast_base.py":  # (defines the kernel decorator and the announcement)
+            continue
+        if "cache=True" in text or "@kernel(" in text:  # numba.njit(..., cache=True) or _fast_base.kernel
+            kernel_modules += 1
             assert "announce_compile(__file__)" in text, source.name
+    assert kernel_modules >= 10

@@ -12,6 +12,7 @@ import pytest
 
 from safelane import Params
 from safelane.planners.base import ExpertPlanner
+from safelane.shield.rules import DECISION_RULES, Coded
 from safelane.sim import ScenarioConfig, SimConfig, _fused, concat, paper_scenarios, simulate_batch
 from test_fast_core import needs_numba
 
@@ -77,6 +78,16 @@ CASES = {
             nominal=ExpertPlanner(k_p=0.4, k_v=0.6, omega=0.8, gap_fraction=0.3, brake_comfort=3.0),
         ),
     ),
+    "RSS's rule (both parameter sets, with and without V2X) beside the paper's variants": (
+        lambda: concat([paper_scenarios(v, 3, 5.0, 60, np.random.default_rng(50 + k), MIXED_F, first_id=1000 * k)
+                        for k, v in enumerate(("RSS", "RSS_V2X", "RSS_matched", "RSS_V2X_matched", "CV_all"))]),
+        {},
+    ),
+    "F ignores the ego (RSS and the paper's variants)": (
+        lambda: concat([paper_scenarios(v, 3, 4.0, 60, np.random.default_rng(60 + k), first_id=1000 * k)
+                        for k, v in enumerate(("RSS_matched", "RSS_V2X", "CV_all", "CV_none"))]),
+        dict(config=SimConfig(follower_ignores_ego=True)),
+    ),
     "the paper preset's settings: its vehicles, slow assessment, completion rule, reactive leaders, monitor off": (
         lambda: _mixed(3, 6.0, seed=5),
         dict(params=Params(a_x_a=3.0, a_x_d=6.151, a_y_m=2.629, lane_width=3.5, vehicle_width=1.8, vehicle_length=4.8,
@@ -97,10 +108,18 @@ def test_the_fused_loop_gives_the_numpy_paths_table_bit_for_bit(monkeypatch, cas
     assert fused.equals(periods) and fused.equals(reference), case
     # the batch exercises what the loop holds: every behaviour, completions, the assessment's verdicts
     assert (reference[["n_proceed", "n_hesitate", "n_abort"]].sum() > 0).all()
-    assert reference["assessed_aggressive"].any() and not reference["assessed_aggressive"].all()
+    if "RSS" not in case and "ignores" not in case:  # (RSS never assesses F; Fs that ignore the ego are connected)
+        assert reference["assessed_aggressive"].any() and not reference["assessed_aggressive"].all()
+    if case.startswith("RSS's rule"):  # RSS's rows proceed, hesitate and respond (aborts without a held plan)
+        rss = batch.variant >= 4
+        assert (reference[["n_proceed", "n_hesitate", "n_abort"]].to_numpy()[rss].sum(0) > 0).all()
+    if "ignores" in case:  # the setting changes F's gaps (F closes in where it would have yielded)
+        default = simulate_batch(batch, seed=4, config=SimConfig()).table["min_gap_follower_m"]
+        changed = ~np.isclose(default, reference["min_gap_follower_m"], rtol=0.0, atol=1e-6, equal_nan=True)
+        assert changed.sum() > len(batch) // 10, changed.sum()
     if "breaches" in case:  # L(N+1) beyond a_x_d: the monitor's flags; no gap is left to complete into
         assert reference["assumption_breach"].any() and reference["breach_time_s"].notna().any()
-    else:
+    elif "ignores" not in case:  # (an F that never yields leaves the expert no gap)
         assert reference["completed"].any() and not reference["completed"].all()
 
 
@@ -143,7 +162,6 @@ UNCOVERED = {
     "sensor noise": dict(cfg=SimConfig(sensor_noise_std=0.1)),
     "unsupervised": dict(cfg=SimConfig(supervised=False)),
     "the completion rule paper_body_across": dict(cfg=SimConfig(completion="paper_body_across")),
-    "F ignores the ego": dict(cfg=SimConfig(follower_ignores_ego=True)),
     "a traffic model": dict(traffic="paper"),
     "another planner": dict(nominal=lambda obs, prm: (np.zeros(len(obs.p_x)), np.zeros(len(obs.p_x)))),
     "a subclass of the expert": dict(nominal=type("Mine", (ExpertPlanner,), {})()),
@@ -177,6 +195,8 @@ def test_the_fused_loop_runs_profiles_and_leaves_other_rules_to_the_period_by_pe
     assert not _fused.steps_compiled(batch, SimConfig(), waves)
     assert _fused.steps_compiled(batch, SimConfig(), TrafficHooks(follower_wish=lambda view, prm: view.v[:, 0]))
     rss = concat([batch, paper_scenarios("RSS", 3, 5.0, 10, rng, first_id=500)])
+    assert _covers(rss)  # RSS's rule is compiled (shield/_fast_rules.py); a user's own rule is not
+    monkeypatch.setitem(DECISION_RULES, "rss", Coded(type("Mine", (), {"decide": lambda self, inp, prm: None})()))
     assert not _covers(rss)
 
 

@@ -118,6 +118,10 @@ def same(a, b, where: str) -> None:
         (13, 48, 2, ("CV_follow", "CV_all", "CV_none", "No_agg_assess") * 12, {"completion": "paper_evasion"}, True),
         (14, 64, 3, "CV_all", {"assessment": "slow", "assess_delay_s": 0.5, "assess_miss": 0.1}, False),
         (15, 48, 3, "No_agg_assess", {"assessment": "slow", "assess_delay_s": 3.0, "assess_miss": 0.231}, True),
+        # RSS's rule (shield/_fast_rules.py): both parameter sets, with and without V2X, beside the paper's rows
+        (16, 64, 3, ("RSS", "RSS_V2X", "RSS_matched", "RSS_V2X_matched"), {}, False),
+        (17, 48, 3, ("RSS", "RSS_V2X_matched", "CV_all", "RSS_matched", "RSS_V2X", "No_agg_assess") * 8, {}, True),
+        (18, 40, 4, "RSS_V2X", {"completion": "paper_evasion", "monitor": False}, True),
     ],
 )
 def test_compiled_period_is_the_stages(seed, n, m, variant, config, own):
@@ -125,11 +129,13 @@ def test_compiled_period_is_the_stages(seed, n, m, variant, config, own):
     cfg = ShieldConfig(**config)
     rng = np.random.default_rng(seed)
     world = random_world(rng, n, m, stale=seed % 3 == 0, own=own)
+    if isinstance(variant, tuple) and len(variant) < n:
+        variant = variant * (n // len(variant))
     shield = Shield(params, variant=variant, config=cfg)
     start = situation_of(world, 0.0, params)
     shield.reset(start)
     state = shield_core.init(start, params, cfg, variant)
-    behaviours, own_aborts = set(), 0
+    behaviours, own_aborts, rss_behaviours = set(), 0, []
     for k in range(60):
         s = situation_of(world, k * params.dt, params)
         prop = proposals(rng, n)
@@ -141,6 +147,7 @@ def test_compiled_period_is_the_stages(seed, n, m, variant, config, own):
         same(fast, ref, f"period {k}: decision")
         same(shield.state, state, f"period {k}: state")
         behaviours.update(ref.behaviour.tolist())
+        rss_behaviours.append(ref.behaviour)
         advance(world, ref, rng, params.dt)
     if n > 1:  # the worlds reach every behaviour (the conservative variants and L0 rarely complete): every branch ran
         slow = config.get("assessment") == "slow"  # (F stays "aggressive" longer: completions are rare)
@@ -148,6 +155,10 @@ def test_compiled_period_is_the_stages(seed, n, m, variant, config, own):
     if config.get("assessment") == "slow":  # the per-scenario draws were compared; they vary (its release: the loop's
         belief = shield.state.belief  # paper-preset case in test_fast_loop.py, where F is found collaborative)
         assert belief.missed.any() and not belief.missed.all() and np.unique(belief.delay_s).size > n // 2
+    if "RSS" in str(variant):  # RSS's rows reach every behaviour too; without L0, completion (then following)
+        ruled = np.char.startswith(np.asarray(variant if isinstance(variant, tuple) else (variant,) * n), "RSS")
+        reached = set(np.unique(np.array(rss_behaviours)[:, ruled]).tolist())
+        assert reached >= ({0, 1, 2} if own else {0, 1, 2, -1}), reached
     if own and config.get("own_lane", True):  # aborts on plans made with L0 (the profile that follows it) compared
         assert own_aborts > 0
 
@@ -252,12 +263,31 @@ def test_unclassified_field_refuses(monkeypatch):
     assert fast_step.refusals(ShieldConfig(), "CV_all", 4) == ["ShieldConfig.monitor=True (not classified)"]
 
 
+def test_a_rule_the_period_does_not_implement_refuses(monkeypatch):
+    """RSS's rule runs compiled with either parameter set; a rule registered in its place that is not an ``RssRule``
+    (a user's own) refuses, naming it, and its rows run the stages (where the rule itself decides them)."""
+    from safelane.shield.rules import DECISION_RULES, Coded
+
+    class Mine:
+        def __repr__(self):
+            return "Mine()"
+
+        def decide(self, inputs, params):
+            raise NotImplementedError
+
+    assert fast_step.refusals(ShieldConfig(), ("RSS_matched", "CV_all"), 2) == []
+    monkeypatch.setitem(DECISION_RULES, "rss", Coded(Mine()))
+    assert fast_step.refusals(ShieldConfig(), ("RSS", "CV_all"), 2) == [
+        "rows decided by a rule the compiled period does not implement: Mine()"]
+    assert fast_step.refusals(ShieldConfig(), ("RSS_matched", "CV_all"), 2) == []
+
+
 def test_rss_rows_and_situations_refuse():
     params = Params()
     rng = np.random.default_rng(12)
     world = random_world(rng, 6, 3, stale=False, own=True)
     s = situation_of(world, 0.0, params)
-    assert fast_step.refusals(ShieldConfig(), "RSS", 6) == ["rows decided by another rule (RSS)"]
+    assert fast_step.refusals(ShieldConfig(), "RSS", 6) == []  # RSS's rule is compiled (shield/_fast_rules.py)
     assert fast_step.situation_refusals(s, ShieldConfig(), None) == []
     s = dataclasses.replace(s, err_f=np.full((6, 2), 0.1))
     assert fast_step.situation_refusals(s, ShieldConfig(), None) == ["sensing-error bounds"]

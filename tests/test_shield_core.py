@@ -516,6 +516,7 @@ def test_rows_of_other_rules_are_decided_by_their_rule_and_a_row_never_depends_o
                 a_y_hesitate=np.clip(-sub_s.ego_vy / PRM.dt, -PRM.a_y_m, PRM.a_y_m), invalid=invalid,
                 l1_decel=l1_decel, uses_chain=chained, completed=sub_state.completed, chain_bounds=bounds,
                 n_connected=sub_s.n_connected,
+                a_y_keep=np.clip(0.8 * (PRM.lane_width - sub_s.ego_y) - 1.6 * sub_s.ego_vy, -PRM.a_y_m, PRM.a_y_m),
             )  # fmt: skip
             behaviour, rx, ry, completing = DECISION_RULES[rule].decide(inputs, PRM)
             np.testing.assert_array_equal(d.behaviour[rows], behaviour)

@@ -31,11 +31,13 @@ to the target lane, taken as the left one, so an ad-rss lateral speed is ``−vy
 from __future__ import annotations
 
 from functools import lru_cache
+from typing import NamedTuple
 
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field, model_validator
 
 from ..params import Params
+from ..safety._backend import ARRAY, INF, jitable
 
 #: ``ad::physics`` precisions: two values closer than this compare equal.
 DISTANCE_PRECISION_M = 1e-3
@@ -103,33 +105,142 @@ def rss_params_for(name: str, params: Params) -> RssParams:
         raise ValueError(f"unknown RSS parameter set {name!r}; choose one of {', '.join(RSS_PARAMETER_SETS)}") from None
 
 
-def _greater(a, b, precision):
+class RssRecord(NamedTuple):
+    """The parameters the closed forms read, as a record numba can take (the compiled kernels build one per row from
+    a float vector, :data:`RSS_FIELDS`); uncompiled code passes :class:`RssParams` itself (the same attribute names)."""
+
+    response_time_ego: float
+    response_time_other: float
+    accel_max: float
+    brake_min: float
+    brake_max: float
+    lat_accel_max: float
+    lat_brake_min: float
+    lateral_fluctuation_margin: float
+    max_speed_on_acceleration: float
+    min_longitudinal_safety_distance: float
+
+
+#: The :class:`RssParams` fields a compiled rule reads, in :class:`RssRecord`'s order.
+RSS_FIELDS = RssRecord._fields
+
+
+def rss_vector(rss: RssParams) -> np.ndarray:
+    """``rss``'s :data:`RSS_FIELDS` as floats (what a compiled kernel turns back into an :class:`RssRecord`)."""
+    return np.array([getattr(rss, name) for name in RSS_FIELDS], float)
+
+
+# The closed forms, written once against the backend ``xp`` (``safety/_backend.py``): NumPy arrays through the public
+# functions below, floats compiled into the shield's period (``shield/_fast_period.py``). Negations are comparisons
+# written the other way round (``abs(a - b) >= p`` for ad-rss's ``not equal``), which give the same verdicts: where
+# either side is NaN, the other conjunct is false already.
+
+
+def greater_core(xp, a, b, precision):
     """``ad::physics``'s ``a > b``: greater, and not equal within ``precision``."""
-    return (a > b) & ~(np.abs(a - b) < precision)
+    return (a > b) & (abs(a - b) >= precision)
 
 
-def _clamp0(x, precision):
+def clamp0_core(xp, x, precision):
     """``std::max(x, 0)`` with ``ad::physics``'s ``<`` (a value within ``precision`` below 0 stays as it is)."""
-    return np.where((x < 0.0) & ~(np.abs(x) < precision), 0.0, x)
+    return xp.where((x < 0.0) & (abs(x) >= precision), 0.0, x)
+
+
+def stated_longitudinal_core(xp, v, response_time, accel_max, brake_min, max_speed):
+    """Backend-generic :func:`stated_braking_longitudinal`."""
+    v_r = v + accel_max * response_time
+    v_r = xp.where(greater_core(xp, v_r, 0.0, SPEED_PRECISION_MPS), v_r, 0.0)
+    limit = xp.where(greater_core(xp, v, max_speed, SPEED_PRECISION_MPS), v, max_speed)
+    v_r = xp.where((v_r < limit) | (abs(v_r - limit) < SPEED_PRECISION_MPS), v_r, limit)
+    t_acc = (v_r - v) / accel_max
+    offset = v * response_time + 0.5 * accel_max * t_acc * t_acc + (v_r - v) * (response_time - t_acc)
+    return offset + v_r * v_r / (2.0 * brake_min)
+
+
+def longitudinal_core(xp, v_front, v_rear, response_time_rear, accel_max_rear, brake_min_rear, brake_max_front,
+                      max_speed_rear, min_distance_rear):  # fmt: skip
+    """Backend-generic :func:`longitudinal_safe_distance`."""
+    rear = stated_longitudinal_core(xp, v_rear, response_time_rear, accel_max_rear, brake_min_rear, max_speed_rear)
+    front = v_front * v_front / (2.0 * brake_max_front)
+    return clamp0_core(xp, rear - front, DISTANCE_PRECISION_M) + min_distance_rear
+
+
+def longitudinal_exact_core(xp, v_front, v_rear, response_time_rear, accel_max_rear, brake_min_rear, brake_max_front,
+                            max_speed_rear, min_distance_rear):  # fmt: skip
+    """Backend-generic :func:`longitudinal_safe_distance_exact` (where the rear vehicle does not brake harder, the
+    interior candidate is ``-inf`` and the closed form stands)."""
+    closed = longitudinal_core(xp, v_front, v_rear, response_time_rear, accel_max_rear, brake_min_rear,
+                               brake_max_front, max_speed_rear, min_distance_rear)  # fmt: skip
+    harder = brake_min_rear > brake_max_front
+    rho = response_time_rear
+    v_rho = xp.minimum(v_rear + accel_max_rear * rho, xp.maximum(max_speed_rear, v_rear))
+    t_acc = (v_rho - v_rear) / accel_max_rear
+    d_rho = v_rear * rho + 0.5 * accel_max_rear * t_acc * t_acc + (v_rho - v_rear) * (rho - t_acc)
+    t_star = xp.div(v_rho + brake_min_rear * rho - v_front, brake_min_rear - brake_max_front, 0.0)
+    t_stop = xp.minimum(v_front / brake_max_front, rho + v_rho / brake_min_rear)
+    inside = harder & (t_star >= rho) & (t_star <= t_stop)
+    tr = t_star - rho
+    closing = d_rho + v_rho * tr - 0.5 * brake_min_rear * tr * tr - (v_front * t_star - 0.5 * brake_max_front
+                                                                      * t_star * t_star)  # fmt: skip
+    interior = xp.where(inside, xp.maximum(closing, 0.0) + min_distance_rear, -INF)
+    return xp.maximum(closed, interior)
+
+
+def stated_lateral_core(xp, v_towards, response_time, lat_accel_max, lat_brake_min):
+    """Backend-generic :func:`stated_braking_lateral` (a lateral speed of ``-0.0`` after the response time adds
+    ``+0.0``, as ad-rss's sign test does)."""
+    v_r = v_towards + lat_accel_max * response_time
+    offset = lat_accel_max * 0.5 * response_time * response_time + v_towards * response_time
+    return offset + xp.where(v_r < 0.0, 0.0, v_r * v_r / (2.0 * lat_brake_min))
+
+
+def lateral_core(xp, v_left, response_time_left, v_right, response_time_right, lat_accel_max, lat_brake_min,
+                 margin_left, margin_right, lat_accel_max_right, lat_brake_min_right):  # fmt: skip
+    """Backend-generic :func:`lateral_safe_distance` (every argument given)."""
+    left = stated_lateral_core(xp, v_left, response_time_left, lat_accel_max, lat_brake_min)
+    # The right vehicle moves towards the left one in ad-rss's negative direction: its offset is -(distance covered).
+    right = -stated_lateral_core(xp, -v_right, response_time_right, lat_accel_max_right, lat_brake_min_right)
+    return clamp0_core(xp, left - right + 0.5 * (margin_left + margin_right), DISTANCE_PRECISION_M)
+
+
+def pair_core(xp, ego_x, ego_y, ego_vx, ego_vy, x, y, vx, vy, rss, length, width, brake_other):
+    """Backend-generic :func:`pair_check` (``rss``: :class:`RssParams` or :class:`RssRecord`; ``length``, ``width``:
+    the vehicles'): ``(safe, lon_safe, lat_safe, lon_distance, lon_safe_distance, lat_distance,
+    lat_safe_distance)``."""
+    ego_vx, vx = xp.maximum(ego_vx, 0.0), xp.maximum(vx, 0.0)  # ad-rss takes speeds >= 0 (vehicles stop)
+    ahead = x > ego_x
+    lon_distance = xp.maximum(abs(x - ego_x) - length, 0.0)
+    # One evaluation for both orders: the rear vehicle is the ego where the other is ahead.
+    lon_safe_distance = longitudinal_exact_core(
+        xp, xp.where(ahead, vx, ego_vx), xp.where(ahead, ego_vx, vx),
+        xp.where(ahead, rss.response_time_ego, rss.response_time_other), rss.accel_max, rss.brake_min,
+        xp.where(ahead, brake_other, rss.brake_max), rss.max_speed_on_acceleration,
+        rss.min_longitudinal_safety_distance,
+    )  # fmt: skip
+    left = y > ego_y  # the other vehicle is on the left (towards the target lane)
+    lat_distance = xp.maximum(abs(y - ego_y) - width, 0.0)
+    rho_l = xp.where(left, rss.response_time_other, rss.response_time_ego)
+    rho_r = xp.where(left, rss.response_time_ego, rss.response_time_other)
+    v_l = xp.where(left, -vy, -ego_vy)  # ad-rss's lateral axis points right: speed = -vy
+    v_r = xp.where(left, -ego_vy, -vy)
+    mu = rss.lateral_fluctuation_margin
+    lat_safe_distance = lateral_core(xp, v_l, rho_l, v_r, rho_r, rss.lat_accel_max, rss.lat_brake_min, mu, mu,
+                                     rss.lat_accel_max, rss.lat_brake_min)  # fmt: skip
+    lon_safe = greater_core(xp, lon_distance, lon_safe_distance, DISTANCE_PRECISION_M)
+    lat_safe = greater_core(xp, lat_distance, lat_safe_distance, DISTANCE_PRECISION_M)
+    return lon_safe | lat_safe, lon_safe, lat_safe, lon_distance, lon_safe_distance, lat_distance, lat_safe_distance
 
 
 def is_safe(distance_m, safe_distance_m):
     """ad-rss's verdict ``distance > safe distance`` (greater by at least the 1 mm precision)."""
-    return _greater(np.asarray(distance_m, float), safe_distance_m, DISTANCE_PRECISION_M)
+    return greater_core(ARRAY, np.asarray(distance_m, float), safe_distance_m, DISTANCE_PRECISION_M)
 
 
 def stated_braking_longitudinal(v, response_time, accel_max, brake_min, max_speed=100.0):
     """Distance a vehicle at speed ``v >= 0`` covers under RSS's stated braking pattern: ``accel_max`` for the
     response time (speed limited to ``max(max_speed, v)``, never below 0), then ``brake_min`` to a stop
     (``calculateLongitudinalDistanceOffsetAfterStatedBrakingPattern``)."""
-    v = np.asarray(v, float)
-    v_r = v + accel_max * response_time
-    v_r = np.where(_greater(v_r, 0.0, SPEED_PRECISION_MPS), v_r, 0.0)
-    limit = np.where((max_speed < v) & ~(np.abs(max_speed - v) < SPEED_PRECISION_MPS), v, max_speed)
-    v_r = np.where((v_r < limit) | (np.abs(v_r - limit) < SPEED_PRECISION_MPS), v_r, limit)
-    t_acc = (v_r - v) / accel_max
-    offset = v * response_time + 0.5 * accel_max * t_acc * t_acc + (v_r - v) * (response_time - t_acc)
-    return offset + v_r * v_r / (2.0 * brake_min)
+    return stated_longitudinal_core(ARRAY, np.asarray(v, float), response_time, accel_max, brake_min, max_speed)
 
 
 def longitudinal_safe_distance(
@@ -142,10 +253,9 @@ def longitudinal_safe_distance(
     the rear vehicle's response time, ``accel_max``, ``brake_min``, ``max_speed_on_acceleration`` and
     ``min_longitudinal_safety_distance``; the front vehicle's ``brake_max``.
     """
-    v_front = np.asarray(v_front, float)
-    rear = stated_braking_longitudinal(v_rear, response_time_rear, accel_max_rear, brake_min_rear, max_speed_rear)
-    front = v_front * v_front / (2.0 * brake_max_front)
-    return _clamp0(rear - front, DISTANCE_PRECISION_M) + min_distance_rear
+    return longitudinal_core(ARRAY, np.asarray(v_front, float), np.asarray(v_rear, float), response_time_rear,
+                             accel_max_rear, brake_min_rear, brake_max_front, max_speed_rear,
+                             min_distance_rear)  # fmt: skip
 
 
 def longitudinal_safe_distance_exact(
@@ -162,25 +272,10 @@ def longitudinal_safe_distance_exact(
     is reached when the speeds become equal after the response time, ``t* = (v_ρ + brake_min·ρ − v_f)/(brake_min −
     brake_max_front)``; the safe distance is the larger of the two. Identical to ad-rss wherever its lemma holds.
     """
-    v_front, v_rear = np.asarray(v_front, float), np.asarray(v_rear, float)
-    closed = longitudinal_safe_distance(v_front, v_rear, response_time_rear, accel_max_rear, brake_min_rear,
-                                        brake_max_front, max_speed_rear, min_distance_rear)  # fmt: skip
-    harder = brake_min_rear > brake_max_front
-    if not np.any(harder):
-        return closed
-    rho = response_time_rear
-    v_rho = np.minimum(v_rear + accel_max_rear * rho, np.maximum(max_speed_rear, v_rear))
-    t_acc = (v_rho - v_rear) / accel_max_rear
-    d_rho = v_rear * rho + 0.5 * accel_max_rear * t_acc * t_acc + (v_rho - v_rear) * (rho - t_acc)
-    with np.errstate(all="ignore"):
-        t_star = (v_rho + brake_min_rear * rho - v_front) / (brake_min_rear - brake_max_front)
-        t_stop = np.minimum(v_front / brake_max_front, rho + v_rho / brake_min_rear)
-        inside = harder & (t_star >= rho) & (t_star <= t_stop)
-        tr = t_star - rho
-        closing = d_rho + v_rho * tr - 0.5 * brake_min_rear * tr * tr - (v_front * t_star - 0.5 * brake_max_front
-                                                                          * t_star * t_star)  # fmt: skip
-    interior = np.where(inside, np.maximum(closing, 0.0) + min_distance_rear, -np.inf)
-    return np.maximum(closed, interior)
+    with np.errstate(invalid="ignore", over="ignore"):  # (the interior candidate where it is not used)
+        return longitudinal_exact_core(ARRAY, np.asarray(v_front, float), np.asarray(v_rear, float),
+                                       response_time_rear, accel_max_rear, brake_min_rear, brake_max_front,
+                                       max_speed_rear, min_distance_rear)  # fmt: skip
 
 
 def stated_braking_lateral(v_towards, response_time, lat_accel_max, lat_brake_min):
@@ -188,10 +283,7 @@ def stated_braking_lateral(v_towards, response_time, lat_accel_max, lat_brake_mi
     speed towards the other ``v_towards`` (negative: moving away): ``lat_accel_max`` towards the other for the
     response time, then ``lat_brake_min`` to zero lateral speed if still moving towards it
     (``calculateLateralDistanceOffsetAfterStatedBrakingPattern``)."""
-    v = np.asarray(v_towards, float)
-    v_r = v + lat_accel_max * response_time
-    offset = lat_accel_max * 0.5 * response_time * response_time + v * response_time
-    return offset + np.where(np.signbit(v_r), 0.0, v_r * v_r / (2.0 * lat_brake_min))
+    return stated_lateral_core(ARRAY, np.asarray(v_towards, float), response_time, lat_accel_max, lat_brake_min)
 
 
 def lateral_safe_distance(
@@ -207,10 +299,9 @@ def lateral_safe_distance(
     margin_right = margin_left if margin_right is None else margin_right
     a_r = lat_accel_max if lat_accel_max_right is None else lat_accel_max_right
     b_r = lat_brake_min if lat_brake_min_right is None else lat_brake_min_right
-    left = stated_braking_lateral(v_left, response_time_left, lat_accel_max, lat_brake_min)
-    # The right vehicle moves towards the left one in ad-rss's negative direction: its offset is -(distance covered).
-    right = -stated_braking_lateral(-np.asarray(v_right, float), response_time_right, a_r, b_r)
-    return _clamp0(left - right + 0.5 * (margin_left + margin_right), DISTANCE_PRECISION_M)
+    return lateral_core(ARRAY, np.asarray(v_left, float), response_time_left, np.asarray(v_right, float),
+                        response_time_right, lat_accel_max, lat_brake_min, margin_left, margin_right, a_r,
+                        b_r)  # fmt: skip
 
 
 def pair_check(ego_x, ego_y, ego_vx, ego_vy, x, y, vx, vy, rss: RssParams, params: Params, brake_max_other=None):
@@ -222,24 +313,11 @@ def pair_check(ego_x, ego_y, ego_vx, ego_vy, x, y, vx, vy, rss: RssParams, param
     is ``lon_safe | lat_safe`` (a situation is dangerous only when both distances are unsafe).
     """
     brake_other = rss.brake_max if brake_max_other is None else brake_max_other
-    ego_vx, vx = np.maximum(ego_vx, 0.0), np.maximum(vx, 0.0)  # ad-rss takes speeds >= 0 (vehicles stop)
-    ahead = x > ego_x
-    lon_distance = np.maximum(np.abs(x - ego_x) - params.vehicle_length, 0.0)
-    # One evaluation for both orders: the rear vehicle is the ego where the other is ahead.
-    lon_safe_distance = longitudinal_safe_distance_exact(
-        np.where(ahead, vx, ego_vx), np.where(ahead, ego_vx, vx),
-        np.where(ahead, rss.response_time_ego, rss.response_time_other), rss.accel_max, rss.brake_min,
-        np.where(ahead, brake_other, rss.brake_max), rss.max_speed_on_acceleration,
-        rss.min_longitudinal_safety_distance,
-    )  # fmt: skip
-    left = y > ego_y  # the other vehicle is on the left (towards the target lane)
-    lat_distance = np.maximum(np.abs(y - ego_y) - params.vehicle_width, 0.0)
-    rho_l = np.where(left, rss.response_time_other, rss.response_time_ego)
-    rho_r = np.where(left, rss.response_time_ego, rss.response_time_other)
-    v_l = np.where(left, -vy, -ego_vy)  # ad-rss's lateral axis points right: speed = -vy
-    v_r = np.where(left, -ego_vy, -vy)
-    mu = rss.lateral_fluctuation_margin
-    lat_safe_distance = lateral_safe_distance(v_l, rho_l, v_r, rho_r, rss.lat_accel_max, rss.lat_brake_min, mu)
-    lon_safe, lat_safe = is_safe(lon_distance, lon_safe_distance), is_safe(lat_distance, lat_safe_distance)
-    out = (lon_safe | lat_safe, lon_safe, lat_safe, lon_distance, lon_safe_distance, lat_distance, lat_safe_distance)
+    with np.errstate(invalid="ignore", over="ignore"):
+        out = pair_core(ARRAY, ego_x, ego_y, ego_vx, ego_vy, x, y, vx, vy, rss, params.vehicle_length,
+                        params.vehicle_width, brake_other)  # fmt: skip
     return tuple(np.broadcast_arrays(*out))
+
+
+jitable(greater_core, clamp0_core, stated_longitudinal_core, longitudinal_core, longitudinal_exact_core,
+        stated_lateral_core, lateral_core, pair_core)

@@ -29,9 +29,83 @@ from __future__ import annotations
 
 import numpy as np
 
-from .._motion import advance
+from .._motion import advance_core
 from ..params import Params
-from .rss import pair_check, rss_params_for
+from ..safety._backend import ARRAY, jitable
+from .rss import pair_core, rss_params_for
+
+#: The least ``brake_max`` a vehicle ahead is given (a bound of 0 would make RSS's stopping distance infinite).
+BRAKE_FLOOR_MPS2 = 1e-9
+
+
+# The rule's closed forms, written once against the backend ``xp``: :class:`RssRule` evaluates them on the rows'
+# arrays, the shield's compiled period (``baselines/_fast_rss.py``) on each row's floats.
+
+
+def chain_brake_core(xp, slot, uses_chain, n_connected, bound, l1_decel, brake_max):
+    """RSS's ``brake_max`` of the chain's vehicle in ``slot`` (0: L1): RSS's own, or with V2X (``uses_chain``) a
+    connected leader's bound from the chain analysis (``bound``), L1's the variant's worst case (``l1_decel``)."""
+    out = xp.where(uses_chain & (slot < n_connected), bound, brake_max)
+    out = xp.where(slot == 0, xp.where(uses_chain, l1_decel, brake_max), out)
+    return xp.maximum(out, BRAKE_FLOOR_MPS2)
+
+
+def ego_after_core(xp, ego_x, ego_y, ego_vx, ego_vy, a_x, a_y, dt):
+    """The ego after one period of ``(a_x, a_y)`` (longitudinally stopping at rest): ``(x, y, vx, vy)``."""
+    ex, evx = advance_core(xp, ego_x, ego_vx, a_x, dt)
+    return ex, ego_y + ego_vy * dt + 0.5 * a_y * dt * dt, evx, ego_vy + a_y * dt
+
+
+def ahead_after_core(xp, ex, ey, evx, evy, x, v, y, brake, rss, length, width, dt):
+    """One vehicle ahead (a chain vehicle at ``y``, or L0), predicted braking at ``brake`` (its ``brake_max``) over the
+    period, against the ego after it (``ex, ey, evx, evy``): ``(safe, longitudinally safe or not ahead)``."""
+    x1, v1 = advance_core(xp, x, v, -brake, dt)
+    checked = pair_core(xp, ex, ey, evx, evy, x1, y, v1, 0.0, rss, length, width, brake)
+    return checked[0], xp.where(x1 > ex, checked[1], True)
+
+
+def follower_after_core(xp, ex, ey, evx, evy, f_x, f_v, y, rss, length, width, dt):
+    """F, predicted accelerating at ``accel_max`` over the period, against the ego after it: safe."""
+    x1, v1 = advance_core(xp, f_x, f_v, rss.accel_max, dt)
+    return pair_core(xp, ex, ey, evx, evy, x1, y, v1, 0.0, rss, length, width, rss.brake_max)[0]
+
+
+def verdict_core(xp, active, invalid, ok_chain, ok_f, ok_chain_h, ok_f_h):
+    """``(proceed, hesitate, respond)``: the proposal where it is RSS-safe after the period (never an invalid one),
+    else the hesitation where that is, else RSS's proper response; none of them once the change is complete."""
+    proceed = active & xp.where(invalid, False, ok_chain & ok_f)
+    hesitate = active & xp.where(proceed, False, ok_chain_h & ok_f_h)
+    return proceed, hesitate, active & xp.where(proceed | hesitate, False, True)
+
+
+def lateral_core(xp, proceed, hesitate, respond, completed, a_y, a_y_hesitate, a_y_keep, ego_y, ego_vy, a_y_m,
+                 lat_brake_min):  # fmt: skip
+    """The lateral command: the proposal, the hesitation, the proper response (back towards the original lane,
+    braking laterally at ``lat_brake_min`` or more while still moving out), or after completion the lane keeping
+    ``a_y_keep`` (the paper shield's controller)."""
+    back = xp.clip(-0.8 * ego_y - 1.6 * ego_vy, -a_y_m, a_y_m)
+    back = xp.where(ego_vy > 0.0, xp.minimum(back, -xp.minimum(lat_brake_min, a_y_m)), back)
+    out = xp.where(hesitate, a_y_hesitate, a_y)
+    out = xp.where(respond, back, out)
+    return xp.where(completed, a_y_keep, out)
+
+
+def follow_check_accel(xp, respond, a_x):
+    """The longitudinal acceleration a following row's check assumes over the period: none while responding (the
+    response may brake), else the proposal."""
+    return xp.where(respond, 0.0, a_x)
+
+
+def follow_core(xp, follow, lon_ok, a_x, brake_min, a_x_d):
+    """The longitudinal command of a following row (responding or complete): the proposal while the longitudinal
+    safe distance to every vehicle ahead holds after the period (``lon_ok``, checked at
+    :func:`follow_check_accel`), else braking at ``brake_min`` (at most the ego's ``a_x_d``) or more."""
+    return xp.where(follow & xp.where(lon_ok, False, True), xp.minimum(a_x, -xp.minimum(brake_min, a_x_d)), a_x)
+
+
+def completing_core(xp, proceed, hesitate, ego_y, ego_vy, a_y, dt, y_boundary):
+    """Whether a moving row's centre crosses the lane boundary this period."""
+    return (proceed | hesitate) & (ego_y + ego_vy * dt + 0.5 * a_y * dt * dt >= y_boundary)
 
 
 class RssRule:
@@ -44,18 +118,19 @@ class RssRule:
     def __repr__(self) -> str:
         return f"RssRule({self.parameter_set!r})"
 
+    def params(self, params: Params):
+        """The :class:`~.rss.RssParams` of this rule in the world ``params``."""
+        return rss_params_for(self.parameter_set, params)
+
     def brake_max(self, inp, params: Params):
-        """``(k, M)``: each chain vehicle's ``brake_max`` — RSS's, or with V2X (``uses_chain``) a connected leader's
-        bound from the chain analysis (L1's as the variant's worst case gives it)."""
-        rss = rss_params_for(self.parameter_set, params)
+        """``(k, M)``: each chain vehicle's ``brake_max`` (:func:`chain_brake_core`)."""
+        rss = self.params(params)
         m = inp.chain_x.shape[1]
         bounds = np.full(inp.chain_x.shape, rss.brake_max)
         cols = min(m, inp.chain_bounds.shape[1])
         bounds[:, :cols] = inp.chain_bounds[:, :cols]
-        connected = np.arange(m)[None, :] < inp.n_connected[:, None]
-        out = np.where(inp.uses_chain[:, None] & connected, bounds, rss.brake_max)
-        out[:, 0] = np.where(inp.uses_chain, inp.l1_decel, rss.brake_max)
-        return np.maximum(out, 1e-9)
+        return chain_brake_core(ARRAY, np.arange(m)[None, :], inp.uses_chain[:, None], inp.n_connected[:, None],
+                                bounds, inp.l1_decel[:, None], rss.brake_max)  # fmt: skip
 
     def safe_after(self, inp, a_x, a_y, params: Params):
         """After one period of ``(a_x, a_y)``: ``(safe towards every vehicle ahead — the target lane's and, until the
@@ -66,60 +141,44 @@ class RssRule:
         ``brake_max``, F accelerating at ``accel_max``), so the state checked is RSS-safe whatever they do within
         RSS's assumptions. Every chain vehicle is checked, not only L1: straddling the lane line (laterally safe) the
         ego may drive past L1."""
-        rss = rss_params_for(self.parameter_set, params)
-        dt = params.dt
-        ex, evx = advance(inp.ego_x, inp.ego_vx, a_x, dt)
-        ey = inp.ego_y + inp.ego_vy * dt + 0.5 * a_y * dt * dt
-        evy = inp.ego_vy + a_y * dt
-        brake = self.brake_max(inp, params)
-        cx, cv = advance(inp.chain_x, inp.chain_v, -brake, dt)
-        fx, fv = advance(inp.f_x, inp.f_v, rss.accel_max, dt)
-        lane = params.lane_width
+        rss = self.params(params)
+        length, width, lane = params.vehicle_length, params.vehicle_width, params.lane_width
         with np.errstate(all="ignore"):
+            ex, ey, evx, evy = ego_after_core(ARRAY, inp.ego_x, inp.ego_y, inp.ego_vx, inp.ego_vy, a_x, a_y, params.dt)
             col = (ex[:, None], ey[:, None], evx[:, None], evy[:, None])
-            chain = pair_check(*col, cx, lane, cv, 0.0, rss, params, brake)
-            to_f = pair_check(ex, ey, evx, evy, fx, lane, fv, 0.0, rss, params)
-        ahead = cx > ex[:, None]
-        ok_ahead, lon_ok = chain[0].all(1), (chain[1] | ~ahead).all(1)
+            safe, lon_ok = ahead_after_core(ARRAY, *col, inp.chain_x, inp.chain_v, lane, self.brake_max(inp, params),
+                                            rss, length, width, params.dt)  # fmt: skip
+            to_f = follower_after_core(ARRAY, ex, ey, evx, evy, inp.f_x, inp.f_v, lane, rss, length, width, params.dt)
+        ok_ahead, lon_ok = safe.all(1), lon_ok.all(1)
         if inp.own_x is not None:  # L0 in the own lane (y = 0), braking at brake_max, until the change completes
             has = np.isfinite(inp.own_x) & ~inp.completed
-            ox, ov = advance(np.where(has, inp.own_x, ex), np.where(has, inp.own_v, 0.0), -rss.brake_max, dt)
             with np.errstate(all="ignore"):
-                own = pair_check(ex, ey, evx, evy, ox, 0.0, ov, 0.0, rss, params)
-            ok_ahead &= ~has | own[0]
-            lon_ok &= ~has | own[1] | ~(ox > ex)
-        return ok_ahead, to_f[0], lon_ok
+                own_safe, own_lon = ahead_after_core(ARRAY, ex, ey, evx, evy, np.where(has, inp.own_x, ex),
+                                                     np.where(has, inp.own_v, 0.0), 0.0, rss.brake_max, rss, length,
+                                                     width, params.dt)  # fmt: skip
+            ok_ahead &= ~has | own_safe
+            lon_ok &= ~has | own_lon
+        return ok_ahead, to_f, lon_ok
 
     def decide(self, inp, params: Params):
         """``(proceed, hesitate, respond, a_x, a_y, completing)`` for the rule's rows (see the module docstring;
         rows in none of the three are complete: following)."""
-        rss = rss_params_for(self.parameter_set, params)
-        dt = params.dt
-        a_x, a_y = inp.a_x.copy(), inp.a_y.copy()
-        active = ~inp.completed
-
-        ok_chain, ok_f, _ = self.safe_after(inp, a_x, a_y, params)
-        proceed = active & ~inp.invalid & ok_chain & ok_f
-        ok_chain_h, ok_f_h, _ = self.safe_after(inp, a_x, inp.a_y_hesitate, params)
-        hesitate = active & ~proceed & ok_chain_h & ok_f_h
-        respond = active & ~proceed & ~hesitate
-        a_y = np.where(hesitate, inp.a_y_hesitate, a_y)
-
-        # The proper response: lateral return, braking laterally at lat_brake_min or more while still moving out;
-        # braking at brake_min or more where the distance to a vehicle ahead is longitudinally unsafe.
-        back = np.clip(-0.8 * inp.ego_y - 1.6 * inp.ego_vy, -params.a_y_m, params.a_y_m)
-        back = np.where(inp.ego_vy > 0.0, np.minimum(back, -min(rss.lat_brake_min, params.a_y_m)), back)
-        brake = -min(rss.brake_min, params.a_x_d)
-        a_y = np.where(respond, back, a_y)
-        # After completion: follow the vehicles ahead by RSS, centred in the target lane.
-        centre = np.clip(0.8 * (params.lane_width - inp.ego_y) - 1.6 * inp.ego_vy, -params.a_y_m, params.a_y_m)
-        a_y = np.where(inp.completed, centre, a_y)
+        rss = self.params(params)
+        ok_chain, ok_f, _ = self.safe_after(inp, inp.a_x, inp.a_y, params)
+        ok_chain_h, ok_f_h, _ = self.safe_after(inp, inp.a_x, inp.a_y_hesitate, params)
+        proceed, hesitate, respond = verdict_core(ARRAY, ~inp.completed, inp.invalid, ok_chain, ok_f, ok_chain_h,
+                                                  ok_f_h)  # fmt: skip
+        a_y = lateral_core(ARRAY, proceed, hesitate, respond, inp.completed, inp.a_y, inp.a_y_hesitate, inp.a_y_keep,
+                           inp.ego_y, inp.ego_vy, params.a_y_m, rss.lat_brake_min)  # fmt: skip
+        a_x = inp.a_x
         follow = respond | inp.completed
         if follow.any():
-            _, _, lon_ok = self.safe_after(inp, np.where(respond, 0.0, a_x), a_y, params)
-            a_x = np.where(follow & ~lon_ok, np.minimum(a_x, brake), a_x)
-
-        moving = proceed | hesitate
-        ey_end = inp.ego_y + inp.ego_vy * dt + 0.5 * a_y * dt * dt
-        completing = moving & (ey_end >= params.y_boundary)
+            _, _, lon_ok = self.safe_after(inp, follow_check_accel(ARRAY, respond, a_x), a_y, params)
+            a_x = follow_core(ARRAY, follow, lon_ok, a_x, rss.brake_min, params.a_x_d)
+        completing = completing_core(ARRAY, proceed, hesitate, inp.ego_y, inp.ego_vy, a_y, params.dt,
+                                     params.y_boundary)  # fmt: skip
         return proceed, hesitate, respond, a_x, a_y, completing
+
+
+jitable(chain_brake_core, ego_after_core, ahead_after_core, follower_after_core, verdict_core, lateral_core,
+        follow_check_accel, follow_core, completing_core)

@@ -7,13 +7,16 @@ into observations, rewards, costs and flags. :class:`~safelane.envs.LaneChangeEn
 :class:`~safelane.envs.LaneChangeVectorEnv` is the same task over the whole batch.
 
 Resets (the vector env's auto-reset): the rows that finished get fresh scenarios, sampled row by row from their own
-generators exactly as a single env samples them; a new ``ClosedLoop`` is built for the whole batch (its constant
-arrays), and the finished rows of the state are overwritten by the initial state of their new scenarios (where the
-initial state has no record at all — the shield's memory of the previous period — the rows' record is emptied, see
-:func:`.rows.vacate_rows`). The batch
-shares one clock, so a row that restarts at batch time ``T`` runs its episode at ``T, T + dt, …``: its plan's clock
-is shifted by ``T`` and nothing else in the closed loop reads the absolute time — as long as ``L(N+1)`` brakes
-from ``t = 0`` (``SimConfig.brake_start_s = 0``) and V2X is perfect, which the vector env therefore requires.
+generators exactly as a single env samples them, and a ``ClosedLoop`` over those rows alone gives their initial
+state and first observation. On the compiled loop (:class:`~safelane.sim._fused.Stepper`) the fresh rows' kernel
+inputs and state are spliced into the running batch's arrays (:meth:`~safelane.sim._fused.Stepper.splice`); each row
+keeps its own clock, so a restarted row runs exactly the single env's episode. Period by period in NumPy a new
+``ClosedLoop`` is built for the whole batch (its constant arrays), and the finished rows of the state are overwritten
+by the initial state of their new scenarios (where the initial state has no record at all — the shield's memory of
+the previous period — the rows' record is emptied, see :func:`.rows.vacate_rows`). That batch shares one clock, so a
+row that restarts at batch time ``T`` runs its episode at ``T, T + dt, …``: its plan's clock is shifted by ``T`` and
+nothing else in the closed loop reads the absolute time — as long as ``L(N+1)`` brakes from ``t = 0``
+(``SimConfig.brake_start_s = 0``) and V2X is perfect, which the vector env therefore requires.
 """
 
 from __future__ import annotations
@@ -29,7 +32,7 @@ from ..planners.base import Observation
 from ..planners.features import FEATURE_NAMES, features, plan_steps
 from ..planners.variants import VARIANT_NAMES, get_variant
 from ..safety._backend import ARRAY, jitable
-from ..sim._fused import Stepper, StepState, steps_compiled
+from ..sim._fused import Stepper, steps_compiled
 from ..sim.config import SimConfig
 from ..sim.scenario import ScenarioBatch, ScenarioConfig, paper_scenarios
 from ..sim.step import ClosedLoop
@@ -110,6 +113,15 @@ class ActionPlanner:
         return self.a_x, self.a_y
 
 
+#: The bit generators whose raw words (``random_raw``) are the 64-bit draws their ``Generator`` builds on (all of
+#: NumPy's but ``MT19937``, whose raw words have 32 bits): for them ``Generator.random()`` is ``(word >> 11)·2⁻⁵³``
+#: and ``Generator.integers(0, 2**62)`` is ``word >> 2`` (Lemire's bounded draw with a power-of-two range: one word,
+#: never rejected), so :meth:`ScenarioSampler.draw_many` takes a row's draws in one call
+#: (``tests/test_envs.py`` checks the scenarios against :meth:`ScenarioSampler.draw` for each generator).
+_WORD_GENERATORS = (np.random.PCG64, np.random.PCG64DXSM, np.random.Philox, np.random.SFC64)
+_DOUBLE_UNIT = 1.0 / 9007199254740992.0  # 2⁻⁵³
+
+
 @dataclasses.dataclass(frozen=True)
 class ScenarioSampler:
     """Draws one scenario from a generator: the paper's sampler with ``N`` drawn from ``n_leaders`` and
@@ -159,19 +171,37 @@ class ScenarioSampler:
         a third of a vector step at 1,024 envs)."""
         cfg, k = self.scenario, self.width
         m = len(rngs)
-        n, decel = np.zeros(m, np.int64), np.zeros(m)
-        gap, ego_vx, f_conn_u, f_aggr_u = (np.zeros(m) for _ in range(4))
-        human = np.zeros((m, k), bool)
-        sid = np.zeros(m, np.int64)
+        n = np.full(m, self.n_leaders[0], np.int64)
         lo, hi = self.decel
-        for i, rng in enumerate(rngs):
-            # The draws of _settings and paper_scenarios(samples=1), in their order, as one call: uniform(a, b) is
-            # a + (b - a)·random() on the same stream (the equality is tested).
-            n[i] = self.n_leaders[rng.integers(len(self.n_leaders))] if len(self.n_leaders) > 1 else self.n_leaders[0]
-            u = rng.random(5 + n[i]) if hi > lo else np.concatenate([[0.0], rng.random(4 + n[i])])
-            decel[i], gap[i], ego_vx[i], f_conn_u[i], f_aggr_u[i] = u[:5]
-            human[i, 1 : n[i] + 1] = u[5:] < cfg.human_share
-            sid[i] = rng.integers(0, 2**62)
+        first = 0 if hi > lo else 1  # a fixed decel draws no uniform: u's first column stays 0.0
+        several = len(self.n_leaders) > 1
+        # Per row, the draws of _settings and paper_scenarios(samples=1) in their order: N (where several), the
+        # uniforms (decel, gap, ego_vx, F connected, F aggressive, one per leader; uniform(a, b) is a + (b - a)·random()
+        # on the same stream) and the id. Each row's uniforms land in a row of u; past a row's own leaders u is masked.
+        if all(type(getattr(rng, "bit_generator", None)) in _WORD_GENERATORS for rng in rngs):
+            # The same draws as words: one call per row (see _WORD_GENERATORS)
+            words = np.zeros((m, 6 + max(self.n_leaders)), np.uint64)
+            if several:
+                for i, rng in enumerate(rngs):
+                    n[i] = self.n_leaders[rng.integers(len(self.n_leaders))]
+                    words[i, first : 6 + n[i]] = rng.bit_generator.random_raw(6 + n[i] - first)
+            elif m:
+                words[:, first:] = [rng.bit_generator.random_raw(words.shape[1] - first) for rng in rngs]
+            u = (words >> np.uint64(11)) * _DOUBLE_UNIT
+            sid = (words[np.arange(m), 5 + n] >> np.uint64(2)).astype(np.int64)
+        else:
+            u, sid = np.ones((m, 5 + max(self.n_leaders))), np.zeros(m, np.int64)
+            for i, rng in enumerate(rngs):
+                if several:
+                    n[i] = self.n_leaders[rng.integers(len(self.n_leaders))]
+                rng.random(out=u[i, first : 5 + n[i]])
+                sid[i] = rng.integers(0, 2**62)
+        if first:
+            u[:, 0] = 0.0
+        decel, gap, ego_vx, f_conn_u, f_aggr_u = u[:, :5].T
+        leaders = max(self.n_leaders)
+        human = np.zeros((m, k), bool)
+        human[:, 1 : leaders + 1] = (u[:, 5 : 5 + leaders] < cfg.human_share) & (np.arange(leaders) < n[:, None])
         decel = lo + (hi - lo) * decel if hi > lo else np.full(m, lo)
         gap = cfg.gap[0] + (cfg.gap[1] - cfg.gap[0]) * gap
         ego_vx = cfg.ego_speed[0] + (cfg.ego_speed[1] - cfg.ego_speed[0]) * ego_vx
@@ -273,7 +303,7 @@ class LaneChangeTask:
         self.batch: ScenarioBatch | None = None
         self.state = None
         self.steps = np.zeros(batch, np.int64)
-        self._bounds = self.action_bounds()
+        self._bounds = tuple(bound[:, None] for bound in self.action_bounds())  # (per action column, see step)
         self._compiled: bool | None = None  # whether the loop runs compiled (decided at the first batch)
 
     @property
@@ -300,12 +330,15 @@ class LaneChangeTask:
         first = ClosedLoop(fresh, self.seed, self.params, self.config, self.planner, self.traffic)
         start = first.initial_state()
         obs = features(first.observe(start), self.params).astype(np.float32)  # (the clock is not a feature)
-        self.loop = self._loop(self.batch)
-        if isinstance(self.loop, Stepper):  # each row its own clock: the new episodes start at 0
-            start = self.loop.state_of(start)
+        if isinstance(self.loop, Stepper):  # the fresh rows' inputs and state spliced in; each row its own clock
+            self.loop.splice(rows, Stepper(first))
+            shares_plan, f_connected = self._view[:2]
+            shares_plan[rows], f_connected[rows] = first.shares_plan, first.b.connected[:, 0]
+            for into, new in zip(self.state.rows, self.loop.state_of(start).rows, strict=True):
+                into[rows] = new
         else:
-            start = shift_plan_clock(start, self.state.t)
-        self.state = replace_rows(self.state, start, rows, self.n)
+            self.loop = self._loop(self.batch)
+            self.state = replace_rows(self.state, shift_plan_clock(start, self.state.t), rows, self.n)
         self.steps[rows] = 0
         return obs
 
@@ -315,16 +348,15 @@ class LaneChangeTask:
         from ._fast import OUTCOME, env_step_kernel
 
         loop, n = self.loop, self.n
-        rows = loop.rows_after(self.state)
-        obs, outcome = np.empty((n, len(FEATURE_NAMES))), np.empty((n, len(OUTCOME)))
+        rows = self.state.rows  # advanced in place: the task keeps no state of the period before
+        obs, outcome = np.empty((n, len(FEATURE_NAMES)), np.float32), np.empty((n, len(OUTCOME)))
         behaviour, finite = np.empty(n, np.int64), np.empty(n, np.bool_)
         self.steps += 1
         env_step_kernel(loop.prm_vec, loop.period_prm, loop.batch, rows, proposal, self._env_values, self._view,
                         self.steps, obs, outcome, behaviour, finite)  # fmt: skip
         loop.check_finite(rows, finite)
-        self.state = StepState(rows)
         return StepOutcome(
-            obs=obs.astype(np.float32),
+            obs=obs,
             reward=outcome[:, 0],
             terminated=outcome[:, 6] > 0.5,
             truncated=outcome[:, 7] > 0.5,
@@ -347,7 +379,7 @@ class LaneChangeTask:
             return loop
         prm = self.params
         self._env_values = np.array([prm.dt, prm.y_boundary, self.max_steps, *self.reward_config.weights()], float)
-        self._view = (np.ascontiguousarray(loop.shares_plan), np.ascontiguousarray(loop.b.connected[:, 0]),
+        self._view = (np.array(loop.shares_plan), np.array(loop.b.connected[:, 0]),  # (ours: restart splices rows)
                       np.array(plan_steps(prm.dt, self.config.l1_plan_steps), np.int64),
                       np.empty(self.config.l1_plan_steps))  # fmt: skip
         return Stepper(loop)
@@ -358,7 +390,10 @@ class LaneChangeTask:
     def step(self, action: np.ndarray) -> StepOutcome:
         """One control period with the agent's ``(B, 2)`` proposals (clipped to the action box)."""
         lo, hi = self._bounds
-        proposal = np.clip(check_action(action, (self.n, 2)), lo, hi)  # NaN stays: an invalid one
+        # Clipped column by column (a (B, 2) array's inner loop of 2 would cost NumPy ~10x); NaN stays: an invalid one.
+        proposal = np.empty((2, self.n))
+        np.clip(check_action(action, (self.n, 2)).T, lo, hi, out=proposal)
+        proposal = proposal.T
         if isinstance(self.loop, Stepper):
             return self._step_compiled(proposal)
         self.planner.set(proposal)

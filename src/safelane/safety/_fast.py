@@ -26,7 +26,7 @@ from numba import types
 
 from . import _compile
 from ._backend import SCALAR, Limits
-from ._fast_base import _B, _F, announce_compile
+from ._fast_base import _B, _F, announce_compile, kernel
 
 # responsible.responsible_bound's dispatch finds its kernel here (fast_kernel() is this module): re-exported
 from ._fast_responsible import responsible, responsible_kernel  # noqa: F401
@@ -56,7 +56,7 @@ def _plan_parts(py, vy, p, v, p1, v1, a1, fp, fv, aggr, margin, fmargin, a_a, a_
     return (r[1], r[2], r[3], r[4], r[5], r[6], r[7], r[8], r[9], r[10]), (r[0], r[11], r[12], r[13], r[14])
 
 
-@numba.njit(_EXISTS_SIGNATURE, cache=True, nogil=True, error_model="numpy")
+@kernel(_EXISTS_SIGNATURE)
 def exists_kernel(
     ego_px, ego_py, ego_vx, ego_vy, l1_p, l1_v, l1_decel, f_p, f_v, aggressive, lead_margin, follow_margin, a_a, a_d,
     a_y, y_safe, tol, out, gaps,
@@ -79,7 +79,7 @@ def exists_kernel(
             gaps[1, i] = r[10]
 
 
-@numba.njit(_PLAN_SIGNATURE, cache=True, nogil=True, error_model="numpy")
+@kernel(_PLAN_SIGNATURE)
 def plan_kernel(
     ego_px, ego_py, ego_vx, ego_vy, l1_p, l1_v, l1_decel, f_p, f_v, aggressive, lead_margin, follow_margin, a_a, a_d,
     a_y, y_safe, tol, floats, flags,

@@ -21,7 +21,7 @@ from numba import types
 from .._motion import advance_core
 from . import _compile
 from ._backend import SCALAR
-from ._fast_base import _F, announce_compile, readonly
+from ._fast_base import _F, announce_compile, kernel, readonly
 from .chain import min_follow_decel
 from .responsible import pair_min_gap_core, responsible_bound_core, responsible_ok_core
 
@@ -63,7 +63,7 @@ def _responsible_ok(a, slack, v_f, v_l, lead_decel, brake, dt, tol, half, feas_t
     return responsible_ok_core(SCALAR, a, slack, v_f, v_l, lead_decel, brake, dt, tol, feas_tol)
 
 
-@numba.njit(_RESPONSIBLE_SIGNATURE, cache=True, nogil=True, error_model="numpy")
+@kernel(_RESPONSIBLE_SIGNATURE)
 def responsible_kernel(slack, v_f, v_l, lead_decel, brake, dt, out):
     """:func:`~.responsible.responsible_bound` per element (:func:`~.responsible.responsible_bound_core` on a row)
     — the same bits (``tests/test_fast_responsible.py``)."""

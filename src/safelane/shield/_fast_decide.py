@@ -11,7 +11,6 @@ so the verdicts and plans are its bits (``tests/test_fast_decide.py``).
 
 from __future__ import annotations
 
-import numba
 import numpy as np
 from numba import types
 
@@ -19,7 +18,7 @@ from ..params import Params
 from ..safety import _compile
 from ..safety._backend import FEASIBILITY_TOL_M, SCALAR, Limits
 from ..safety._fast import BOOL_PARTS, FLOAT_PARTS
-from ..safety._fast_base import _B, _F, announce_compile, row_function
+from ..safety._fast_base import _B, _F, announce_compile, kernel, row_function
 from ..safety.lateral import LATERAL_TOL_M
 from .decide import Verdict, candidate_row, completion_level, verdict_of
 
@@ -46,7 +45,7 @@ def _candidate(x, y, vx, vy, ax, ay, x1, v1, d1, xf, vf, aggr, a_a, a_d, a_ym, y
     return state, period_ok, completing, parts, (r[0], r[11], r[12], r[13], r[14])
 
 
-@numba.njit(_SIGNATURE, cache=True, nogil=True, error_model="numpy")
+@kernel(_SIGNATURE)
 def candidate_kernel(
     ego_x, ego_y, ego_vx, ego_vy, a_x, a_y, l1_x, l1_v, l1_decel, f_x, f_v, f_aggr, a_a, a_d, a_ym, y_safe, p_m, dt,
     level, lat_tol, tol, floats, flags,

@@ -6,13 +6,12 @@ flags and times are the NumPy path's (``tests/test_fast_monitor.py``)."""
 
 from __future__ import annotations
 
-import numba
 import numpy as np
 from numba import types
 
 from ..safety import _compile
 from ..safety._backend import SCALAR
-from ..safety._fast_base import announce_compile, row_function
+from ..safety._fast_base import announce_compile, kernel, row_function
 from .monitor import BREACH_KINDS, TOL_M, Breach, braked_harder, pushed_harder
 
 _compile.register_rows()
@@ -44,7 +43,7 @@ def _breach_row(chain_x, chain_v, bounds, r, now_x, nr, off, n_connected, plan_l
     return l1, leader, last, pushed_harder(SCALAR, now_f_x, f_x, f_v, f_limit, dt, tol)
 
 
-@numba.njit(_SIGNATURE, cache=True, nogil=True, error_model="numpy")
+@kernel(_SIGNATURE)
 def breach_kernel(
     chain_x, chain_v, bounds, now_x, n_connected, plan_l1_decel, f_x, f_v, f_limit, active, now_f_x, same_chain, dt,
     tol, flags,
@@ -85,7 +84,7 @@ _ANCHOR_SIGNATURE = types.void(
 )  # fmt: skip
 
 
-@numba.njit(_ANCHOR_SIGNATURE, cache=True, nogil=True, error_model="numpy")
+@kernel(_ANCHOR_SIGNATURE)
 def anchor_kernel(
     chain_x, chain_v, bounds, now_x, l1_decel, n_connected, f_x, f_v, f_accel, now_f_x, own_x, own_v, own_decel,
     now_own_x, age, age_f, age_own, active, same_chain, tol, flags,

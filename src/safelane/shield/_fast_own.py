@@ -21,14 +21,13 @@ Imported only where numba imports and ``SAFELANE_NO_NUMBA`` is not ``1``
 
 from __future__ import annotations
 
-import numba
 import numpy as np
 from numba import types
 
 from ..params import Params
 from ..safety import _compile
 from ..safety._backend import FEASIBILITY_TOL_M, SCALAR, Limits
-from ..safety._fast_base import _B, _F, announce_compile, row_function
+from ..safety._fast_base import _B, _F, announce_compile, kernel, row_function
 from ..safety.lateral import LATERAL_TOL_M, lateral_core
 from ..safety.own_lane import _search, choose_member, member_bounds, member_parts, own_period
 from .decide import candidate_period, own_margin
@@ -75,7 +74,7 @@ def _own_lane(p, py, v, vy, p1, v1, d1, fp, fv, aggr, p0, v0, d0, lm, fm, om, pr
                                                                                         r[1])  # fmt: skip
 
 
-@numba.njit(_CHECK_SIGNATURE, cache=True, nogil=True, error_model="numpy")
+@kernel(_CHECK_SIGNATURE)
 def check_kernel(
     ego_x, ego_y, ego_vx, ego_vy, a_x, a_y, l1_x, l1_v, l1_decel, f_x, f_v, f_aggr, l0_x, l0_v, l0_decel, a_a, a_d,
     a_ym, y_safe, p_m, dt, level, lat_tol, tol, margin, floats, flags,
@@ -106,7 +105,7 @@ def check_kernel(
             flags[2 + j, i] = b[j]
 
 
-@numba.njit(_OWN_LANE_SIGNATURE, cache=True, nogil=True, error_model="numpy")
+@kernel(_OWN_LANE_SIGNATURE)
 def own_lane_kernel(
     ego_px, ego_py, ego_vx, ego_vy, l1_p, l1_v, l1_decel, f_p, f_v, aggressive, l0_p, l0_v, l0_decel, lead_margin,
     follow_margin, margin, a_a, a_d, a_ym, y_safe, tol, floats, flags,

@@ -40,6 +40,7 @@ from ..sim._fast_traffic import _chain_row
 from ._fast_decide import _candidate
 from ._fast_monitor import _breach_row
 from ._fast_own import _own_lane
+from ._fast_rules import rule_row
 from .assessment import belief_core
 from .decide import (
     ABORT,
@@ -63,10 +64,10 @@ _INF = np.inf
 PRM = (
     "t", "dt", "a_x_a", "a_x_d", "a_y_m", "y_safe", "p_m", "p_m_human", "y_boundary", "lane_width", "a_o_d",
     "lat_tol", "tol", "monitor_tol", "assess_threshold", "monitor", "own_level", "own_margin", "truth",
-    "paper_evasion", "slow", "assess_delay_s", "assess_miss", "time_tol",
+    "paper_evasion", "slow", "assess_delay_s", "assess_miss", "time_tol", "vehicle_length", "vehicle_width",
 )  # fmt: skip
 #: Columns of the situation's per-row floats ``sf``.
-SIT_F = ("ego_x", "ego_y", "ego_vx", "ego_vy", "f_x", "f_v", "f_observed", "a_x", "a_y")
+SIT_F = ("ego_x", "ego_y", "ego_vx", "ego_vy", "f_x", "f_v", "f_observed", "a_x", "a_y", "n_connected")
 #: Columns of the situation's per-row flags ``sb``: F trusted over V2X (connected and collaborative), a stale V2X
 #: sender, the variant's flags (uses the chain, F's V2X, the assessment), F's true type (the ``truth`` assessment).
 SIT_B = ("f_trusted", "stale", "uses_chain", "uses_f_v2x", "uses_assessment", "f_aggressive_truth")
@@ -89,8 +90,9 @@ STATE_B = ("plan_f_aggr", "latched", "aggressive", "completed", "snap_active", "
            "follower", "stale_v2x", "slow_missed", "slow_aggressive")  # fmt: skip
 #: Per-row outputs ``of``: the commands, the proposal as checked, L1's worst case.
 OUT_F = ("a_x", "a_y", "nominal_x", "nominal_y", "l1_decel")
-#: Per-row output flags ``ob``: completing, invalid, F assumed aggressive, the chain unsafe.
-OUT_B = ("completing", "invalid", "f_aggressive", "unsafe")
+#: Per-row output flags ``ob``: completing, invalid, F assumed aggressive, the chain unsafe, the command is the held
+#: plan's motion (an abort under the paper's rule; an RSS response is a constant command).
+OUT_B = ("completing", "invalid", "f_aggressive", "unsafe", "on_plan")
 
 _PF = {name: j for j, name in enumerate(PLAN)}
 _P_FEAS, _P_REASON, _P_TX2, _P_GAPL, _P_GAPF, _P_FOLLOWS = (
@@ -182,17 +184,19 @@ def monitor_row(b, t, dt, mon_tol, now, snap_x, snap_v, snap_bounds, snap_nc, st
 
 
 @row_function
-def period_row(b, prm, times, den, sf, sb, chain_x, chain_v, link_promise, link_margin, own_x, own_v, own_promise,
-               own_nc, history, count, st, sk, plan, has_last, snap_x, snap_v, snap_bounds, snap_nc, bounds,
-               given_unsafe, of, ob, knots, x2, v2, b2, kn):  # fmt: skip
+def period_row(b, prm, times, den, sf, sb, rule, chain_x, chain_v, link_promise, link_margin, own_x, own_v,
+               own_promise, own_nc, history, count, st, sk, plan, has_last, snap_x, snap_v, snap_bounds, snap_nc,
+               bounds, given_unsafe, of, ob, knots, x2, v2, b2, kn):  # fmt: skip
     """One period of row ``b`` (the module docstring): the stages of :func:`~.core.step` in their order. Reads the
-    situation (``sf``, ``sb``, the chain; ``link_promise``, ``link_margin`` ``(M − 1, .)``: each link's promise and
-    margin, resolved as :func:`~.stages.chain_analysis` resolves them), updates the state in place (``history``,
-    ``count``, ``st``, ``sk``, ``plan``; the snapshot ``snap_*`` of the last period is read, the caller keeps this
-    one), writes ``bounds`` (or reads them, with ``given_unsafe``, where the caller's chain analysis is given: a
-    non-empty ``given_unsafe``), ``of``, ``ob`` and, for an abort, the held plan's knots ``knots[b] (5, 8)`` (``t, px,
-    vx, py, vy``; also left in the scratch ``kn``); returns the behaviour. ``times``, ``den``: the assessment's
-    window; ``x2, v2, b2, kn``: scratch (``b2`` holds the chain's bounds with F's slot after the call)."""
+    situation (``sf``, ``sb``, the chain; ``rule``: the row's decision rule, :data:`._fast_rules.RULE` — one column
+    of zeros for a batch under the paper's rule alone; ``link_promise``, ``link_margin`` ``(M − 1, .)``: each link's
+    promise and margin, resolved as :func:`~.stages.chain_analysis` resolves them), updates the state in place
+    (``history``, ``count``, ``st``, ``sk``, ``plan``; the snapshot ``snap_*`` of the last period is read, the
+    caller keeps this one), writes ``bounds`` (or reads them, with ``given_unsafe``, where the caller's chain
+    analysis is given: a non-empty ``given_unsafe``), ``of``, ``ob`` and, for an abort, the held plan's knots
+    ``knots[b] (5, 8)`` (``t, px, vx, py, vy``; also left in the scratch ``kn``); returns the behaviour. ``times``,
+    ``den``: the assessment's window; ``x2, v2, b2, kn``: scratch (``b2`` holds the chain's bounds with F's slot
+    after the call)."""
     t, dt, a_a, a_d, a_ym, y_safe, p_m, _, y_bound, lane_w, a_o, lat_tol, tol, mon_tol, thr, mon = prm[:16]
     own_level, own_margin = prm[16], prm[17]
     paper = prm[19] > 0.0  # ShieldConfig.completion == "paper_evasion" (else "commit_guard")
@@ -257,7 +261,17 @@ def period_row(b, prm, times, den, sf, sb, chain_x, chain_v, link_promise, link_
     active = not sk[b, 3]
     code_b = COMPLETED
     completing = False
-    if active:
+    ruled = rule.shape[1] > 1 and rule[b, 0] > 0.0  # RSS decides this row (stages.decide's other rules)
+    ax_rule = ay_rule = 0.0
+    if ruled:
+        code_b, ax_rule, ay_rule, completing = rule_row(
+            rule, b, (ex, ey, evx, evy), chain_x, chain_v, (fx, fv), bounds, sf[b, 9], (a_x, a_y, a_yh,
+            lane_keep_accel(SCALAR, ey, evy, lane_w, a_ym)), invalid, l1_decel, sb[b, 2] and not unsafe, sk[b, 3],
+            (l0x, l0v), (dt, lane_w, prm[24], prm[25], a_d, a_ym, y_bound),
+        )  # fmt: skip
+        if code_b == PROCEED or code_b == HESITATE:  # (stages.remember: the plan's start moves, the plan stays)
+            st[b, 0] = t + 0.0 + dt
+    elif active:
         code_b = ABORT
         for code in range(2):
             if code == 0 and invalid:
@@ -320,7 +334,10 @@ def period_row(b, prm, times, den, sf, sb, chain_x, chain_v, link_promise, link_
     # --- command (stages.command) ---
     ax_cmd = a_x
     ay_cmd = a_yh if code_b == HESITATE else a_y
-    if not active:  # after completion: centre in the target lane, follow L1 responsibly
+    on_plan = code_b == ABORT and not ruled
+    if ruled:
+        ax_cmd, ay_cmd = ax_rule, ay_rule
+    elif not active:  # after completion: centre in the target lane, follow L1 responsibly
         slack = chain_x[b, 0] - ex - p_m
         ax_cmd = responsible_accel_core(SCALAR, a_x, _responsible_bound(slack, evx, chain_v[b, 0], l1_decel, a_d,
                                                                         dt), a_d)  # fmt: skip
@@ -328,7 +345,7 @@ def period_row(b, prm, times, den, sf, sb, chain_x, chain_v, link_promise, link_
             if not responsible_ok_core(SCALAR, ax_cmd, slack, evx, chain_v[b, 0], l1_decel, a_d, dt, tol):
                 ax_cmd = -a_d
         ay_cmd = lane_keep_accel(SCALAR, ey, evy, lane_w, a_ym)
-    if code_b == ABORT:  # the held plan's exact motion over the period
+    if on_plan:  # the held plan's exact motion over the period
         age = SCALAR.maximum(t + 0.0 - st[b, 0], 0.0)
         _held_motion(plan, b, age, dt, a_a, a_d, kt, kx, kv, ky, kvy)
         for j in range(8):
@@ -355,14 +372,14 @@ def period_row(b, prm, times, den, sf, sb, chain_x, chain_v, link_promise, link_
     completing = completing and active
     sk[b, 3] = sk[b, 3] or completing
     of[b, 0], of[b, 1], of[b, 2], of[b, 3], of[b, 4] = ax_cmd, ay_cmd, ax_ok, ay_ok, l1_decel
-    ob[b, 0], ob[b, 1], ob[b, 2], ob[b, 3] = completing, invalid and active, f_aggr, unsafe
+    ob[b, 0], ob[b, 1], ob[b, 2], ob[b, 3], ob[b, 4] = completing, invalid and active, f_aggr, unsafe, on_plan
     return code_b
 
 
 @numba.njit(cache=True, nogil=True, error_model="numpy")
-def period_kernel(prm, sf, sb, chain_x, chain_v, chain_promise, chain_human, n_connected, own_x, own_v, own_promise,
-                  own_nc, history, count, st, sk, plan, has_last, snap_x, snap_v, snap_bounds, snap_nc, bounds,
-                  given_unsafe, behaviour, of, ob, knots):  # fmt: skip
+def period_kernel(prm, sf, sb, rule, chain_x, chain_v, chain_promise, chain_human, n_connected, own_x, own_v,
+                  own_promise, own_nc, history, count, st, sk, plan, has_last, snap_x, snap_v, snap_bounds, snap_nc,
+                  bounds, given_unsafe, behaviour, of, ob, knots):  # fmt: skip
     """One period of every row: :func:`period_row` after resolving each link's promise and margin as
     :func:`~.stages.chain_analysis` does (the promise of a connected leader, else ``a_o_d``; ``p_m_human`` for a
     connected human-driven one, else ``p_m``)."""
@@ -384,7 +401,7 @@ def period_kernel(prm, sf, sb, chain_x, chain_v, chain_promise, chain_human, n_c
             link_promise[i, b] = chain_promise[b, i] if connected else a_o
             link_margin[i, b] = p_m_h if (chain_human[b, i] and connected) else p_m
     for b in range(bsz):
-        behaviour[b] = period_row(b, prm, times, den, sf, sb, chain_x, chain_v, link_promise, link_margin, own_x, own_v,
-                                  own_promise, own_nc, history, count, st, sk, plan, has_last, snap_x, snap_v,
+        behaviour[b] = period_row(b, prm, times, den, sf, sb, rule, chain_x, chain_v, link_promise, link_margin, own_x,
+                                  own_v, own_promise, own_nc, history, count, st, sk, plan, has_last, snap_x, snap_v,
                                   snap_bounds, snap_nc, bounds, given_unsafe, of, ob, knots, x2, v2, b2,
                                   kn)  # fmt: skip

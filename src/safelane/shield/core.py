@@ -38,7 +38,7 @@ from .monitor import Breach, Snapshot, observe_breaches
 from .policies import ASSESSMENTS, variant_flags
 from .proposals import proposal_arrays
 from .realworld import carry_worst, delay_periods, in_flight_checked, own_plan, worst_corners
-from .rules import rule_rows
+from .rules import rule_rows, rule_table
 from .situation import Situation
 from .stages import chain_analysis, exact, own_leader
 
@@ -129,7 +129,8 @@ def step(
         if not fast_step.situation_refusals(folded, cfg, folded_state):
             arrays = proposal_arrays(planner_name, proposal, n)
             packed, decision = fast_step.step(fast_step.Packed.of(folded_state), folded, arrays, params, cfg,
-                                              np.column_stack(variant_flags(variant, n)), folded_chain)  # fmt: skip
+                                              np.column_stack(variant_flags(variant, n)), folded_chain,
+                                              rule_table(rule_rows(variant, n), n, params))  # fmt: skip
             return packed.state(params, decision), decision
     return stages_step(state, situation, proposal, params, cfg, variant, planner_name=planner_name, chain=chain)
 
@@ -278,9 +279,11 @@ class Shield:
         self.state = dataclasses.replace(state, t=state.t if t is None else float(t))
 
     def _flags(self, n: int):
-        """The variant's ``(B, 3)`` flags for ``n`` rows (cached: the variant is fixed)."""
+        """The variant's ``(B, 3)`` flags and the rows' decision rules (:func:`.rules.rule_table`) for ``n`` rows
+        (cached: the variant is fixed)."""
         if n not in self._flag_rows:
-            self._flag_rows[n] = np.column_stack(variant_flags(self.variant, n))
+            table = rule_table(rule_rows(self.variant, n), n, self.params)
+            self._flag_rows[n] = (np.column_stack(variant_flags(self.variant, n)), table)
         return self._flag_rows[n]
 
     @state.setter
@@ -322,8 +325,9 @@ class Shield:
         if not self.refusals(situation):
             packed = self._packed if self._packed is not None else fast_step.Packed.of(self._state)
             proposal = proposal_arrays("the nominal planner", proposal, len(situation))
-            self._packed, decision = fast_step.step(packed, situation, proposal, self.params, self.config,
-                                                    self._flags(len(situation)))  # fmt: skip
+            flags, rules = self._flags(len(situation))
+            self._packed, decision = fast_step.step(packed, situation, proposal, self.params, self.config, flags,
+                                                    rule=rules)  # fmt: skip
             self._state, self.last_path = None, "compiled"
             return decision
         self.state, decision = stages_step(self.state, situation, proposal, self.params, self.config, self.variant)

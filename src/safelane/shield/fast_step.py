@@ -31,10 +31,10 @@ from ..safety.plan import EvasionPlan
 from ..tolerances import TIME_TOL_S
 from .assessment import AssessmentState
 from .config import ShieldConfig
-from .decide import ABORT, own_completion_level, own_margin
+from .decide import own_completion_level, own_margin
 from .decision import Decision
 from .monitor import TOL_M, Breach, Snapshot
-from .rules import rule_rows
+from .rules import rule_rows, uncompiled_rules
 
 #: Each :class:`ShieldConfig` field and the values the compiled period implements (``None``: every value).
 COMPILED: dict[str, tuple | None] = {
@@ -69,8 +69,9 @@ def refusals(config: ShieldConfig, variant, batch: int) -> list[str]:
         value = getattr(config, name)
         if allowed is not None and value not in allowed:
             out.append(f"ShieldConfig.{name}={value!r}" + ("" if name in COMPILED else " (not classified)"))
-    if rule_rows(variant, batch):
-        out.append("rows decided by another rule (RSS)")
+    other = uncompiled_rules(rule_rows(variant, batch))
+    if other:
+        out.append(f"rows decided by a rule the compiled period does not implement: {', '.join(other)}")
     return out
 
 
@@ -217,6 +218,12 @@ def _no_own(n: int) -> tuple:
     return np.full((n, 1), np.inf), np.zeros((n, 1)), np.zeros((n, 0)), np.zeros(n, np.int64)
 
 
+@functools.lru_cache(maxsize=16)
+def _paper_rule(n: int) -> np.ndarray:
+    """The kernel's rule vectors for ``n`` rows under the paper's rule alone (an input only: shared between calls)."""
+    return np.zeros((n, 1))
+
+
 @functools.lru_cache(maxsize=64)
 def period_constants(prm: Params, cfg: ShieldConfig) -> np.ndarray:
     """The kernel's parameter vector (its first entry, the period's time, is the caller's to set): the parameters,
@@ -225,24 +232,26 @@ def period_constants(prm: Params, cfg: ShieldConfig) -> np.ndarray:
                     prm.lane_width, prm.others_decel, LATERAL_TOL_M, FEASIBILITY_TOL_M, TOL_M, cfg.assess_threshold,
                     float(cfg.monitor), max(own_completion_level(prm), prm.y_boundary), own_margin(prm),
                     float(cfg.assessment == "truth"), float(cfg.completion == "paper_evasion"),
-                    float(cfg.assessment == "slow"), cfg.assess_delay_s, cfg.assess_miss, TIME_TOL_S])  # fmt: skip
+                    float(cfg.assessment == "slow"), cfg.assess_delay_s, cfg.assess_miss, TIME_TOL_S,
+                    prm.vehicle_length, prm.vehicle_width])  # fmt: skip
     out.flags.writeable = False
     return out
 
 
 def step(packed: Packed, situation, proposal, params: Params, config: ShieldConfig, flags,
-         chain=None) -> tuple[Packed, Decision]:  # fmt: skip
+         chain=None, rule=None) -> tuple[Packed, Decision]:  # fmt: skip
     """One period compiled: ``(packed, situation, proposal) -> (packed', Decision)`` — :func:`.core.step`'s result
     for a period :func:`refusals` and :func:`situation_refusals` accept. ``proposal``: the checked ``(a_x, a_y)``
     arrays (:func:`.validation.batch_proposal`); ``flags``: the variant's ``(B, 3)`` flags
     (:func:`.policies.variant_flags`, stacked); ``chain``: ``(bounds, unsafe)``, the caller's
-    :func:`~.stages.chain_analysis` of this situation, taken as given (as :func:`.core.step` takes it), or ``None``."""
+    :func:`~.stages.chain_analysis` of this situation, taken as given (as :func:`.core.step` takes it), or ``None``;
+    ``rule``: the rows' decision rules (:func:`.rules.rule_table`), ``None`` for the paper's alone."""
     fp = _period_module()
     s, prm, cfg = situation, params, config
     n, m = s.chain_x.shape
     sf = np.empty((n, len(fp.SIT_F)))
     sf[:, 0], sf[:, 1], sf[:, 2], sf[:, 3], sf[:, 4], sf[:, 5] = s.ego_x, s.ego_y, s.ego_vx, s.ego_vy, s.f_x, s.f_v
-    sf[:, 6], sf[:, 7], sf[:, 8] = s.observed_f_speed, proposal[0], proposal[1]
+    sf[:, 6], sf[:, 7], sf[:, 8], sf[:, 9] = s.observed_f_speed, proposal[0], proposal[1], s.n_connected
     sb = np.empty((n, len(fp.SIT_B)), bool)
     sb[:, 0] = s.f_connected & s.f_collaborative
     sb[:, 1] = False if s.v2x_stale is None else s.v2x_stale
@@ -276,14 +285,15 @@ def step(packed: Packed, situation, proposal, params: Params, config: ShieldConf
     of, ob = np.empty((n, len(fp.OUT_F))), np.empty((n, len(fp.OUT_B)), bool)
     knots = np.empty((n, 5, 8))
     nc = np.asarray(s.n_connected, np.int64)
-    fp.period_kernel(prm_vec, sf, sb, np.ascontiguousarray(s.chain_x), np.ascontiguousarray(s.chain_v),
+    rule = _paper_rule(n) if rule is None else rule
+    fp.period_kernel(prm_vec, sf, sb, rule, np.ascontiguousarray(s.chain_x), np.ascontiguousarray(s.chain_v),
                      np.ascontiguousarray(s.chain_promise, float).reshape(n, max(m - 1, 0)),
                      np.ascontiguousarray(s.chain_human, bool).reshape(n, max(m - 1, 0)), nc, *own, out.history,
                      out.count,
                      out.st, out.sk, out.plan, packed.snapshot is not None, *snap, bounds, given_unsafe, behaviour,
                      of, ob, knots)  # fmt: skip
     out.snapshot = (s.chain_x, s.chain_v, bounds, nc)
-    rows = (behaviour == ABORT).nonzero()[0]
+    rows = ob[:, 4].nonzero()[0]  # the aborts on the held plan (an RSS response is a constant command)
     if rows.size:
         k = knots[rows]
         abort = (rows, k[:, 0], k[:, 1], k[:, 2], k[:, 3], k[:, 4])

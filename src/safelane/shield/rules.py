@@ -22,6 +22,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..baselines.rss import RSS_FIELDS, rss_vector
 from ..baselines.rss_rule import RssRule
 from ..planners.variants import VARIANT_NAMES, VARIANTS
 from .decide import ABORT, COMPLETED, HESITATE, PROCEED
@@ -56,8 +57,8 @@ class RuleInputs:
     own lane), the checked and clipped proposal (``invalid`` rows hold zeros), the lateral hesitation, L1's
     worst-case deceleration from the information the variant uses (``uses_chain``: from the connected chain;
     otherwise ``a_x_d``), every chain vehicle's bound from the chain analysis (``(k, M)``; meaningful where
-    ``uses_chain`` and for the ``n_connected`` connected leaders), and whether the lane change was complete before
-    this period."""
+    ``uses_chain`` and for the ``n_connected`` connected leaders), whether the lane change was complete before this
+    period, and the lane keeping's lateral command after completion."""
 
     ego_x: np.ndarray
     ego_y: np.ndarray
@@ -76,6 +77,7 @@ class RuleInputs:
     completed: np.ndarray
     chain_bounds: np.ndarray
     n_connected: np.ndarray
+    a_y_keep: np.ndarray  # the lateral command after completion (stages.lane_keep_accel: centred in the target lane)
     own_x: np.ndarray | None = None  # L0, the ego's own-lane leader (+inf: none), at the frame's state; None: no L0
     own_v: np.ndarray | None = None
 
@@ -93,3 +95,23 @@ def rule_rows(variant, n: int) -> list[tuple[object, np.ndarray]]:
     present = np.flatnonzero(np.bincount(codes, minlength=len(_RULE_NAMES)))  # integer counting, not a string sort
     named = [(_RULE_NAMES[c], c) for c in present.tolist() if _RULE_NAMES[c] != "paper"]
     return [(DECISION_RULES[name], np.flatnonzero(codes == c)) for name, c in sorted(named)]
+
+
+def uncompiled_rules(ruled) -> list[str]:
+    """The rules among ``ruled`` (:func:`rule_rows`' list) that the compiled period does not implement (it implements
+    :class:`~safelane.baselines.rss_rule.RssRule` with any parameter set, ``shield/_fast_rules.py``)."""
+    return [repr(getattr(coded, "rule", coded)) for coded, _ in ruled
+            if not isinstance(getattr(coded, "rule", None), RssRule)]
+
+
+def rule_table(ruled, n: int, params) -> np.ndarray:
+    """The compiled period's per-row rule vectors (``shield/_fast_rules.RULE``): ``(n, 1 + len(RSS_FIELDS))``, the
+    first column 1 where RSS decides the row, then its parameters; ``(n, 1)`` zeros where no row is ruled. ``ruled``:
+    :func:`rule_rows`' list, every rule an :class:`~safelane.baselines.rss_rule.RssRule`."""
+    if not ruled:
+        return np.zeros((n, 1))
+    out = np.zeros((n, 1 + len(RSS_FIELDS)))
+    for coded, rows in ruled:
+        out[rows, 0] = 1.0
+        out[rows, 1:] = rss_vector(coded.rule.params(params))
+    return out

@@ -243,7 +243,8 @@ def decide(state, obs: Observed, worst: WorstCase, prop: Proposal, fr: Frame, pa
         s = obs.situation
         own = (None, None) if fr.own is None else tuple(np.broadcast_to(a, ex.shape) for a in fr.own[:2])  # L0
         fields = (ex, ey, evx, evy, s.chain_x, s.chain_v, *fr.f, prop.a_x, prop.a_y, a_yh, prop.invalid,
-                  worst.l1_decel, flags[0] & ~obs.unsafe, state.completed, obs.bounds, s.n_connected, *own)  # fmt: skip
+                  worst.l1_decel, flags[0] & ~obs.unsafe, state.completed, obs.bounds, s.n_connected,
+                  lane_keep_accel(ARRAY, ey, evy, prm.lane_width, prm.a_y_m), *own)  # fmt: skip
         for rule, idx in ruled:
             behaviour[idx], ax, ay, completing[idx] = rule.decide(
                 RuleInputs(*(None if arr is None else arr[idx] for arr in fields)), prm)

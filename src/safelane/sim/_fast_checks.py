@@ -22,7 +22,7 @@ from numba import types
 from ..params import Params
 from ..safety import _compile
 from ..safety._backend import INF, SCALAR
-from ..safety._fast_base import _min, announce_compile, row_function
+from ..safety._fast_base import _min, announce_compile, kernel, row_function
 from ._fast_general import _general
 from .checks import (
     apply_pairs,
@@ -122,7 +122,7 @@ def _ego_row(valid, vb, sx, sv, r, ego, lon, lat, plan, fleet, row_acc, consts, 
     return hit, close, gap_f, gap_l1
 
 
-@numba.njit(_SIGNATURE, cache=True, nogil=True, error_model="numpy")
+@kernel(_SIGNATURE)
 def ego_kernel(
     valid, sx, sv, ego_x, ego_vx, x0, v0, acc0, t1, x_end, y0, vy0, ay0, y_end, planned, plan_y_max, plan_x_end,
     plan_y_end, ox, ov, oacc, ots, ox_end, row_acc, dt, p_m, a_lim, conflict, overlap, length, max_level, collided,
@@ -202,7 +202,7 @@ def _lane_row(valid, margin, pb, x, v, acc, t_stop, x_end, v_end, r, row_acc, dt
     return hit, close, ratio
 
 
-@numba.njit(_LANE_SIGNATURE, cache=True, nogil=True, error_model="numpy")
+@kernel(_LANE_SIGNATURE)
 def lane_kernel(valid, margin, x, v, acc, t_stop, x_end, v_end, row_acc, dt, length, collided, violated, min_ratio):
     """:func:`~.checks.lane_checks` per scenario and consecutive pair (``valid``/``margin`` ``(B, K-1)``): the
     near-pair filter, the sampled ratios of the far pairs, the exact minimum of the near ones (one quadratic, or

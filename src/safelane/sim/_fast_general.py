@@ -17,7 +17,7 @@ from numba import types
 
 from ..safety import _compile
 from ..safety._backend import INF, SCALAR
-from ..safety._fast_base import _max, _min, announce_compile, sort_short
+from ..safety._fast_base import _max, _min, announce_compile, kernel, sort_short
 from .kinematics import segment_crossings, state_at, windowed_piece
 
 _compile.register_rows()
@@ -69,7 +69,7 @@ def _general_pair(bt, bx, bv, bacc, at, ax, av, aacc, lt, lx, lv, lacc, level, k
     return low, high
 
 
-@numba.njit(_GENERAL_SIGNATURE, cache=True, nogil=True, error_model="numpy")
+@kernel(_GENERAL_SIGNATURE)
 def general_kernel(bt, bx, bv, bacc, at, ax, av, aacc, lt, lx, lv, lacc, level, lo, hi):
     """:func:`~.kinematics.windowed_gap_extrema` of ``ahead − behind`` (``b*``, ``a*``: the motions' knots ``t``,
     ``x``, ``v`` and segment accelerations, one row per pair) over the instants where the lateral motion (``l*``)

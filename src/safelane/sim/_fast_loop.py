@@ -54,14 +54,14 @@ _INF = np.inf
 PRM = (
     "dt", "a_x_a", "a_x_d", "a_y_m", "y_safe", "p_m", "lane_width", "vehicle_length", "conflict", "overlap",
     "monitor_tol", "brake_start_s", "open_decel", "open_gap_m", "k_p", "k_v", "gap_fraction", "brake_comfort",
-    "omega2", "two_omega", "a_o_d", "reactive",
+    "omega2", "two_omega", "a_o_d", "reactive", "ignores_ego",
 )  # fmt: skip
 #: The batch's inputs of :func:`loop_kernel`, per scenario (:class:`~.step.ClosedLoop`'s arrays; ``promise``,
 #: ``chain_margin``: ``(N, B)``; ``uses``: ``(B, 3)`` the variant's flags).
 LoopBatch = collections.namedtuple("LoopBatch", (
     "x", "v", "ego", "valid", "n_connected", "f_connected", "f_aggressive", "uses", "promise", "chain_margin", "margin",
     "is_last", "acts", "v_desired", "promise_decel", "promise_accel", "decel_last", "gap0", "lane_valid", "lane_margin",
-    "p_v", "scenario_id", "key",
+    "p_v", "scenario_id", "key", "rule",
     "profile_t", "profile_a", "task_wave", "task_period", "f_wave", "wave_lane_valid", "wave_lane_margin",
     "lane_sample",
 ))  # fmt: skip
@@ -229,15 +229,16 @@ def _period(prm, batch, b, w, den, ax_n, ay_n):
     gap_f, gap_l1 = rf[0, 6], rf[0, 7]
     # --- the shield (core.step): one period of shield/_fast_period.period_row ---
     sf[0, 0], sf[0, 1], sf[0, 2], sf[0, 3], sf[0, 4], sf[0, 5] = ex, ey, evx, evy, x[0], v[0]
-    sf[0, 6], sf[0, 7], sf[0, 8] = v[0], ax_n, ay_n
+    sf[0, 6], sf[0, 7], sf[0, 8], sf[0, 9] = v[0], ax_n, ay_n, nc
     for i in range(m):
         chain_x[0, i], chain_v[0, i] = x[i + 1], v[i + 1]
     pp[0] = t
     completed = sk[0, 3]
     active = not completed
-    behaviour = period_row(0, pp, times, den, sf, sb, chain_x, chain_v, link_promise, link_margin, own_x, own_v,
-                           own_promise, own_nc, history, count, st, sk, plan, rb[0, 4], snap_x, snap_v, snap_b,
-                           snap_nc, bounds_out, no_chain, of, ob, knots, px2, pv2, pb2, kn)  # fmt: skip
+    behaviour = period_row(0, pp, times, den, sf, sb, batch.rule[b : b + 1], chain_x, chain_v, link_promise,
+                           link_margin, own_x, own_v, own_promise, own_nc, history, count, st, sk, plan, rb[0, 4],
+                           snap_x, snap_v, snap_b, snap_nc, bounds_out, no_chain, of, ob, knots, px2, pv2, pb2,
+                           kn)  # fmt: skip
     ax_cmd, ay_cmd = of[0, 0], of[0, 1]
     completing, invalid_active = ob[0, 0], ob[0, 1]
     # The snapshot the next period's monitor compares with (the caller keeps it: fast_step.step).
@@ -245,7 +246,7 @@ def _period(prm, batch, b, w, den, ax_n, ay_n):
         snap_x[0, i], snap_v[0, i], snap_b[0, i] = x[i + 1], v[i + 1], bounds[i + 1]
     snap_nc[0] = nc
     rb[0, 4] = True
-    on_plan = behaviour == ABORT
+    on_plan = ob[0, 4]  # the held plan's motion (an abort under the paper's rule; an RSS response is constant)
     if on_plan:  # the held plan's period (knots and samples from period_row): its segment accelerations
         for j in range(7):
             span = kt[j + 1] - kt[j]
@@ -296,7 +297,7 @@ def _period(prm, batch, b, w, den, ax_n, ay_n):
             acc[i] = a_i
     f_wish = _wave_follower(batch, sid, t, a_a, a_d) if waves else 0.0
     acc[0] = _follower_row(x[0], v[0], x[1], v[1], ex, evx, f_aggressive[b], completed, gap0[b], waves, f_wish,
-                           False, p_m, a_a, a_o, open_decel, open_gap, dt)  # fmt: skip
+                           prm[22] > 0.0, p_m, a_a, a_o, open_decel, open_gap, dt)  # fmt: skip
     row_acc = 0.0
     for i in range(k):
         f_acc[i], f_ts[i], f_xe[i], f_ve[i] = constant_segment(SCALAR, x[i], v[i], acc[i], dt)

@@ -12,6 +12,7 @@ import numba
 import numpy as np
 
 from ..safety._fast_base import announce_compile, row_function
+from ..shield._fast_period import OUT_B, SIT_F
 
 announce_compile(__file__)
 
@@ -57,12 +58,13 @@ def _scratch(rows, period_prm):
     window = rows.history.shape[1]
     return Scratch(
         np.empty((1, k)), np.empty((1, k)), np.empty((1, k)), np.empty((1, k)), np.empty((1, k)), np.empty((1, k)),
-        np.empty(k), np.empty(k), np.zeros((1, k), np.bool_), period_prm.copy(), np.empty((1, 9)),
+        np.empty(k), np.empty(k), np.zeros((1, k), np.bool_), period_prm.copy(), np.empty((1, len(SIT_F))),
         np.zeros((1, 6), np.bool_), np.empty((1, m)), np.empty((1, m)), np.full((1, 1), _INF), np.zeros((1, 1)),
         np.empty((1, 0)), np.zeros(1, np.int64), np.empty((1, window)), np.empty(1, np.int64),
         np.empty((1, rows.st.shape[1])), np.empty((1, rows.sk.shape[1]), np.bool_),
         np.empty((1, rows.plan.shape[1])), np.empty((1, m)), np.empty((1, m)), np.empty((1, m)), np.empty(1, np.int64),
-        np.empty((1, m)), np.zeros(0, np.bool_), np.empty((1, 5)), np.empty((1, 4), np.bool_), np.empty((1, 5, 8)),
+        np.empty((1, m)), np.zeros(0, np.bool_), np.empty((1, 5)), np.empty((1, len(OUT_B)), np.bool_),
+        np.empty((1, 5, 8)),
         np.empty((1, m + 1)), np.empty((1, m + 1)), np.empty((1, m + 1)), np.empty((5, 8)), np.empty(7), np.empty(7),
         np.empty(64), np.empty(3), np.empty(3), np.empty(3), np.empty(2), np.empty(2), np.empty(2), np.empty(2),
         np.empty(1), np.empty(3), np.empty(3), np.empty(3), np.empty(2), np.empty(2), np.empty(2), np.empty(window),

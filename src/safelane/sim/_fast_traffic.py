@@ -17,14 +17,13 @@ closed loop, evaluating both sides per row made it about a quarter slower. The r
 
 from __future__ import annotations
 
-import numba
 import numpy as np
 from numba import types
 
 from ..params import Params
 from ..safety import _compile
 from ..safety._backend import INF, SCALAR
-from ..safety._fast_base import announce_compile, row_function
+from ..safety._fast_base import announce_compile, kernel, row_function
 from ..safety.chain import chain_link
 from ..tolerances import TIME_TOL_S
 from .behaviours import (
@@ -67,7 +66,7 @@ def _leader_row(slack, v_f, v_l, d, own, task, violating, pick, decel_last, a_o,
     return leader_keep(SCALAR, want, ok, own)
 
 
-@numba.njit(_SIGNATURE, cache=True, nogil=True, error_model="numpy")
+@kernel(_SIGNATURE)
 def leader_kernel(x, v, margin, is_last, acts, bounds, task, a_last, decel_last, any_violation, violating, pick, a_o,
                   dt, acc):  # fmt: skip
     """Write :func:`~.behaviours.leader_accels`' accelerations into ``acc`` (``(B, K)``, zero on entry). Inputs as
@@ -126,7 +125,7 @@ def _follower_row(f_x, f_v, l1_x, l1_v, ego_x, ego_vx, aggressive, completed, ga
     return a
 
 
-@numba.njit(_FOLLOWER_SIGNATURE, cache=True, nogil=True, error_model="numpy")
+@kernel(_FOLLOWER_SIGNATURE)
 def follower_kernel(f_x, f_v, l1_x, l1_v, ego_x, ego_vx, aggressive, completed, gap0, has_wanted, wanted, ignores_ego,
                     p_m, a_x_a, a_o, open_decel, open_gap_m, dt, out):  # fmt: skip
     """:func:`~.behaviours.follower_accel` per scenario into ``out``; ``wanted`` is read only where ``has_wanted``."""
@@ -174,7 +173,7 @@ def _chain_row(x, v, r, promise, margin, col, a_o, bounds):
     return unsafe
 
 
-@numba.njit(_CHAIN_SIGNATURE, cache=True, nogil=True, error_model="numpy")
+@kernel(_CHAIN_SIGNATURE)
 def chain_kernel(x, v, promise, margin, a_o, bounds, unsafe):
     """:meth:`~.step.ClosedLoop.chain` per scenario: the scan of :func:`safelane.safety.chain.propagate_chain` from
     ``L(N+1)`` (``a_o``) down to ``L1`` into ``bounds`` (``(B, K)``, F's slot ``a_o``) and ``unsafe``.

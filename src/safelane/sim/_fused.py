@@ -1,13 +1,13 @@
 """The compiled closed loop's Python side: where it runs (:func:`covers`), and :func:`run`, which hands a
 :class:`~.step.ClosedLoop`'s arrays to :func:`._fast_loop.loop_kernel` and returns what the results table reads.
 
-The loop covers batches of :data:`FUSED_MIN_ROWS` scenarios or more with the expert planner (``ExpertPlanner``
-itself, any gains), the paper's traffic without hooks (with unexpected promise violations, with or without L(N+1)'s
-profiles; its period, :class:`Stepper`, also with :class:`~.traffic.WaveHooks`: hooks as data), the
-paper's four variants and the settings of the default and paper presets (any assessment, the
-commit guard or the paper's completion rule, the monitor on or off, either leader rule, supervised, none of the
-real-world settings), without a trace or recorded observations (those, and other planners, run its period:
-:class:`Stepper`).
+The loop covers batches of :data:`FUSED_MIN_ROWS` scenarios or more with the expert planner (``ExpertPlanner`` itself,
+any gains), the paper's traffic without hooks (with unexpected promise violations, with or without L(N+1)'s profiles;
+its period, :class:`Stepper`, also with :class:`~.traffic.WaveHooks`: hooks as data), the paper's
+four variants and the RSS variants (their rule: ``shield/_fast_rules.py``), the settings of the default and paper
+presets (any assessment, the commit guard or the paper's completion rule, the monitor on or off, either leader rule,
+supervised, none of the real-world settings) and an F that ignores the ego, without a trace or recorded observations
+(those, and other planners, run its period: :class:`Stepper`).
 Everything else — and everything with ``SAFELANE_NO_FUSED=1`` or without numba — runs period by period
 (:mod:`.step`), whose parts are compiled where they have kernels. Importing this module does not import numba.
 """
@@ -22,11 +22,11 @@ from types import SimpleNamespace
 import numpy as np
 
 from ..planners.base import ExpertPlanner
-from ..planners.variants import VARIANT_NAMES, VARIANTS
 from ..safety.evasion import fast_kernel
 from ..safety.lateral import LATERAL_TOL_M
 from ..shield.monitor import BREACH_KINDS, TOL_M, Breach
 from ..shield.policies import SlowState
+from ..shield.rules import rule_rows, rule_table, uncompiled_rules
 from .traffic import WaveHooks
 
 #: :func:`covers` takes batches from this many scenarios on.
@@ -42,13 +42,14 @@ PROGRESS_CHUNK = 4096
 #: The loop reads these fields' values (any value runs compiled):
 READ = frozenset({"horizon_s", "brake_start_s", "shield.assess_window", "shield.assess_threshold",
                   "follower_open_decel", "follower_open_gap_m", "shield.monitor", "leader_rule",
-                  "shield.assess_delay_s", "shield.assess_miss", "shield.assessment"})  # fmt: skip
+                  "shield.assess_delay_s", "shield.assess_miss", "shield.assessment",
+                  "follower_ignores_ego"})  # fmt: skip
 #: The loop implements these fields at this value (or these values) only; any other value runs period by period:
 FIXED = {
     "shield.completion": ("commit_guard", "paper_evasion"),
     "sensor_noise_std": 0.0,
     "shield.enabled": True, "v2x_loss": 0.0, "v2x_latency_periods": 0,
-    "follower_ignores_ego": False, "own_lane": False, "sensing_error": False,
+    "own_lane": False, "sensing_error": False,
     "actuation_delay_s": 0.0, "shield.actuation_delay_s": 0.0, "neighbours": False,
 }  # fmt: skip
 #: These fields act only through another setting; while the fields named (or the nominal planner: ``"nominal"``)
@@ -133,9 +134,9 @@ def reasons(batch, cfg, nominal, traffic, trace: bool, record_observations: bool
                if setting(cfg, name) not in implemented(name))  # fmt: skip
     if batch.l0_x is not None:
         out.append("own-lane leaders in the batch")
-    ruled = [name for name in np.asarray(VARIANT_NAMES)[np.unique(batch.variant)] if VARIANTS[name].rule != "paper"]
-    if ruled:
-        out.append(f"variants decided by another rule: {ruled}")
+    other = uncompiled_rules(rule_rows(batch.variant, len(batch)))
+    if other:
+        out.append(f"variants decided by a rule the loop does not implement: {other}")
     return out
 
 
@@ -175,7 +176,7 @@ def run_chunk(sim, n_steps: int) -> dict:
                                                                               bad))  # fmt: skip
     if (bad >= 0).any():
         step = int(bad[bad >= 0].min())
-        _non_finite(sim, np.flatnonzero(bad == step), (step + 1) * sim.prm.dt)
+        _non_finite(sim.b.scenario_id, np.flatnonzero(bad == step), (step + 1) * sim.prm.dt)
     return dict(zip(OUT_F, out_f.T, strict=True), **dict(zip(OUT_B, out_b.T, strict=True)), counts=counts,
                 n_invalid=n_invalid, breach_flags=flags, initial_safe=start.initial_safe)  # fmt: skip
 
@@ -197,6 +198,7 @@ def kernel_inputs(sim):
         open_decel=cfg.follower_open_decel, open_gap_m=cfg.follower_open_gap_m, k_p=gains.k_p, k_v=gains.k_v,
         gap_fraction=gains.gap_fraction, brake_comfort=gains.brake_comfort, omega2=gains.omega**2,
         two_omega=2.0 * gains.omega, a_o_d=prm.others_decel, reactive=cfg.leader_rule == "reactive",
+        ignores_ego=cfg.follower_ignores_ego,
     )  # fmt: skip
     c = np.ascontiguousarray
     is_last, acts = traffic.roles
@@ -207,7 +209,7 @@ def kernel_inputs(sim):
         c(is_last), c(acts), c(traffic.v_desired), c(b.promise_decel), c(b.promise_accel),
         c(b.decel_last.astype(np.float64)), c(traffic.gap0), c(sim.lane_pairs[0]), c(sim.lane_pairs[1]),
         c(b.p_v.astype(np.float64)), c(b.scenario_id.astype(np.int64)), np.array([sim.seed % 2**64], np.uint64),
-        *_profile(b), *_waves(traffic.hooks, b),
+        rule_table(rule_rows(b.variant, len(b)), len(b), prm), *_profile(b), *_waves(traffic.hooks, b),
     )  # fmt: skip
     return np.array([float(values[name]) for name in PRM]), period_constants(prm, cfg.shield), batch
 
@@ -237,6 +239,14 @@ def _waves(hooks, b) -> tuple:
     return (*waves, c(hooks.lane_valid, np.bool_), c(hooks.lane_margin, np.float64), hooks.lane_ratio)
 
 
+#: ``_fast_loop.LoopBatch``'s fields with the batch on the last axis (the chain's inputs, vehicle-major as
+#: :class:`~.step.ClosedLoop` keeps them) and those shared by every row (the key of the draws: the seed's); every
+#: other field has the batch first (:meth:`Stepper.splice`), but the :class:`~.traffic.WaveHooks` fields, by scenario
+#: id (no rows without them): a batch with them is not spliced.
+BATCH_LAST, BATCH_SHARED = ("promise", "chain_margin"), ("key",)
+BY_ID = ("task_wave", "task_period", "f_wave", "wave_lane_valid", "wave_lane_margin", "lane_sample")
+
+
 def rows_of(start):
     """A :class:`~.step.SimState` at the start of a run (its first period not yet run) as the compiled loop's row
     state (``_fast_rows.Rows``)."""
@@ -259,8 +269,8 @@ def _slow(sim) -> bool:
     return sim.cfg.shield.assessment == "slow"
 
 
-def _non_finite(sim, rows: np.ndarray, t: float):
-    ids = sim.b.scenario_id[rows][:5].tolist()
+def _non_finite(scenario_id: np.ndarray, rows: np.ndarray, t: float):
+    ids = scenario_id[rows][:5].tolist()
     raise FloatingPointError(
         f"non-finite simulator state at t = {t:.1f} s in scenario(s) {ids} ({rows.size} in all): a bug in a behaviour "
         "model or hook, not an outcome"
@@ -302,8 +312,10 @@ class Stepper:
         self.prm_vec, self.period_prm, self.batch = kernel_inputs(sim)
         self.shared_clock = shared_clock  # every row started together: observations carry one time, as ClosedLoop's
         self.initial_safe = None
+        self.spliced = False  # rows of other scenarios spliced in (splice): sim no longer describes the batch
 
     def initial_state(self) -> StepState:
+        self._whole("initial_state")
         start = self.sim.initial_state()
         self.initial_safe = start.initial_safe
         return self.state_of(start)
@@ -315,6 +327,7 @@ class Stepper:
         return StepState(rows_of(start))
 
     def observe(self, s: StepState):
+        self._whole("observe")
         obs = self.sim.observe(s)
         return dataclasses.replace(obs, t=float(s.t[0])) if self.shared_clock else obs
 
@@ -323,6 +336,7 @@ class Stepper:
         as the fields :func:`~.results.results_table` reads (the compiled loop's, :func:`_state`)."""
         from ._fast_loop import finish_kernel
 
+        self._whole("finish")
         rows = self.rows_after(s)
         finish_kernel(self.prm_vec, rows)
         return _state(dict(
@@ -356,6 +370,36 @@ class Stepper:
         self.check_finite(rows, finite)
         return StepState(rows), behaviour
 
+    def splice(self, rows: np.ndarray, part: Stepper) -> None:
+        """Rows ``rows`` of the batch become ``part``'s rows, in place: ``part`` steps ``len(rows)`` other scenarios
+        (same settings and seed) and its kernel inputs replace those rows' (:func:`kernel_inputs` per row, so the
+        rows' inputs are what a :class:`Stepper` over the spliced batch would hold); the envs' resets, which would
+        otherwise rebuild the whole batch's inputs for a few rows. ``sim`` then describes the batch before the
+        splice: :meth:`observe`, :meth:`step` and :meth:`finish`, which read it, refuse (the envs step with
+        :meth:`step_with` and the kernels; :meth:`check_finite` reads the spliced scenario ids)."""
+        same = (part.sim.seed == self.sim.seed and part.batch.x.shape[1] == self.batch.x.shape[1]
+                and np.array_equal(part.prm_vec, self.prm_vec) and np.array_equal(part.period_prm, self.period_prm))
+        if not same:
+            raise ValueError("Stepper.splice: the part has other settings, another seed or another number of vehicle "
+                             "slots than this batch")  # fmt: skip
+        if any(getattr(b, name).shape[0] for name in BY_ID for b in (self.batch, part.batch)) or (
+                part.batch.profile_t.shape[1] != self.batch.profile_t.shape[1]):  # fmt: skip
+            raise ValueError("Stepper.splice: traffic hooks as data (WaveHooks, by scenario id) or L(N+1) profiles of "
+                             "another length: such batches are not spliced")  # fmt: skip
+        if not self.spliced:  # (kernel_inputs may hand over the ClosedLoop's own arrays: from now on, ours)
+            self.batch = type(self.batch)(*[a.copy() for a in self.batch])
+        for name, into, new in zip(self.batch._fields, self.batch, part.batch, strict=True):
+            if name in BATCH_LAST:
+                into[:, rows] = new
+            elif name not in BATCH_SHARED and name not in BY_ID:
+                into[rows] = new
+        self.spliced = True
+
+    def _whole(self, what: str) -> None:
+        if self.spliced:
+            raise RuntimeError(f"Stepper.{what}: rows were spliced into this batch (splice), so its ClosedLoop no "
+                               "longer describes them; build a Stepper over the batch as it is now")  # fmt: skip
+
     @staticmethod
     def rows_after(s: StepState):
         """A copy of ``s``'s rows for a kernel to advance in place (``s`` stays the state before the period)."""
@@ -367,7 +411,7 @@ class Stepper:
         """A :class:`FloatingPointError` naming the scenarios whose state a kernel found not finite."""
         if not finite.all():
             bad = np.flatnonzero(~finite)
-            _non_finite(self.sim, bad, float(rows.rf[bad[0], 4]))
+            _non_finite(self.batch.scenario_id, bad, float(rows.rf[bad[0], 4]))
 
 
 def steps_compiled(batch, cfg, traffic) -> list[str]:
