@@ -57,6 +57,7 @@ NOT_RUN: dict[str, str] = {
     "safelane traffic --penetration 0,0.25,0.5,0.75,1 --demand 4900 --seconds 300 --warmup 60 --workers 1":
         "the results table's sweep (tens of minutes of CPU; docs/traffic.md); tests/test_traffic.py runs short cells",
     ".venv/bin/python benchmarks/bench_core.py --repeat 3": _BENCH,
+    ".venv/bin/python benchmarks/bench_falsify.py --worlds paper realistic --rounds 4": _BENCH,
     ".venv/bin/python benchmarks/bench_core.py --repeat 5": _BENCH,
     ".venv/bin/python benchmarks/ray_cluster.py": "starts and stops a Ray head node (tens of seconds); " + _BENCH,
     ".venv/bin/python examples/ppo_shield.py": "PPO training: 320 s of CPU on two processes (tests/test_envs.py "

@@ -178,15 +178,22 @@ def test_the_fused_loop_leaves_every_other_setting_to_the_period_by_period_path(
     assert not _covers(batch, **UNCOVERED[case])
 
 
-def test_the_fused_loop_leaves_profiles_and_other_rules_to_the_period_by_period_path(monkeypatch):
-    from safelane.sim.traffic import with_last_profile
+def test_the_fused_loop_runs_profiles_and_leaves_other_rules_to_the_period_by_period_path(monkeypatch):
+    from safelane.sim.traffic import TrafficHooks, WaveHooks, with_last_profile
 
     monkeypatch.delenv("SAFELANE_NO_NUMBA", raising=False)
     monkeypatch.delenv("SAFELANE_NO_FUSED", raising=False)
     rng = np.random.default_rng(0)
     batch = paper_scenarios("CV_all", 3, 5.0, 80, rng)
     profiled = with_last_profile(batch, np.tile([0.0, 1.0], (80, 1)), np.tile([0.0, -5.0], (80, 1)))
-    assert not _covers(profiled)
+    assert _covers(profiled)  # (tests/test_fast_profiles.py: the same bits)
+    # Traffic hooks as data run on the compiled period (the loop's chunks rebuild the default traffic), callables not.
+    waves = WaveHooks(**{name: np.zeros((80, 5)) for name in ("task_low", "task_span", "task_hi", "task_lo",
+                                                              "task_phase")},
+                      **{name: np.ones(80) for name in ("task_period", "f_period", "f_phase", "f_hi", "f_lo")})
+    assert not _covers(batch, traffic=waves)
+    assert not _fused.steps_compiled(batch, SimConfig(), waves)
+    assert _fused.steps_compiled(batch, SimConfig(), TrafficHooks(follower_wish=lambda view, prm: view.v[:, 0]))
     rss = concat([batch, paper_scenarios("RSS", 3, 5.0, 10, rng, first_id=500)])
     assert _covers(rss)  # RSS's rule is compiled (shield/_fast_rules.py); a user's own rule is not
     monkeypatch.setitem(DECISION_RULES, "rss", Coded(type("Mine", (), {"decide": lambda self, inp, prm: None})()))

@@ -56,18 +56,14 @@ def hooks_live() -> bool:
 
 class LaneGapRecorder:
     """Running minimum of each scenario's target-lane gaps over their margins (F–L1, L_i–L(i+1)), sampled at the
-    start of every period through the leader-task hook. The exact in-period check is the simulator's
-    ``leader_violation``; this sample only ranks scenarios for the optimiser."""
+    start of every period by the traffic hooks (:func:`~.falsify_build.hooks_for`: ``WaveHooks``, which the compiled
+    closed loop samples as the NumPy path does). The exact in-period check is the simulator's ``leader_violation``;
+    this sample only ranks scenarios for the optimiser."""
 
     def __init__(self, batch, prm: Params):
         self.margin = np.where(batch.human, prm.p_m_human, prm.p_m)[:, :-1]
         self.pairs = batch.valid[:, 1:] & batch.valid[:, :-1]
         self.min_ratio = np.full(len(batch), np.inf)
-
-    def observe(self, view, params) -> None:
-        ids = view.scenario_id
-        ratio = np.where(self.pairs[ids], (view.x[:, 1:] - view.x[:, :-1]) / self.margin[ids], np.inf)
-        self.min_ratio[ids] = np.minimum(self.min_ratio[ids], ratio.min(1))
 
 
 @dataclass(frozen=True)
@@ -134,7 +130,7 @@ def evaluate(spec: dict, setting: Setting) -> tuple[pd.DataFrame, dict]:
         recorder = None
         if hooks:
             recorder = LaneGapRecorder(sub, prm)
-            kwargs["traffic"] = built.hooks_for(sub_spec, prm, recorder)
+            kwargs["traffic"] = built.hooks_for(sub_spec, prm, recorder, k=sub.x.shape[1])
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")  # decel_last beyond a_x_d is intended where it is asked for
             table = simulate_batch(
@@ -157,6 +153,22 @@ def evaluate(spec: dict, setting: Setting) -> tuple[pd.DataFrame, dict]:
     outcome["ratio"] = np.fmin(outcome["ratio_l1"], outcome["ratio_f"]) if len(outcome) else []
     outcome = outcome.sort_values("row", ignore_index=True)
     return outcome, space.take(spec, outcome["row"].to_numpy(np.int64))
+
+
+def evaluate_round(specs: list[dict], setting: Setting) -> tuple[list[pd.DataFrame], list[dict]]:
+    """:func:`evaluate` of each spec of ``specs``, simulated as one batch: per spec its outcome (``row``: its index in
+    that spec) and its kept rows, as :func:`evaluate` gives them for that spec alone."""
+    sizes = [len(s["n"]) for s in specs]
+    outcome, _ = evaluate(space.concat_specs(specs), setting)
+    rows = outcome["row"].to_numpy(np.int64)
+    edges = np.cumsum([0, *sizes])
+    outcomes, kept = [], []
+    for spec, lo, hi in zip(specs, edges[:-1], edges[1:], strict=True):
+        part = outcome[(rows >= lo) & (rows < hi)].reset_index(drop=True)
+        part["row"] = part["row"].to_numpy(np.int64) - lo
+        outcomes.append(part)
+        kept.append(space.take(spec, part["row"].to_numpy(np.int64)))
+    return outcomes, kept
 
 
 def score(outcome: pd.DataFrame) -> np.ndarray:
@@ -250,6 +262,10 @@ def falsify(
     start = time.perf_counter()
     index = 0
     while report.simulated < scenarios or time.perf_counter() - start < 60.0 * minutes:
+        # One round: every method's batch drawn first (none depends on another's outcome this round: the
+        # cross-entropy search reads the outcomes of its own previous batch), then simulated as one batch (the
+        # scenarios are independent: the same rows, the same bits; fewer, larger calls of the simulator).
+        drawn = []
         for m in methods:
             rng = np.random.default_rng([seed, stream, METHODS.index(m), index])
             # Without profiles, L(N+1)'s sudden braking starts at one instant per batch (period-aligned or not).
@@ -263,7 +279,9 @@ def falsify(
             else:
                 u = cem.ask(rng, batch_size) if m == "cem" else rng.uniform(size=(batch_size, dim))
                 spec = space.decode(u, prm, brake_start, setting.world)
-            outcome, kept = evaluate(spec, setting)
+            drawn.append((m, spec, u))
+        outcomes, kept_rows = evaluate_round([spec for _, spec, _ in drawn], setting)
+        for (m, _, u), outcome, kept in zip(drawn, outcomes, kept_rows, strict=True):
             if m == "cem":
                 scores = np.full(batch_size, np.inf)
                 scores[outcome["row"].to_numpy()] = score(outcome)

@@ -13,7 +13,7 @@ import dataclasses
 import numpy as np
 
 from ..params import Params
-from ..planners.adversarial import HugFollower, HugLeader, Mixture, Oscillating, RecklessMerge, square_wave
+from ..planners.adversarial import HugFollower, HugLeader, Mixture, Oscillating, RecklessMerge
 from ..safety import leader_chain, plan_evasion
 from ..sim.scenario import ScenarioBatch
 from .falsify_space import lin
@@ -154,32 +154,25 @@ def _assumptions_hold(b: ScenarioBatch, prm: Params) -> np.ndarray:
     return ok
 
 
-def hooks_for(spec: dict, prm: Params, recorder=None):
-    """:class:`~safelane.sim.traffic.TrafficHooks` driving the leaders' own tasks and F's wish from the spec
-    (square waves between two levels: inside each leader's promise, inside F's ``[−a_x_d, a_x_a]``).
-    ``recorder``: an object with ``observe(view, params)``, called every period (the lane-gap sampler)."""
-    from ..sim.traffic import TrafficHooks
+def hooks_for(spec: dict, prm: Params, recorder=None, k: int | None = None):
+    """:class:`~safelane.sim.traffic.WaveHooks` driving the leaders' own tasks and F's wish from the spec (square
+    waves between two levels: inside each leader's promise, inside F's ``[−a_x_d, a_x_a]``), as data the compiled
+    closed loop reads. ``recorder``: a :class:`~safelane.experiments.falsify.LaneGapRecorder` whose running minimum
+    the hooks keep (sampled at the start of every period); ``k``: the batch's slots (default: the spec's largest
+    ``N`` plus 2)."""
+    from ..sim.traffic import WaveHooks
 
-    def leader_task(view, params):
-        if recorder is not None:
-            recorder.observe(view, params)
-        ids = view.scenario_id
-        k = view.x.shape[1]
-        pd_, pa = _leaders(spec["promise_decel"][ids], k), _leaders(spec["promise_accel"][ids], k)
-        hi, lo = _leaders(spec["task_hi"][ids], k), _leaders(spec["task_lo"][ids], k)
+    k = int(spec["n"].max()) + 2 if k is None else k
+    pd_, pa = _leaders(spec["promise_decel"], k), _leaders(spec["promise_accel"], k)
+    lane = {}
+    if recorder is not None:
+        lane = dict(lane_valid=recorder.pairs, lane_margin=recorder.margin, lane_ratio=recorder.min_ratio)
+    return WaveHooks(
+        task_low=-pd_, task_span=pd_ + pa, task_hi=_leaders(spec["task_hi"], k), task_lo=_leaders(spec["task_lo"], k),
         # Each leader's wave is shifted by a slot-dependent share of the period.
-        phase = spec["task_phase"][ids][:, None] + 0.37 * np.arange(k)[None, :]
-        up = square_wave(view.t, spec["task_period_s"][ids][:, None], phase) > 0
-        level = np.where(up, hi, lo)
-        return -pd_ + level * (pd_ + pa)
-
-    def follower_wish(view, params):
-        ids = view.scenario_id
-        up = square_wave(view.t, spec["f_period_s"][ids], spec["f_phase"][ids]) > 0
-        level = np.where(up, spec["f_hi"][ids], spec["f_lo"][ids])
-        return -prm.a_x_d + level * (prm.a_x_d + prm.a_x_a)
-
-    return TrafficHooks(leader_task=leader_task, follower_wish=follower_wish)
+        task_phase=spec["task_phase"][:, None] + 0.37 * np.arange(k)[None, :], task_period=spec["task_period_s"],
+        f_period=spec["f_period_s"], f_phase=spec["f_phase"], f_hi=spec["f_hi"], f_lo=spec["f_lo"], **lane,
+    )  # fmt: skip
 
 
 def with_profile_fields() -> bool:

@@ -41,9 +41,10 @@ from ._fast_checks import _ego_row, _lane_row
 from ._fast_general import _general_pair
 from ._fast_held import _motion_max
 from ._fast_rows import _load, _scratch, _store, _window
-from ._fast_traffic import _follower_row, _leader_row
+from ._fast_traffic import _follower_row, _leader_row, _profile_row, _sample_lanes, _wave_follower, _wave_task
 from .behaviours import hold_speed, last_accel, link_decel, reactive_core, task_core, violation_accel
-from .kinematics import constant_segment, piece_acc
+from .checks import far_gap, lane_far_ratio, lane_near, lane_verdict, lateral_extent, near_pair, near_threshold
+from .kinematics import constant_segment, piece_acc, state_at
 
 _compile.register_rows()
 announce_compile(__file__)
@@ -61,7 +62,14 @@ LoopBatch = collections.namedtuple("LoopBatch", (
     "x", "v", "ego", "valid", "n_connected", "f_connected", "f_aggressive", "uses", "promise", "chain_margin", "margin",
     "is_last", "acts", "v_desired", "promise_decel", "promise_accel", "decel_last", "gap0", "lane_valid", "lane_margin",
     "p_v", "scenario_id", "key", "rule",
+    "profile_t", "profile_a", "task_wave", "task_period", "f_wave", "wave_lane_valid", "wave_lane_margin",
+    "lane_sample",
 ))  # fmt: skip
+#: ``LoopBatch``'s last fields: ``L(N+1)``'s profile ``profile_t``, ``profile_a`` ``(B, P)`` (``P = 0``: none, the
+#: sudden braking); :class:`~.traffic.WaveHooks` by scenario id (none: no rows) — ``task_wave`` ``(S, K, 5)`` (low,
+#: span, high, low level, phase), ``task_period`` ``(S,)``, ``f_wave`` ``(S, 4)`` (period, phase, high, low level),
+#: the lane-gap sample's pairs and margins ``(S, K−1)`` and its running minimum ``lane_sample`` ``(S,)`` (written;
+#: none: no rows).
 #: What :func:`loop_kernel` writes: :data:`OUT_F`, :data:`OUT_B` per scenario, ``counts (B, 3)``, ``n_invalid``,
 #: ``breach_flags (B, 5)`` and ``bad_step`` (the first period whose state is not finite, ``-1`` if none).
 LoopOut = collections.namedtuple("LoopOut", ("f", "b", "counts", "n_invalid", "breach_flags", "bad_step"))
@@ -163,6 +171,34 @@ def _draw(batch, b, step, slot, salt):
 
 
 @row_function
+def _switched(x, v, f_acc, f_ts, f_xe, f_ve, i, t_sw, a2, dt, sw):
+    """Vehicle ``i`` (its first segment in ``f_*`` from ``constant_segment``) changing to ``a2`` at ``t_sw`` inside
+    the period: :meth:`~.kinematics.Fleet.switched`'s numbers (its stop time, end state) into ``f_ts``, ``f_xe``,
+    ``f_ve``, its knots (:meth:`~.kinematics.Fleet.motion`) into ``sw``; returns the second segment's ``|a|``."""
+    a1, t_stop = f_acc[i], f_ts[i]
+    ts1 = _min(t_stop, t_sw)
+    x_sw, v_run = state_at(SCALAR, x, v, a1, ts1)
+    v_sw = 0.0 if t_stop <= t_sw else _max(v_run, 0.0)  # stopped before the switch: exactly 0
+    acc2, ts2, x_end, v_end = constant_segment(SCALAR, x_sw, v_sw, a2, _max(dt - t_sw, 0.0))
+    f_ts[i], f_xe[i], f_ve[i] = ts1, x_end, v_end
+    sw.t[0], sw.t[1], sw.t[2], sw.t[3], sw.t[4] = 0.0, ts1, t_sw, t_sw + ts2, dt
+    sw.x[0], sw.x[1], sw.x[2], sw.x[3], sw.x[4] = x, x_sw, x_sw, x_end, x_end
+    sw.v[0], sw.v[1], sw.v[2], sw.v[3], sw.v[4] = v, v_sw, v_sw, v_end, v_end
+    sw.a[0], sw.a[1], sw.a[2], sw.a[3] = a1, 0.0, acc2, 0.0
+    return abs(acc2)
+
+
+@row_function
+def _without(out, flags, b, i):
+    """Row ``b`` of ``flags`` with entry ``i`` off, into ``out`` ``(1, .)``; returns ``out``."""
+    for j in range(flags.shape[1]):
+        out[0, j] = flags[b, j]
+    if i >= 0:
+        out[0, i] = False
+    return out
+
+
+@row_function
 def _period(prm, batch, b, w, den, ax_n, ay_n):
     """One control period of row ``b`` on the scratch ``w`` (its state loaded by :func:`_load`) with the nominal
     proposal ``(ax_n, ay_n)``: the shield (``period_row``), the traffic, the motion, the checks, the running values.
@@ -180,7 +216,7 @@ def _period(prm, batch, b, w, den, ax_n, ay_n):
     (x2, v2, f_acc2, f_ts2, f_xe2, f_ve2, acc, cap, general2, pp, sf, sb, chain_x, chain_v, own_x, own_v, own_promise,
      own_nc, history, count, st, sk, plan, snap_x, snap_v, snap_b, snap_nc, bounds_out, no_chain, of, ob, knots, px2,
      pv2, pb2, kn, kax, kay, scratch, lon_t, lon_x, lon_v, lon_a, lat_t, lat_x, lat_v, lat_a, o_t, o_x, o_v, o_a, lo,
-     hi, times, rf, rb, ri) = w  # fmt: skip
+     hi, times, rf, rb, ri, sw) = w  # fmt: skip
     x, v, f_acc, f_ts, f_xe, f_ve = x2[0], v2[0], f_acc2[0], f_ts2[0], f_xe2[0], f_ve2[0]
     general = general2[0]
     consts = (dt, p_m, a_lim, conflict, overlap, length, max_level)
@@ -219,7 +255,15 @@ def _period(prm, batch, b, w, den, ax_n, ay_n):
     # --- traffic (behaviours: the leaders by their rule, F) ---
     for i in range(k):
         cap[i] = _min(cap[i], bounds[i])
-    a_last = last_accel(SCALAR, t, brake_start, decel_last[b])
+    sw_t, sw_a = dt, 0.0  # L(N+1)'s profile: a switch inside the period at sw_t to sw_a (dt: none)
+    if batch.profile_t.shape[1] > 0:
+        a_last, sw_t, sw_a = _profile_row(batch.profile_t, batch.profile_a, b, t, dt)
+    else:
+        a_last = last_accel(SCALAR, t, brake_start, decel_last[b])
+    sid = batch.scenario_id[b]
+    waves = batch.task_period.shape[0] > 0  # the leaders' and F's wishes from WaveHooks
+    if batch.lane_sample.shape[0] > 0:  # (WaveHooks' sample of the lane gaps, before the leaders' wishes)
+        _sample_lanes(batch, sid, x)
     p_v, step = batch.p_v[b], ri[0, 4]
     if prm[21] > 0.0:  # SimConfig.leader_rule "reactive" (behaviours.reactive_leader_accels): front to back
         for i in range(k - 1, 0, -1):
@@ -234,16 +278,16 @@ def _period(prm, batch, b, w, den, ax_n, ay_n):
                 if p_v > 0.0 and _draw(batch, b, step, i, 7) < p_v:  # an unexpected violation replaces the rule
                     a_i = violation_accel(SCALAR, z, decel_last[b], _draw(batch, b, step, i, 8))
                 else:
-                    task = task_core(SCALAR, hold_speed(SCALAR, v[i], v_desired[b, i]), promise_decel[b, i],
-                                     promise_accel[b, i])  # fmt: skip
+                    wish = _wave_task(batch, sid, i, t) if waves else hold_speed(SCALAR, v[i], v_desired[b, i])
+                    task = task_core(SCALAR, wish, promise_decel[b, i], promise_accel[b, i])
                     a_i = reactive_core(SCALAR, task, z)
             acc[i] = a_i
     else:  # "worst_case" (behaviours.leader_accels), on the running minimum of the chain bounds
         for i in range(k):
             a_i = 0.0
             if 1 <= i < k - 1 and acts[b, i]:
-                task = task_core(SCALAR, hold_speed(SCALAR, v[i], v_desired[b, i]), promise_decel[b, i],
-                                 promise_accel[b, i])  # fmt: skip
+                wish = _wave_task(batch, sid, i, t) if waves else hold_speed(SCALAR, v[i], v_desired[b, i])
+                task = task_core(SCALAR, wish, promise_decel[b, i], promise_accel[b, i])
                 breaks = p_v > 0.0 and _draw(batch, b, step, i, 7) < p_v  # an unexpected violation
                 pick = _draw(batch, b, step, i, 8) if breaks else 0.0
                 a_i = _leader_row(x[i + 1] - x[i] - margin[b, i], v[i], v[i + 1], cap[i + 1], cap[i], task,
@@ -251,12 +295,17 @@ def _period(prm, batch, b, w, den, ax_n, ay_n):
             if is_last[b, i]:
                 a_i = a_last
             acc[i] = a_i
-    acc[0] = _follower_row(x[0], v[0], x[1], v[1], ex, evx, f_aggressive[b], completed, gap0[b], False, 0.0,
+    f_wish = _wave_follower(batch, sid, t, a_a, a_d) if waves else 0.0
+    acc[0] = _follower_row(x[0], v[0], x[1], v[1], ex, evx, f_aggressive[b], completed, gap0[b], waves, f_wish,
                            prm[22] > 0.0, p_m, a_a, a_o, open_decel, open_gap, dt)  # fmt: skip
     row_acc = 0.0
     for i in range(k):
         f_acc[i], f_ts[i], f_xe[i], f_ve[i] = constant_segment(SCALAR, x[i], v[i], acc[i], dt)
         row_acc = _max(row_acc, abs(f_acc[i]))
+    last = nc + 1
+    switching = sw_t < dt
+    if switching:  # L(N+1) switches inside the period: two segments (kinematics.Fleet.switched), its knots in sw
+        row_acc = _max(row_acc, _switched(x[last], v[last], f_acc, f_ts, f_xe, f_ve, last, sw_t, sw_a, dt, sw))
     # --- the ego's motion: a constant command, or the held plan ---
     l_acc, l_ts, l_xe, l_ve = constant_segment(SCALAR, ex, evx, ax_cmd, dt)
     ey1 = ey + evy * dt + 0.5 * ay_cmd * dt * dt
@@ -265,11 +314,24 @@ def _period(prm, batch, b, w, den, ax_n, ay_n):
     p_ymax = _motion_max(kt, ky, kvy) if on_plan else 0.0
     p_xend = kx[7] if on_plan else 0.0
     p_yend = ky[7] if on_plan else 0.0
+    ego_valid, vb = valid, b
+    if switching:  # the switching vehicle's pair is checked below, on its two segments
+        ego_valid, vb = _without(sw.valid, valid, b, last), 0
     hit, close, gap_f, gap_l1 = _ego_row(
-        valid, b, x2, v2, 0, (ex, evx), (ex, evx, l_acc, l_ts, l_xe), (ey, evy, ay_cmd, ey1),
+        ego_valid, vb, x2, v2, 0, (ex, evx), (ex, evx, l_acc, l_ts, l_xe), (ey, evy, ay_cmd, ey1),
         (on_plan, p_ymax, p_xend, p_yend), fleet, row_acc, consts, (gap_f, gap_l1),
         general2,
     )  # fmt: skip
+    if switching:  # its pair with the ego as ego_checks takes a switching vehicle's: near, the general path
+        y_max, xe_, ye_ = lateral_extent(SCALAR, ey, evy, ay_cmd, dt)[1], l_xe, ey1
+        if on_plan:
+            y_max, xe_, ye_ = p_ymax, p_xend, p_yend
+        d0 = x[last] - ex
+        if near_pair(SCALAR, valid[b, last], d0, v[last] - evx, near_threshold(SCALAR, p_m, a_lim + row_acc, dt),
+                     y_max, conflict, dt):  # fmt: skip
+            general[last] = True
+        elif last == 1:
+            gap_l1 = far_gap(SCALAR, gap_l1, valid[b, last], 1.0, d0, ey, f_xe[last] - xe_, ye_, conflict)
     for c in range(k):
         if not general[c]:
             continue
@@ -278,10 +340,13 @@ def _period(prm, batch, b, w, den, ax_n, ay_n):
         o_x[0], o_x[1], o_x[2] = x[c], f_xe[c], f_xe[c]
         o_v[0], o_v[1], o_v[2] = v[c], f_ve[c], f_ve[c]
         o_a[0], o_a[1] = f_acc[c], 0.0
+        m_t, m_x, m_v, m_a = o_t, o_x, o_v, o_a
+        if switching and c == last:
+            m_t, m_x, m_v, m_a = sw.t, sw.x, sw.v, sw.a
         for n_level in range(2):
             level = conflict if n_level == 0 else overlap
             if on_plan:
-                lo[n_level], hi[n_level] = _general_pair(kt, kx, kv, kax[:7], o_t, o_x, o_v, o_a, kt, ky, kvy,
+                lo[n_level], hi[n_level] = _general_pair(kt, kx, kv, kax[:7], m_t, m_x, m_v, m_a, kt, ky, kvy,
                                                          kay[:7], level, scratch)  # fmt: skip
             else:
                 lon_t[0], lon_t[1], lon_t[2] = 0.0, l_ts, dt
@@ -292,7 +357,7 @@ def _period(prm, batch, b, w, den, ax_n, ay_n):
                 lat_x[0], lat_x[1] = ey, ey1
                 lat_v[0], lat_v[1] = evy, evy1
                 lat_a[0] = ay_cmd
-                lo[n_level], hi[n_level] = _general_pair(lon_t, lon_x, lon_v, lon_a, o_t, o_x, o_v, o_a, lat_t,
+                lo[n_level], hi[n_level] = _general_pair(lon_t, lon_x, lon_v, lon_a, m_t, m_x, m_v, m_a, lat_t,
                                                          lat_x, lat_v, lat_a, level, scratch)  # fmt: skip
         hit = hit or (lo[1] < length and hi[1] > -length)
         close = close or (lo[0] < p_m - DIST_TOL_M and hi[0] > -p_m + DIST_TOL_M)
@@ -300,8 +365,29 @@ def _period(prm, batch, b, w, den, ax_n, ay_n):
             gap_f = _min(gap_f, -hi[0])
         elif c == 1:
             gap_l1 = _min(gap_l1, lo[0])
-    l_hit, l_close, ratio = _lane_row(batch.lane_valid, batch.lane_margin, b, x2, v2, f_acc2, f_ts2, f_xe2, f_ve2, 0,
+    lane_valid, lane_margin, pb = batch.lane_valid, batch.lane_margin, b
+    if switching:  # the pair behind the switching vehicle is checked below, on its two segments
+        lane_valid, lane_margin, pb = _without(sw.lane_valid, batch.lane_valid, b, last - 1), sw.lane_margin, 0
+        for c in range(k - 1):
+            lane_margin[0, c] = batch.lane_margin[b, c]
+    l_hit, l_close, ratio = _lane_row(lane_valid, lane_margin, pb, x2, v2, f_acc2, f_ts2, f_xe2, f_ve2, 0,
                                       row_acc, dt, length)  # fmt: skip
+    c = last - 1
+    if switching and batch.lane_valid[b, c]:  # as lane_checks takes a switching pair: near, its exact minimum
+        m = batch.lane_margin[b, c]
+        if lane_near(SCALAR, True, x[c], v[c], f_xe[c], f_ve[c], x[last], v[last], f_xe[last], f_ve[last], m, row_acc,
+                     dt):  # fmt: skip
+            o_t[0], o_t[1], o_t[2] = 0.0, f_ts[c], dt
+            o_x[0], o_x[1], o_x[2] = x[c], f_xe[c], f_xe[c]
+            o_v[0], o_v[1], o_v[2] = v[c], f_ve[c], f_ve[c]
+            o_a[0], o_a[1] = f_acc[c], 0.0
+            sw.lat_t[1] = dt  # (a lateral motion above the level all period: the gap's extrema, unwindowed)
+            low = _general_pair(o_t, o_x, o_v, o_a, sw.t, sw.x, sw.v, sw.a, sw.lat_t, sw.lat_x, sw.lat_v, sw.lat_a,
+                                0.0, scratch)[0]  # fmt: skip
+            pair_hit, pair_close, pair_ratio = lane_verdict(SCALAR, low, m, length)
+            l_hit, l_close, ratio = l_hit or pair_hit, l_close or pair_close, _min(ratio, pair_ratio)
+        else:
+            ratio = _min(ratio, lane_far_ratio(SCALAR, True, x[last] - x[c], f_xe[last] - f_xe[c], m))
     # --- advance (ClosedLoop.check_and_advance) ---
     if on_plan:
         ex, evx, ey, evy = kx[7], kv[7], ky[7], kvy[7]

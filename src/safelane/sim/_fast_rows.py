@@ -38,7 +38,14 @@ Scratch = collections.namedtuple("Scratch", (
     "own_x", "own_v", "own_promise", "own_nc", "history", "count", "st", "sk", "plan", "snap_x", "snap_v", "snap_b",
     "snap_nc", "bounds_out", "no_chain", "of", "ob", "knots", "px2", "pv2", "pb2", "kn", "kax", "kay", "scratch",
     "lon_t", "lon_x", "lon_v", "lon_a", "lat_t", "lat_x", "lat_v", "lat_a", "o_t", "o_x", "o_v", "o_a", "lo", "hi",
-    "times", "rf", "rb", "ri",
+    "times", "rf", "rb", "ri", "sw",
+))  # fmt: skip
+#: The scratch of a period in which ``L(N+1)``'s profile switches (``Scratch.sw``): the row's ``valid`` and lane
+#: pairs without that vehicle (the checks' rows skip it; ``_fast_loop._period`` checks its pairs on its two segments),
+#: its motion's knots (``t``, ``x``, ``v``, ``a``: 5, 5, 5, 4) and a lateral motion above the level all period (for the
+#: general path's gap over two motions, unwindowed).
+Switched = collections.namedtuple("Switched", (
+    "valid", "lane_valid", "lane_margin", "t", "x", "v", "a", "lat_t", "lat_x", "lat_v", "lat_a",
 ))  # fmt: skip
 
 
@@ -62,6 +69,8 @@ def _scratch(rows, period_prm):
         np.empty(64), np.empty(3), np.empty(3), np.empty(3), np.empty(2), np.empty(2), np.empty(2), np.empty(2),
         np.empty(1), np.empty(3), np.empty(3), np.empty(3), np.empty(2), np.empty(2), np.empty(2), np.empty(window),
         np.empty((1, len(RF))), np.empty((1, len(RB)), np.bool_), np.empty((1, len(RI)), np.int64),
+        Switched(np.empty((1, k), np.bool_), np.empty((1, m), np.bool_), np.empty((1, m)), np.empty(5), np.empty(5),
+                 np.empty(5), np.empty(4), np.zeros(2), np.ones(2), np.zeros(2), np.zeros(1)),
     )  # fmt: skip
 
 

@@ -22,20 +22,25 @@ from numba import types
 
 from ..params import Params
 from ..safety import _compile
-from ..safety._backend import SCALAR
+from ..safety._backend import INF, SCALAR
 from ..safety._fast_base import announce_compile, kernel, row_function
 from ..safety.chain import chain_link
+from ..tolerances import TIME_TOL_S
 from .behaviours import (
     follow_core,
     follower_wish_core,
     follows_ego,
+    gap_ratio,
     leader_confirmed,
     leader_keep,
     leader_needs_check,
     leader_want,
     link_decel,
     violation_accel,
+    wave_level,
+    wave_wish,
 )
+from .traffic import profile_after, profile_end, profile_scan
 
 _compile.register_rows()
 announce_compile(__file__)
@@ -184,3 +189,48 @@ def chain_bounds(x, v, promise, margin, prm: Params):
     unsafe = np.empty(bsz, dtype=np.bool_)
     chain_kernel(x, v, promise.reshape(k - 2, bsz), margin.reshape(k - 2, bsz), prm.others_decel, bounds, unsafe)
     return bounds, unsafe
+
+
+# --- traffic hooks as data and L(N+1)'s profile, row by row (the compiled closed loop's: _fast_loop._period) ---
+
+
+@row_function
+def _wave_task(batch, sid, i, t):
+    """The leader in slot ``i``'s wish from :class:`~.traffic.WaveHooks` (scenario id ``sid``; ``batch.task_wave``:
+    low, span, high, low level, phase per slot)."""
+    w = batch.task_wave
+    level = wave_level(SCALAR, t, batch.task_period[sid], w[sid, i, 4], w[sid, i, 2], w[sid, i, 3])
+    return wave_wish(SCALAR, level, w[sid, i, 0], w[sid, i, 1])
+
+
+@row_function
+def _wave_follower(batch, sid, t, a_x_a, a_x_d):
+    """F's wish from :class:`~.traffic.WaveHooks` (``batch.f_wave``: period, phase, high, low level), clipped into
+    ``[−a_x_d, a_x_a]`` as the paper's traffic clips a hook's wish."""
+    w = batch.f_wave
+    level = wave_level(SCALAR, t, w[sid, 0], w[sid, 1], w[sid, 2], w[sid, 3])
+    return SCALAR.clip(wave_wish(SCALAR, level, -a_x_d, a_x_d + a_x_a), -a_x_d, a_x_a)
+
+
+@row_function
+def _sample_lanes(batch, sid, x):
+    """:class:`~.traffic.WaveHooks`' sample of the lane gaps at the period's start (``x``: the row's positions) into
+    its running minimum ``batch.lane_sample[sid]``."""
+    low = INF
+    for c in range(x.shape[0] - 1):
+        low = SCALAR.minimum(low, gap_ratio(SCALAR, batch.wave_lane_valid[sid, c], x[c], x[c + 1],
+                                            batch.wave_lane_margin[sid, c]))  # fmt: skip
+    batch.lane_sample[sid] = SCALAR.minimum(batch.lane_sample[sid], low)
+
+
+@row_function
+def _profile_row(times, accels, b, t_start, dt):
+    """:func:`~.traffic.profile_segment` of row ``b``: ``(a1, t_switch, a2)``."""
+    now = t_start + TIME_TOL_S
+    a1, t_next = accels[b, 0], INF
+    for j in range(times.shape[1]):
+        a1, t_next = profile_scan(SCALAR, now, times[b, j], accels[b, j], a1, t_next)
+    a2 = a1
+    for j in range(times.shape[1]):
+        a2 = profile_after(SCALAR, t_next, times[b, j], accels[b, j], a2)
+    return profile_end(SCALAR, t_start, dt, TIME_TOL_S, a1, t_next, a2)

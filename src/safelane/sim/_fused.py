@@ -2,7 +2,8 @@
 :class:`~.step.ClosedLoop`'s arrays to :func:`._fast_loop.loop_kernel` and returns what the results table reads.
 
 The loop covers batches of :data:`FUSED_MIN_ROWS` scenarios or more with the expert planner (``ExpertPlanner`` itself,
-any gains), the paper's traffic without hooks or L(N+1) profiles (with unexpected promise violations), the paper's
+any gains), the paper's traffic without hooks (with unexpected promise violations, with or without L(N+1)'s profiles;
+its period, :class:`Stepper`, also with :class:`~.traffic.WaveHooks`: hooks as data), the paper's
 four variants and the RSS variants (their rule: ``shield/_fast_rules.py``), the settings of the default and paper
 presets (any assessment, the commit guard or the paper's completion rule, the monitor on or off, either leader rule,
 supervised, none of the real-world settings) and an F that ignores the ego, without a trace or recorded observations
@@ -26,6 +27,7 @@ from ..safety.lateral import LATERAL_TOL_M
 from ..shield.monitor import BREACH_KINDS, TOL_M, Breach
 from ..shield.policies import SlowState
 from ..shield.rules import rule_rows, rule_table, uncompiled_rules
+from .traffic import WaveHooks
 
 #: :func:`covers` takes batches from this many scenarios on.
 FUSED_MIN_ROWS = 64
@@ -120,7 +122,9 @@ def reasons(batch, cfg, nominal, traffic, trace: bool, record_observations: bool
         out.append("a trace is recorded")
     if record_observations:
         out.append("observations are recorded")
-    if traffic is not None:
+    if traffic is not None and not (stepping and type(traffic) is WaveHooks):
+        # WaveHooks (the paper's traffic, its wishes as data) run on the compiled period; the loop's chunks and the
+        # blame's rerun (engine.py) rebuild the closed loop with the default traffic
         out.append("a traffic model other than the paper's default")
     if len(batch) < FUSED_MIN_ROWS and not stepping:
         out.append(f"fewer than {FUSED_MIN_ROWS} scenarios")
@@ -130,8 +134,6 @@ def reasons(batch, cfg, nominal, traffic, trace: bool, record_observations: bool
                if setting(cfg, name) not in implemented(name))  # fmt: skip
     if batch.l0_x is not None:
         out.append("own-lane leaders in the batch")
-    if batch.last_profile_t is not None:
-        out.append("L(N+1) braking profiles")
     other = uncompiled_rules(rule_rows(batch.variant, len(batch)))
     if other:
         out.append(f"variants decided by a rule the loop does not implement: {other}")
@@ -207,15 +209,42 @@ def kernel_inputs(sim):
         c(is_last), c(acts), c(traffic.v_desired), c(b.promise_decel), c(b.promise_accel),
         c(b.decel_last.astype(np.float64)), c(traffic.gap0), c(sim.lane_pairs[0]), c(sim.lane_pairs[1]),
         c(b.p_v.astype(np.float64)), c(b.scenario_id.astype(np.int64)), np.array([sim.seed % 2**64], np.uint64),
-        rule_table(rule_rows(b.variant, len(b)), len(b), prm),
+        rule_table(rule_rows(b.variant, len(b)), len(b), prm), *_profile(b), *_waves(traffic.hooks, b),
     )  # fmt: skip
     return np.array([float(values[name]) for name in PRM]), period_constants(prm, cfg.shield), batch
 
 
+def _profile(b) -> tuple:
+    """``LoopBatch``'s ``profile_t``, ``profile_a``: ``L(N+1)``'s profile (none: ``(B, 0)``)."""
+    if b.last_profile_t is None:
+        return np.zeros((len(b), 0)), np.zeros((len(b), 0))
+    return np.ascontiguousarray(b.last_profile_t, np.float64), np.ascontiguousarray(b.last_profile_a, np.float64)
+
+
+def _waves(hooks, b) -> tuple:
+    """``LoopBatch``'s :class:`~.traffic.WaveHooks` fields (``_fast_loop.LoopBatch``; none: no rows). The running
+    minimum of the lane-gap sample is the hooks' own array (the loop writes it, as the NumPy path's hook does)."""
+    k = b.x.shape[1]
+    c = np.ascontiguousarray
+    if type(hooks) is not WaveHooks:
+        return (np.zeros((0, k, 5)), np.zeros(0), np.zeros((0, 4)), np.zeros((0, k - 1), bool), np.zeros((0, k - 1)),
+                np.zeros(0))  # fmt: skip
+    task = np.stack([hooks.task_low, hooks.task_span, hooks.task_hi, hooks.task_lo, hooks.task_phase], -1)
+    f_wave = np.stack([hooks.f_period, hooks.f_phase, hooks.f_hi, hooks.f_lo], 1)
+    waves = (c(task, np.float64), c(hooks.task_period, np.float64), c(f_wave, np.float64))
+    if hooks.lane_ratio is None:
+        return (*waves, np.zeros((0, k - 1), bool), np.zeros((0, k - 1)), np.zeros(0))
+    if not (hooks.lane_ratio.flags.c_contiguous and hooks.lane_ratio.dtype == np.float64):
+        raise ValueError("WaveHooks.lane_ratio must be a C-contiguous float64 array (the loop writes into it)")
+    return (*waves, c(hooks.lane_valid, np.bool_), c(hooks.lane_margin, np.float64), hooks.lane_ratio)
+
+
 #: ``_fast_loop.LoopBatch``'s fields with the batch on the last axis (the chain's inputs, vehicle-major as
 #: :class:`~.step.ClosedLoop` keeps them) and those shared by every row (the key of the draws: the seed's); every
-#: other field has the batch first (:meth:`Stepper.splice`).
+#: other field has the batch first (:meth:`Stepper.splice`), but the :class:`~.traffic.WaveHooks` fields, by scenario
+#: id (no rows without them): a batch with them is not spliced.
 BATCH_LAST, BATCH_SHARED = ("promise", "chain_margin"), ("key",)
+BY_ID = ("task_wave", "task_period", "f_wave", "wave_lane_valid", "wave_lane_margin", "lane_sample")
 
 
 def rows_of(start):
@@ -353,12 +382,16 @@ class Stepper:
         if not same:
             raise ValueError("Stepper.splice: the part has other settings, another seed or another number of vehicle "
                              "slots than this batch")  # fmt: skip
+        if any(getattr(b, name).shape[0] for name in BY_ID for b in (self.batch, part.batch)) or (
+                part.batch.profile_t.shape[1] != self.batch.profile_t.shape[1]):  # fmt: skip
+            raise ValueError("Stepper.splice: traffic hooks as data (WaveHooks, by scenario id) or L(N+1) profiles of "
+                             "another length: such batches are not spliced")  # fmt: skip
         if not self.spliced:  # (kernel_inputs may hand over the ClosedLoop's own arrays: from now on, ours)
             self.batch = type(self.batch)(*[a.copy() for a in self.batch])
         for name, into, new in zip(self.batch._fields, self.batch, part.batch, strict=True):
             if name in BATCH_LAST:
                 into[:, rows] = new
-            elif name not in BATCH_SHARED:
+            elif name not in BATCH_SHARED and name not in BY_ID:
                 into[rows] = new
         self.spliced = True
 

@@ -31,6 +31,7 @@ from typing import Protocol, runtime_checkable
 import numpy as np
 
 from ..params import Params
+from ..safety._backend import ARRAY, INF, jitable
 from ..tolerances import SETTING_SLACK, TIME_TOL_S
 
 
@@ -149,19 +150,91 @@ def with_last_profile(batch, switch_times_s, accels_mps2, params: Params | None 
 
 def profile_segment(t_start: float, dt: float, times: np.ndarray, accels: np.ndarray):
     """The profile over the period ``[t_start, t_start + dt]``: ``(a1, t_switch, a2)`` per row, ``t_switch``
-    relative to the period's start (``dt`` and ``a2 = a1`` where nothing switches inside it)."""
-    eps = TIME_TOL_S
-    idx = (times <= t_start + eps).sum(1) - 1  # the last segment started by now (padding repeats a start)
-    rows = np.arange(len(times))
-    a1 = accels[rows, idx]
-    later = times > t_start + eps
-    has_later = later.any(1)
-    t_next = np.where(has_later, times[rows, np.argmax(later, 1)], np.inf)
-    last_at = (times <= t_next[:, None]).sum(1) - 1  # the segment that starts at t_next
+    relative to the period's start (``dt`` and ``a2 = a1`` where nothing switches inside it). A scan of the
+    segments (:func:`profile_scan`, :func:`profile_after`, :func:`profile_end`), the compiled loop's too."""
+    now = t_start + TIME_TOL_S
+    a1, t_next = accels[:, 0], np.full(len(times), np.inf)
+    for j in range(times.shape[1]):
+        a1, t_next = profile_scan(ARRAY, now, times[:, j], accels[:, j], a1, t_next)
+    a2 = a1
+    for j in range(times.shape[1]):
+        a2 = profile_after(ARRAY, t_next, times[:, j], accels[:, j], a2)
+    return profile_end(ARRAY, t_start, dt, TIME_TOL_S, a1, t_next, a2)
+
+
+def profile_scan(xp, now, t_j, a_j, a1, t_next):
+    """Segment ``j`` (starts ascending, from ``j = 0``) of :func:`profile_segment`'s scan: ``a1`` the acceleration of
+    the last segment started by ``now`` (the period's start plus the time tolerance; padding repeats a start),
+    ``t_next`` the first start after ``now`` (``inf`` while none is seen). Backend-generic."""
+    later = t_j > now
+    return xp.where(later, a1, a_j), xp.where(later & (t_next == INF), t_j, t_next)
+
+
+def profile_after(xp, t_next, t_j, a_j, a2):
+    """Segment ``j`` of the second scan: ``a2`` the acceleration of the last segment that starts at ``t_next``.
+    Backend-generic."""
+    return xp.where(t_j <= t_next, a_j, a2)
+
+
+def profile_end(xp, t_start, dt, eps, a1, t_next, a2):
+    """``(a1, t_switch, a2)`` of the period from the scans: a switch where the next start lies inside the period
+    (by more than ``eps`` before its end). Backend-generic."""
     inside = t_next < t_start + dt - eps
-    a2 = np.where(inside, accels[rows, np.minimum(last_at, times.shape[1] - 1)], a1)
-    t_sw = np.where(inside, t_next - t_start, dt)
-    return a1, t_sw, a2
+    return a1, xp.where(inside, t_next - t_start, dt), xp.where(inside, a2, a1)
+
+
+@dataclass(frozen=True, eq=False)
+class WaveHooks(TrafficHooks):
+    """:class:`TrafficHooks` as data: square waves between two levels (:func:`~.behaviours.wave_level`), per scenario
+    id, which the compiled closed loop reads as the NumPy path calls them (the falsifier's hooks:
+    ``experiments/falsify_build.hooks_for``).
+
+    Attributes (first axis the scenario id):
+        task_low, task_span, task_hi, task_lo, task_phase: ``(S, K)`` each leader's wish
+            ``task_low + level · task_span``, ``level`` ``task_hi`` on the first half of its wave, ``task_lo`` on the
+            second, its phase in periods;
+        task_period: ``(S,)`` the leaders' wave period [s];
+        f_period, f_phase, f_hi, f_lo: ``(S,)`` F's wave: ``−a_x_d + level · (a_x_d + a_x_a)``;
+        lane_valid, lane_margin, lane_ratio: ``(S, K−1)``, ``(S, K−1)``, ``(S,)`` or ``None``: the running minimum,
+            sampled at the start of every period, of each scenario's consecutive target-lane gaps over their margins
+            (:func:`~.behaviours.gap_ratio`), written into ``lane_ratio`` (where it is not ``None``).
+    """
+
+    task_low: np.ndarray | None = None
+    task_span: np.ndarray | None = None
+    task_hi: np.ndarray | None = None
+    task_lo: np.ndarray | None = None
+    task_phase: np.ndarray | None = None
+    task_period: np.ndarray | None = None
+    f_period: np.ndarray | None = None
+    f_phase: np.ndarray | None = None
+    f_hi: np.ndarray | None = None
+    f_lo: np.ndarray | None = None
+    lane_valid: np.ndarray | None = None
+    lane_margin: np.ndarray | None = None
+    lane_ratio: np.ndarray | None = None
+
+    def __post_init__(self):
+        object.__setattr__(self, "leader_task", self._leader_task)
+        object.__setattr__(self, "follower_wish", self._follower_wish)
+
+    def _leader_task(self, view: TrafficView, params: Params) -> np.ndarray:
+        from .behaviours import gap_ratio, wave_level, wave_wish
+
+        ids = view.scenario_id
+        if self.lane_ratio is not None:
+            ratio = gap_ratio(ARRAY, self.lane_valid[ids], view.x[:, :-1], view.x[:, 1:], self.lane_margin[ids])
+            self.lane_ratio[ids] = np.minimum(self.lane_ratio[ids], ratio.min(1))
+        level = wave_level(ARRAY, view.t, self.task_period[ids][:, None], self.task_phase[ids], self.task_hi[ids],
+                           self.task_lo[ids])  # fmt: skip
+        return wave_wish(ARRAY, level, self.task_low[ids], self.task_span[ids])
+
+    def _follower_wish(self, view: TrafficView, params: Params) -> np.ndarray:
+        from .behaviours import wave_level, wave_wish
+
+        ids = view.scenario_id
+        level = wave_level(ARRAY, view.t, self.f_period[ids], self.f_phase[ids], self.f_hi[ids], self.f_lo[ids])
+        return wave_wish(ARRAY, level, -params.a_x_d, params.a_x_d + params.a_x_a)
 
 
 @runtime_checkable
@@ -214,3 +287,8 @@ def resolve_traffic(traffic) -> TrafficModel:
         f"traffic must be a registered name ({', '.join(TRAFFIC_MODELS)}), TrafficHooks or a TrafficModel; got "
         f"{type(traffic).__name__}"
     )
+
+
+# The profile's scan, compiled into the closed loop (safety/_compile.py, through _fast_loop): the same functions, row by
+# row.
+jitable(profile_scan, profile_after, profile_end)
