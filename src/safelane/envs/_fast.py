@@ -21,7 +21,7 @@ from ..planners import features as _features  # noqa: F401  (its closed forms ar
 from ..planners.features import feature_row, planned_change
 from ..safety import _compile
 from ..safety._backend import SCALAR
-from ..safety._fast_base import announce_compile
+from ..safety._fast_base import announce_compiles
 from ..shield.decide import ABORT, HESITATE
 from ..sim._fast_loop import _period
 from ..sim._fast_rows import _load, _scratch, _store, _window
@@ -29,7 +29,7 @@ from . import core as _core  # noqa: F401  (outcome_core is marked: registered b
 from .core import outcome_core
 
 _compile.register_rows()
-announce_compile(__file__)
+announce_compiles()
 
 #: The env's scalars (:func:`env_step_kernel`'s ``env``): the period, the lane boundary, the horizon in periods and
 #: :class:`~.core.RewardConfig`'s weights in :meth:`~.core.RewardConfig.weights`' order.

@@ -26,14 +26,14 @@ from numba import types
 
 from . import _compile
 from ._backend import SCALAR, Limits
-from ._fast_base import _B, _F, announce_compile, kernel
+from ._fast_base import _B, _F, announce_compiles, kernel
 
 # responsible.responsible_bound's dispatch finds its kernel here (fast_kernel() is this module): re-exported
 from ._fast_responsible import responsible, responsible_kernel  # noqa: F401
 from .evasion import PARTS, evasion_parts
 
 _compile.register_rows()
-announce_compile(__file__)
+announce_compiles()
 
 #: The float fields of the plan, in the rows of :func:`plan_kernel`'s ``floats`` output.
 FLOAT_PARTS = PARTS[:10]

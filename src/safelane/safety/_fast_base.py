@@ -23,6 +23,7 @@ import numba
 import numpy as np
 from llvmlite import ir
 from numba import types
+from numba.core import event
 from numba.extending import intrinsic
 
 from . import _backend, _compile
@@ -76,21 +77,45 @@ drop_stale_caches()
 _ANNOUNCED: list[bool] = []
 
 
-def announce_compile(source: str, stream=None) -> bool:
-    """Say once per process (on stderr) that numba is compiling the kernels, when the module ``source`` has no
-    cached kernel yet: a fresh install, or a kernel source edited. Measured on the 2-core development machine, idle: a
-    first ``simulate`` and ``Shield.step`` with an empty cache took 56 s (the same script 3.2 s once cached).
-    Returns whether it spoke.
-    Silent with ``NUMBA_DISABLE_JIT=1`` (nothing is compiled) and with ``NUMBA_CACHE_DIR`` (the cache is elsewhere)."""
+def say_compiling(stream=None) -> bool:
+    """Say once per process (on stderr) that numba is compiling the kernels: a fresh install, or a kernel source
+    edited. Measured on the 2-core development machine: a first run of the loop, the neural planner's compiled period
+    and an env step with an empty cache took 53 s (``benchmarks/bench_cold_start.py``; 1.2 s once cached). Returns
+    whether it spoke. Silent with ``NUMBA_DISABLE_JIT=1`` (nothing is compiled) and with ``NUMBA_CACHE_DIR`` (the
+    cache is elsewhere: benchmarks and tests that time or isolate compilation)."""
     if _ANNOUNCED or numba.config.DISABLE_JIT or numba.config.CACHE_DIR:
-        return False
-    src = Path(source)
-    if any((src.parent / "__pycache__").glob(f"{src.stem}.*.nbi")):
         return False
     _ANNOUNCED.append(True)
     print("safelane: compiling the numba kernels on first use (about a minute, once; cached for later runs)",
           file=stream or sys.stderr, flush=True)  # fmt: skip
     return True
+
+
+class _CompileListener(event.Listener):
+    """numba's ``numba:compile`` event, which fires where a function of safelane is really compiled (a cache miss,
+    not a load from the cache): the moment to say so (:func:`say_compiling`)."""
+
+    def on_start(self, ev) -> None:
+        dispatcher = (ev.data or {}).get("dispatcher")
+        module = getattr(getattr(dispatcher, "py_func", None), "__module__", None) or ""  # (None for some)
+        if module.startswith("safelane."):
+            say_compiling()
+
+    def on_end(self, ev) -> None:
+        pass
+
+
+_LISTENING: list[bool] = []
+
+
+def announce_compiles() -> None:
+    """Listen, once per process, for the compilation of any of safelane's kernels and say so when it starts (each
+    kernel module calls this at import). Before, a module announced at import when its folder held no cached kernel of
+    it, which also spoke where nothing compiled (a module whose kernels a run never calls has no cache)."""
+    if not _LISTENING:
+        event.register("numba:compile", _CompileListener())
+        _LISTENING.append(True)
+
 
 def kernel(signature):
     """A batch kernel: ``numba.njit(signature, cache=True, nogil=True, error_model="numpy")``, compiled — or loaded from

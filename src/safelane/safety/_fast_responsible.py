@@ -21,12 +21,12 @@ from numba import types
 from .._motion import advance_core
 from . import _compile
 from ._backend import SCALAR
-from ._fast_base import _F, announce_compile, kernel, readonly
+from ._fast_base import _F, announce_compiles, kernel, readonly
 from .chain import min_follow_decel
 from .responsible import pair_min_gap_core, responsible_bound_core, responsible_ok_core
 
 _compile.register_rows()
-announce_compile(__file__)
+announce_compiles()
 
 _RESPONSIBLE_SIGNATURE = types.void(*(_F,) * 5, types.float64, types.Array(types.float64, 1, "C"))
 

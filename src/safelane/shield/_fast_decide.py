@@ -18,12 +18,12 @@ from ..params import Params
 from ..safety import _compile
 from ..safety._backend import FEASIBILITY_TOL_M, SCALAR, Limits
 from ..safety._fast import BOOL_PARTS, FLOAT_PARTS
-from ..safety._fast_base import _B, _F, announce_compile, kernel, row_function
+from ..safety._fast_base import _B, _F, announce_compiles, kernel, row_function
 from ..safety.lateral import LATERAL_TOL_M
 from .decide import Verdict, candidate_row, completion_level, verdict_of
 
 _compile.register_rows()
-announce_compile(__file__)
+announce_compiles()
 
 #: The rows of :func:`candidate_kernel`'s ``floats``: the predicted states, then the plan's float parts.
 STATES = ("ex", "ey", "evx", "evy", "lx", "lv", "fx", "fv")

@@ -11,11 +11,11 @@ from numba import types
 
 from ..safety import _compile
 from ..safety._backend import SCALAR
-from ..safety._fast_base import announce_compile, kernel, row_function
+from ..safety._fast_base import announce_compiles, kernel, row_function
 from .monitor import BREACH_KINDS, TOL_M, Breach, braked_harder, pushed_harder
 
 _compile.register_rows()
-announce_compile(__file__)
+announce_compiles()
 
 _M = types.Array(types.float64, 2, "A", readonly=True)
 _V = types.Array(types.float64, 1, "A", readonly=True)

@@ -27,13 +27,13 @@ from numba import types
 from ..params import Params
 from ..safety import _compile
 from ..safety._backend import FEASIBILITY_TOL_M, SCALAR, Limits
-from ..safety._fast_base import _B, _F, announce_compile, kernel, row_function
+from ..safety._fast_base import _B, _F, announce_compiles, kernel, row_function
 from ..safety.lateral import LATERAL_TOL_M, lateral_core
 from ..safety.own_lane import _search, choose_member, member_bounds, member_parts, own_period
 from .decide import candidate_period, own_margin
 
 _compile.register_rows()
-announce_compile(__file__)
+announce_compiles()
 
 #: The predicted states at the period's end (:func:`check_kernel`'s first rows of ``floats``), then ``L0``'s.
 STATES = ("ex", "ey", "evx", "evy", "lx", "lv", "fx", "fv", "l0_x", "l0_v")

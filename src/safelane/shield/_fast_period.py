@@ -30,7 +30,7 @@ import numpy as np
 
 from ..safety import _compile
 from ..safety._backend import SCALAR, Limits, _clip
-from ..safety._fast_base import announce_compile, float_bits, row_function, sort_short
+from ..safety._fast_base import announce_compiles, float_bits, row_function, sort_short
 from ..safety._fast_responsible import _responsible_bound
 from ..safety.chain import chain_link
 from ..safety.own_lane import own_period
@@ -57,7 +57,7 @@ from .proposals import proposal_core
 from .stages import lane_keep_accel, worst_case_core
 
 _compile.register_rows()
-announce_compile(__file__)
+announce_compiles()
 
 _INF = np.inf
 #: Scalars of :func:`period_kernel`'s ``prm`` vector, in order.

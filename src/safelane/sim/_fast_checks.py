@@ -22,7 +22,7 @@ from numba import types
 from ..params import Params
 from ..safety import _compile
 from ..safety._backend import INF, SCALAR
-from ..safety._fast_base import _min, announce_compile, kernel, row_function
+from ..safety._fast_base import _min, announce_compiles, kernel, row_function
 from ._fast_general import _general
 from .checks import (
     apply_pairs,
@@ -43,7 +43,7 @@ from .checks import (
 from .kinematics import extrema
 
 _compile.register_rows()
-announce_compile(__file__)
+announce_compiles()
 
 _M = types.Array(types.float64, 2, "A", readonly=True)
 _MB = types.Array(types.bool_, 2, "A", readonly=True)

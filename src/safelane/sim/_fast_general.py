@@ -17,11 +17,11 @@ from numba import types
 
 from ..safety import _compile
 from ..safety._backend import INF, SCALAR
-from ..safety._fast_base import _max, _min, announce_compile, kernel, sort_short
+from ..safety._fast_base import _max, _min, announce_compiles, kernel, sort_short
 from .kinematics import segment_crossings, state_at, windowed_piece
 
 _compile.register_rows()
-announce_compile(__file__)
+announce_compiles()
 
 _OUT_V = types.Array(types.float64, 1, "C")
 _K = types.Array(types.float64, 2, "A", readonly=True)

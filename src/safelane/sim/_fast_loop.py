@@ -33,7 +33,7 @@ from .._splitmix import counter_uniform4
 from ..planners.base import ExpertGains, expert_accel
 from ..safety import _compile
 from ..safety._backend import SCALAR, Limits
-from ..safety._fast_base import _max, _min, announce_compile, row_function
+from ..safety._fast_base import _max, _min, announce_compiles, row_function
 from ..shield._fast_period import monitor_row, period_row
 from ..shield.decide import ABORT, HESITATE, PROCEED
 from ..tolerances import DIST_TOL_M
@@ -47,7 +47,7 @@ from .checks import far_gap, lane_far_ratio, lane_near, lane_verdict, lateral_ex
 from .kinematics import constant_segment, piece_acc, state_at
 
 _compile.register_rows()
-announce_compile(__file__)
+announce_compiles()
 
 _INF = np.inf
 #: Scalars of :func:`loop_kernel`'s ``prm`` vector, in order.

@@ -11,10 +11,10 @@ import collections
 import numba
 import numpy as np
 
-from ..safety._fast_base import announce_compile, row_function
+from ..safety._fast_base import announce_compiles, row_function
 from ..shield._fast_period import OUT_B, SIT_F
 
-announce_compile(__file__)
+announce_compiles()
 
 _INF = np.inf
 #: A row's whole state between periods, one array per part with the batch first (the compiled loop's only state):

@@ -23,7 +23,7 @@ from numba import types
 from ..params import Params
 from ..safety import _compile
 from ..safety._backend import INF, SCALAR
-from ..safety._fast_base import announce_compile, kernel, row_function
+from ..safety._fast_base import announce_compiles, kernel, row_function
 from ..safety.chain import chain_link
 from ..tolerances import TIME_TOL_S
 from .behaviours import (
@@ -43,7 +43,7 @@ from .behaviours import (
 from .traffic import profile_after, profile_end, profile_scan
 
 _compile.register_rows()
-announce_compile(__file__)
+announce_compiles()
 
 _M = types.Array(types.float64, 2, "A", readonly=True)
 _MB = types.Array(types.bool_, 2, "A", readonly=True)

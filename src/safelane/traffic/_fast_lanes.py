@@ -8,9 +8,9 @@ from __future__ import annotations
 
 import numba
 
-from ..safety._fast_base import announce_compile
+from ..safety._fast_base import announce_compiles
 from . import lanes
 
-announce_compile(lanes.__file__)  # numba caches the kernel under the source it compiles: lanes.py
+announce_compiles(lanes.__file__)  # numba caches the kernel under the source it compiles: lanes.py
 numba.extending.register_jitable(lanes._first)
 neighbour_kernel = numba.njit(cache=True, nogil=True)(lanes.neighbour_rows)
