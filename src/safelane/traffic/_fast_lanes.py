@@ -11,6 +11,6 @@ import numba
 from ..safety._fast_base import announce_compiles
 from . import lanes
 
-announce_compiles(lanes.__file__)  # numba caches the kernel under the source it compiles: lanes.py
+announce_compiles()
 numba.extending.register_jitable(lanes._first)
 neighbour_kernel = numba.njit(cache=True, nogil=True)(lanes.neighbour_rows)
