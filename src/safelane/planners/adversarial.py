@@ -26,6 +26,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..params import Params
+from ..safety._backend import ARRAY, jitable
 from .base import Observation, clip_actions
 
 
@@ -48,10 +49,16 @@ def _lateral(obs: Observation, params: Params, omega, zeta):
     return w * w * (params.lane_width - obs.p_y) - 2.0 * z * w * obs.v_y
 
 
+def wave_level(xp, t, period, phase, high, low):
+    """A square wave between two levels at time ``t``: ``high`` on the first half of each ``period``, ``low`` on the
+    second; ``phase`` in periods (``[0, 1)``). Backend-generic: the adversarial planners' waves (:func:`square_wave`)
+    and the falsifier's traffic hooks as data (``sim/traffic.WaveHooks``, compiled in the closed loop)."""
+    return xp.where((t / period + phase) % 1.0 < 0.5, high, low)
+
+
 def square_wave(t: float, period_s, phase) -> np.ndarray:
     """``+1`` on the first half of each period, ``−1`` on the second; ``phase`` in periods (``[0, 1)``)."""
-    frac = np.mod(t / np.asarray(period_s, float) + np.asarray(phase, float), 1.0)
-    return np.where(frac < 0.5, 1.0, -1.0)
+    return wave_level(ARRAY, t, np.asarray(period_s, float), np.asarray(phase, float), 1.0, -1.0)
 
 
 @dataclass(frozen=True)
@@ -164,3 +171,6 @@ ADVERSARIES = {
     "oscillating": Oscillating,
     "reckless": RecklessMerge,
 }
+
+
+jitable(wave_level)

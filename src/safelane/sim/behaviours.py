@@ -35,6 +35,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..params import Params
+from ..planners.adversarial import wave_level  # noqa: F401  (the square wave's one home; used by WaveHooks)
 from ..safety._backend import ARRAY, FEASIBILITY_TOL_M, INF, jitable
 from ..safety.chain import min_follow_decel, propagate_chain
 from ..safety.evasion import fast_kernel
@@ -292,13 +293,6 @@ def follower_accel(
         return np.where(follows_ego(ARRAY, ego_x - f_x, aggressive, completed, ignores_ego), a_ego, a)
 
 
-def wave_level(xp, t, period, phase, high, low):
-    """A square wave between two levels at time ``t``: ``high`` on the first half of each ``period``, ``low`` on the
-    second; ``phase`` in periods (``[0, 1)``). The wishes of :class:`~.traffic.WaveHooks` (the falsifier's traffic
-    hooks as data). Backend-generic."""
-    return xp.where((t / period + phase) % 1.0 < 0.5, high, low)
-
-
 def wave_wish(xp, level, low, span):
     """A wish at ``level`` (in ``[0, 1]``) of the range ``[low, low + span]``. Backend-generic."""
     return low + level * span
@@ -314,6 +308,6 @@ def gap_ratio(xp, valid, x_behind, x_ahead, margin):
 # functions, evaluated row by row.
 jitable(
     last_accel, leader_want, leader_needs_check, leader_confirmed, leader_keep, link_decel, violation_accel,
-    reactive_core, hold_speed, task_core, follower_wish_core, follow_core, follows_ego, wave_level, wave_wish,
+    reactive_core, hold_speed, task_core, follower_wish_core, follow_core, follows_ego, wave_wish,
     gap_ratio,
 )  # fmt: skip

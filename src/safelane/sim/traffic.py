@@ -185,9 +185,9 @@ def profile_end(xp, t_start, dt, eps, a1, t_next, a2):
 
 @dataclass(frozen=True, eq=False)
 class WaveHooks(TrafficHooks):
-    """:class:`TrafficHooks` as data: square waves between two levels (:func:`~.behaviours.wave_level`), per scenario
-    id, which the compiled closed loop reads as the NumPy path calls them (the falsifier's hooks:
-    ``experiments/falsify_build.hooks_for``).
+    """:class:`TrafficHooks` as data: square waves between two levels
+    (:func:`~safelane.planners.adversarial.wave_level`), per scenario id, which the compiled closed loop reads as the
+    NumPy path calls them (the falsifier's hooks: ``experiments/falsify_build.hooks_for``).
 
     Attributes (first axis the scenario id):
         task_low, task_span, task_hi, task_lo, task_phase: ``(S, K)`` each leader's wish
