@@ -71,3 +71,90 @@ def test_stated_braking_above_the_acceleration_speed_limit_does_not_accelerate()
     v, t_acc = 99.0, 1.0 / 3.5
     expect = v * t_acc + 0.5 * acc * t_acc**2 + 100.0 * (rho - t_acc) + 100.0**2 / (2 * brake)
     assert stated_braking_longitudinal(v, rho, acc, brake, max_speed=100.0) == pytest.approx(expect, rel=1e-12)
+
+
+def _verdict_by_hand(active, invalid, ok_chain, ok_f, ok_chain_h, ok_f_h):
+    """The rule's order, as its module docstring states it: once complete, none; an RSS-safe proposal (never an
+    invalid one); else an RSS-safe hesitation; else the proper response."""
+    if not active:
+        return False, False, False
+    if not invalid and ok_chain and ok_f:
+        return True, False, False
+    if ok_chain_h and ok_f_h:
+        return False, True, False
+    return False, False, True
+
+
+def test_the_verdict_follows_the_rules_order_on_every_combination():
+    from itertools import product
+
+    from safelane.baselines.rss_rule import verdict_core
+
+    combos = np.array(list(product([False, True], repeat=6)))
+    got = verdict_core(ARRAY, *combos.T)
+    for row, p, h, r in zip(combos, *got, strict=True):
+        assert (bool(p), bool(h), bool(r)) == _verdict_by_hand(*row), row
+
+
+def test_the_lateral_command_of_each_behaviour():
+    """Proceed: the proposal; hesitate: the hesitation; respond: back towards the original lane by the PD law
+    (``-0.8 y - 1.6 v_y``, clipped to ``a_y_m``), braking laterally at ``lat_brake_min`` or more while still moving
+    out; complete: the lane keeping's command."""
+    from safelane.baselines.rss_rule import lateral_core
+
+    a_y_m, lat_brake_min = 1.5, 0.8
+    f, t = np.array([False]), np.array([True])
+    one = lambda p, h, r, c, y, vy: float(lateral_core(ARRAY, p, h, r, c, np.array([0.7]), np.array([-0.3]),  # noqa: E731
+                                                       np.array([0.05]), np.array([y]), np.array([vy]), a_y_m,
+                                                       lat_brake_min)[0])  # fmt: skip
+    assert one(t, f, f, f, 1.0, 0.5) == 0.7
+    assert one(f, t, f, f, 1.0, 0.5) == -0.3
+    assert one(f, f, f, t, 3.4, 0.0) == 0.05
+    # responding, moving out slowly: the PD law asks -0.8 - 0.16 = -0.96, harder than lat_brake_min: as is
+    assert one(f, f, t, f, 1.0, 0.1) == pytest.approx(-0.8 * 1.0 - 1.6 * 0.1)
+    # responding, moving out, near the original lane: the PD law asks less than lat_brake_min: -lat_brake_min
+    assert one(f, f, t, f, 0.1, 0.01) == -lat_brake_min
+    # responding, already moving back: the PD law alone (here positive: it brakes the return), clipped to a_y_m
+    assert one(f, f, t, f, 0.2, -0.9) == pytest.approx(-0.8 * 0.2 + 1.6 * 0.9)
+    assert one(f, f, t, f, 0.2, -2.0) == a_y_m  # (-0.16 + 3.2, clipped)
+
+
+def test_completion_is_the_centre_crossing_the_boundary_this_period():
+    from safelane.baselines.rss_rule import completing_core
+
+    prm = Params()
+    y0 = prm.y_boundary - 0.05
+    t, f = np.array([True]), np.array([False])
+    crossing = completing_core(ARRAY, t, f, np.array([y0]), np.array([0.6]), np.array([0.0]), prm.dt, prm.y_boundary)
+    assert crossing[0]  # 0.06 m this period
+    short = completing_core(ARRAY, f, t, np.array([y0]), np.array([0.4]), np.array([0.0]), prm.dt, prm.y_boundary)
+    assert not short[0]  # 0.04 m
+    still = completing_core(ARRAY, f, f, np.array([y0]), np.array([0.6]), np.array([0.0]), prm.dt, prm.y_boundary)
+    assert not still[0]  # a responding row never completes
+
+
+def test_each_vehicle_ahead_gets_its_brake_max():
+    """L1: the variant's worst case with V2X, else RSS's ``brake_max``; a connected leader behind L1: its chain bound
+    with V2X; a non-connected one: RSS's; never below the floor."""
+    from safelane.baselines.rss_rule import BRAKE_FLOOR_MPS2, chain_brake_core
+
+    slots = np.arange(4)
+    bounds = np.array([0.0, 0.5, 1.5, 2.5])
+    with_v2x = chain_brake_core(ARRAY, slots, True, 2, bounds, 3.0, 8.0)
+    np.testing.assert_array_equal(with_v2x, [3.0, 0.5, 8.0, 8.0])
+    np.testing.assert_array_equal(chain_brake_core(ARRAY, slots, False, 2, bounds, 3.0, 8.0), [8.0] * 4)
+    assert chain_brake_core(ARRAY, 0, True, 1, 0.0, 0.0, 8.0) == BRAKE_FLOOR_MPS2
+
+
+def test_matched_parameters_and_their_vector():
+    from safelane.baselines.rss import RSS_FIELDS, rss_vector
+
+    prm = Params(a_x_a=2.0, a_x_d=7.0, a_y_m=1.2, dt=0.05)
+    m = RssParams.matched(prm)
+    assert (m.response_time_ego, m.response_time_other) == (0.05, 0.05)
+    assert (m.accel_max, m.brake_min, m.brake_max, m.brake_min_correct) == (2.0, 7.0, 7.0, 7.0)
+    assert (m.lat_accel_max, m.lat_brake_min) == (1.2, 1.2)
+    assert m.lateral_fluctuation_margin == RssParams().lateral_fluctuation_margin
+    vec = rss_vector(m)
+    assert vec.tolist() == [getattr(m, name) for name in RSS_FIELDS] and len(RSS_FIELDS) == 10
+    assert RSS_FIELDS[:5] == ("response_time_ego", "response_time_other", "accel_max", "brake_min", "brake_max")
