@@ -1,5 +1,5 @@
 """Simulations that the whole-episode compiled loop does not take only because of their nominal planner, a trace or
-recorded observations run their periods compiled (``sim/_fused.Stepper``: ``engine == "compiled period"``), the
+recorded observations run their periods compiled (``sim/_stepper.Stepper``: ``engine == "compiled period"``), the
 planner between periods: the table, the trace and the observations are the NumPy path's (``SAFELANE_NO_FUSED=1``),
 bit for bit, and the table is the compiled loop's where that loop runs too."""
 

@@ -1,5 +1,5 @@
-"""The envs on the compiled period (``sim/_fused.Stepper``, ``sim/_fast_loop.step_kernel``) against the same envs period
-by period in NumPy (``SAFELANE_NO_FUSED=1``: :class:`~safelane.sim.step.ClosedLoop`, the reference): the same
+"""The envs on the compiled period (``sim/_stepper.Stepper``, ``sim/_fast_loop.step_kernel``) against the same envs
+period by period in NumPy (``SAFELANE_NO_FUSED=1``: :class:`~safelane.sim.step.ClosedLoop`, the reference): the same
 observations, rewards, flags and info, bit for bit, over several episodes with resets, invalid actions, hesitations
 and aborts; the vector env's sub-envs the single env's exactly (each row keeps its own clock); the dispatch."""
 
@@ -15,7 +15,7 @@ pytest.importorskip("numba", reason="the compiled period needs the fast extra")
 
 from safelane.envs import LaneChangeEnv, LaneChangeVectorEnv
 from safelane.params import Params
-from safelane.sim._fused import Stepper
+from safelane.sim._stepper import Stepper
 from safelane.sim.step import ClosedLoop
 
 KW = dict(n_leaders=(0, 1, 3), decel=(2.0, 8.0), reward={"time": 0.01, "intervention": 0.1, "cost": 1.0})

@@ -14,6 +14,7 @@ from safelane import Params
 from safelane.planners.base import ExpertPlanner
 from safelane.shield.rules import DECISION_RULES, Coded
 from safelane.sim import ScenarioConfig, SimConfig, _fused, concat, paper_scenarios, simulate_batch
+from safelane.sim._stepper import steps_compiled
 from test_fast_core import needs_numba
 
 pytestmark = [pytest.mark.compiled, needs_numba]
@@ -192,8 +193,8 @@ def test_the_fused_loop_runs_profiles_and_leaves_other_rules_to_the_period_by_pe
                                                               "task_phase")},
                       **{name: np.ones(80) for name in ("task_period", "f_period", "f_phase", "f_hi", "f_lo")})
     assert not _covers(batch, traffic=waves)
-    assert not _fused.steps_compiled(batch, SimConfig(), waves)
-    assert _fused.steps_compiled(batch, SimConfig(), TrafficHooks(follower_wish=lambda view, prm: view.v[:, 0]))
+    assert not steps_compiled(batch, SimConfig(), waves)
+    assert steps_compiled(batch, SimConfig(), TrafficHooks(follower_wish=lambda view, prm: view.v[:, 0]))
     rss = concat([batch, paper_scenarios("RSS", 3, 5.0, 10, rng, first_id=500)])
     assert _covers(rss)  # RSS's rule is compiled (shield/_fast_rules.py); a user's own rule is not
     monkeypatch.setitem(DECISION_RULES, "rss", Coded(type("Mine", (), {"decide": lambda self, inp, prm: None})()))

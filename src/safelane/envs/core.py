@@ -8,8 +8,8 @@ into observations, rewards, costs and flags. :class:`~safelane.envs.LaneChangeEn
 
 Resets (the vector env's auto-reset): the rows that finished get fresh scenarios, sampled row by row from their own
 generators exactly as a single env samples them, and a ``ClosedLoop`` over those rows alone gives their initial
-state and first observation. On the compiled loop (:class:`~safelane.sim._fused.Stepper`) the fresh rows' kernel
-inputs and state are spliced into the running batch's arrays (:meth:`~safelane.sim._fused.Stepper.splice`); each row
+state and first observation. On the compiled loop (:class:`~safelane.sim._stepper.Stepper`) the fresh rows' kernel
+inputs and state are spliced into the running batch's arrays (:meth:`~safelane.sim._stepper.Stepper.splice`); each row
 keeps its own clock, so a restarted row runs exactly the single env's episode. Period by period in NumPy a new
 ``ClosedLoop`` is built for the whole batch (its constant arrays), and the finished rows of the state are overwritten
 by the initial state of their new scenarios (where the initial state has no record at all — the shield's memory of
@@ -32,7 +32,7 @@ from ..planners.base import Observation
 from ..planners.features import FEATURE_NAMES, features, plan_steps
 from ..planners.variants import VARIANT_NAMES, get_variant
 from ..safety._backend import ARRAY, jitable
-from ..sim._fused import Stepper, steps_compiled
+from ..sim._stepper import Stepper, steps_compiled
 from ..sim.config import SimConfig
 from ..sim.scenario import ScenarioBatch, ScenarioConfig, paper_scenarios
 from ..sim.step import ClosedLoop
@@ -370,7 +370,7 @@ class LaneChangeTask:
         )
 
     def _loop(self, batch: ScenarioBatch):
-        """The closed loop over ``batch``: compiled (:class:`~safelane.sim._fused.Stepper`) where it covers the
+        """The closed loop over ``batch``: compiled (:class:`~safelane.sim._stepper.Stepper`) where it covers the
         settings, else :class:`~safelane.sim.step.ClosedLoop` (the same interface, period by period)."""
         loop = ClosedLoop(batch, self.seed, self.params, self.config, self.planner, self.traffic)
         if self._compiled is None:  # (decided once: every batch comes from the same sampler and settings)

@@ -5,10 +5,12 @@
 No rule lives here: the row calls the rule's closed forms (:mod:`safelane.baselines.rss_rule`: ``chain_brake_core``,
 ``ego_after_core``, ``ahead_after_core``, ``follower_after_core``, ``verdict_core``, ``lateral_core``,
 ``follow_check_accel``, ``follow_core``, ``completing_core``; RSS itself in :mod:`safelane.baselines.rss`) and reduces
-over the chain with a loop where :class:`~safelane.baselines.rss_rule.RssRule` reduces with ``all``. A row's RSS
-parameters come as a float vector (:data:`RULE`: the rule flag, then :data:`~safelane.baselines.rss.RSS_FIELDS`), so
-rows of several parameter sets run in one call. ``tests/test_fast_period.py`` and ``tests/test_fast_loop.py`` hold
-it to the NumPy path bit for bit.
+over the chain with a loop where :class:`~safelane.baselines.rss_rule.RssRule` reduces with ``all``. That glue is the
+one twin, and it is unavoidable: ``RssRule.decide`` evaluates whole rows with NumPy's array operations, which compiled
+row code cannot call without allocating; every formula it applies is the closed forms' own. A row's RSS parameters
+come as a float vector (:data:`RULE`: the rule flag, then :data:`~safelane.baselines.rss.RSS_FIELDS`), so rows of
+several parameter sets run in one call. ``tests/test_fast_period.py`` and ``tests/test_fast_loop.py`` hold it to the
+NumPy path bit for bit.
 """
 
 from __future__ import annotations

@@ -3,18 +3,17 @@
 
 The loop covers batches of :data:`FUSED_MIN_ROWS` scenarios or more with the expert planner (``ExpertPlanner`` itself,
 any gains), the paper's traffic without hooks (with unexpected promise violations, with or without L(N+1)'s profiles;
-its period, :class:`Stepper`, also with :class:`~.traffic.WaveHooks`: hooks as data), the paper's
+its period, :class:`~._stepper.Stepper`, also with :class:`~.traffic.WaveHooks`: hooks as data), the paper's
 four variants and the RSS variants (their rule: ``shield/_fast_rules.py``), the settings of the default and paper
 presets (any assessment, the commit guard or the paper's completion rule, the monitor on or off, either leader rule,
 supervised, none of the real-world settings) and an F that ignores the ego, without a trace or recorded observations
-(those, and other planners, run its period: :class:`Stepper`).
+(those, and other planners, run its period: :class:`~._stepper.Stepper`).
 Everything else — and everything with ``SAFELANE_NO_FUSED=1`` or without numba — runs period by period
 (:mod:`.step`), whose parts are compiled where they have kernels. Importing this module does not import numba.
 """
 
 from __future__ import annotations
 
-import dataclasses
 import functools
 import os
 from types import SimpleNamespace
@@ -105,8 +104,8 @@ def unclassified(config_cls) -> list[str]:
 def reasons(batch, cfg, nominal, traffic, trace: bool, record_observations: bool, stepping: bool = False) -> list[str]:
     """Why the compiled loop does not run this simulation (empty: it runs it); see the module docstring. Any
     :class:`~safelane.Params` runs compiled (the loop takes the ego's ``a_x_d`` and the others' maximum ``a_o_d``
-    apart, as the stages do). ``stepping``: why its period (:class:`Stepper`) does not — the batch's size and the
-    nominal planner do not count there (the planner runs between the periods)."""
+    apart, as the stages do). ``stepping``: why its period (:class:`~._stepper.Stepper`) does not — the batch's size
+    and the nominal planner do not count there (the planner runs between the periods)."""
     missing = unclassified(type(cfg))
     if missing:
         raise RuntimeError(
@@ -241,8 +240,8 @@ def _waves(hooks, b) -> tuple:
 
 #: ``_fast_loop.LoopBatch``'s fields with the batch on the last axis (the chain's inputs, vehicle-major as
 #: :class:`~.step.ClosedLoop` keeps them) and those shared by every row (the key of the draws: the seed's); every
-#: other field has the batch first (:meth:`Stepper.splice`), but the :class:`~.traffic.WaveHooks` fields, by scenario
-#: id (no rows without them): a batch with them is not spliced.
+#: other field has the batch first (:meth:`~._stepper.Stepper.splice`), but the :class:`~.traffic.WaveHooks` fields,
+#: by scenario id (no rows without them): a batch with them is not spliced.
 BATCH_LAST, BATCH_SHARED = ("promise", "chain_margin"), ("key",)
 BY_ID = ("task_wave", "task_period", "f_wave", "wave_lane_valid", "wave_lane_margin", "lane_sample")
 
@@ -275,149 +274,6 @@ def _non_finite(scenario_id: np.ndarray, rows: np.ndarray, t: float):
         f"non-finite simulator state at t = {t:.1f} s in scenario(s) {ids} ({rows.size} in all): a bug in a behaviour "
         "model or hook, not an outcome"
     )
-
-
-@dataclasses.dataclass(frozen=True)
-class StepState:
-    """A batch's state in the compiled loop (the arrays of ``_fast_rows.Rows``, the batch first, so that the envs'
-    row surgery ``envs/rows.replace_rows`` replaces rows), with the :class:`~.step.SimState` fields the envs and
-    :meth:`~.step.ClosedLoop.observe` read as views: ``ego``, ``x``, ``v``, ``acc``, ``t`` (``(B,)``: each row
-    its own clock), ``completed``, ``collided``, ``violated``, ``l0`` (``None``: no own lane)."""
-
-    rows: tuple
-
-    @property
-    def ego(self):
-        rf = self.rows.rf
-        return rf[:, 0], rf[:, 1], rf[:, 2], rf[:, 3]
-
-    x = property(lambda self: self.rows.x)
-    v = property(lambda self: self.rows.v)
-    acc = property(lambda self: self.rows.acc)
-    t = property(lambda self: self.rows.rf[:, 4])
-    completed = property(lambda self: self.rows.sk[:, 3])
-    collided = property(lambda self: self.rows.rb[:, 0])
-    violated = property(lambda self: self.rows.rb[:, 1])
-    l0 = None
-
-
-class Stepper:
-    """:class:`~.step.ClosedLoop`'s interface for stepping (``initial_state``, ``step``, ``observe``) on the compiled
-    period (``_fast_loop.step_kernel``): the envs' loop, where :func:`steps_compiled` says it runs. The nominal
-    proposals are the planner's (the envs' ``ActionPlanner``: the agent's actions), passed to the kernel as they are;
-    the state's arithmetic is the closed loop's, bit for bit (``tests/test_env_compiled.py``)."""
-
-    def __init__(self, sim, shared_clock: bool = False):
-        self.sim = sim
-        self.prm_vec, self.period_prm, self.batch = kernel_inputs(sim)
-        self.shared_clock = shared_clock  # every row started together: observations carry one time, as ClosedLoop's
-        self.initial_safe = None
-        self.spliced = False  # rows of other scenarios spliced in (splice): sim no longer describes the batch
-
-    def initial_state(self) -> StepState:
-        self._whole("initial_state")
-        start = self.sim.initial_state()
-        self.initial_safe = start.initial_safe
-        return self.state_of(start)
-
-    @staticmethod
-    def state_of(start) -> StepState:
-        """A :class:`~.step.SimState` at the start of a run (:meth:`~.step.ClosedLoop.initial_state`) as the
-        compiled loop's state."""
-        return StepState(rows_of(start))
-
-    def observe(self, s: StepState):
-        self._whole("observe")
-        obs = self.sim.observe(s)
-        return dataclasses.replace(obs, t=float(s.t[0])) if self.shared_clock else obs
-
-    def finish(self, s: StepState):
-        """:meth:`~.step.ClosedLoop.finish`: the state after the last period with the monitor's view of that period,
-        as the fields :func:`~.results.results_table` reads (the compiled loop's, :func:`_state`)."""
-        from ._fast_loop import finish_kernel
-
-        self._whole("finish")
-        rows = self.rows_after(s)
-        finish_kernel(self.prm_vec, rows)
-        return _state(dict(
-            t_complete=rows.rf[:, 5], min_gap_f=rows.rf[:, 6], min_gap_l1=rows.rf[:, 7], min_lane_ratio=rows.rf[:, 8],
-            first_collaborative_s=rows.st[:, 1], breach_first_s=rows.st[:, 2], completed=rows.sk[:, 3],
-            collided=rows.rb[:, 0], violated=rows.rb[:, 1], leader_collided=rows.rb[:, 2],
-            leader_violated=rows.rb[:, 3], aggressive=rows.sk[:, 2], counts=rows.ri[:, :3], n_invalid=rows.ri[:, 3],
-            breach_flags=rows.sk[:, 5:10], initial_safe=self.initial_safe, slow_delay_s=rows.st[:, 7],
-            slow_missed=rows.sk[:, 10], slow_aggressive=rows.sk[:, 11],
-        ), _slow(self.sim))  # fmt: skip
-
-    def step(self, s: StepState):
-        """:meth:`~.step.ClosedLoop.step`: the nominal planner's proposals on this state's observation, one period."""
-        from ..shield.proposals import proposal_arrays
-
-        obs = self.observe(s)
-        proposal = proposal_arrays(self.sim.planner_name, self.sim.nominal(obs, self.sim.prm), len(self.sim.b))
-        new, behaviour = self.step_with(s, *proposal)  # (checked as the shield checks it: errors name the planner)
-        return new, obs, behaviour
-
-    def step_with(self, s: StepState, a_x, a_y):
-        """One period with the nominal proposals ``a_x``, ``a_y`` ``(B,)`` given (a planner that does not read the
-        observation: the envs' actions): ``(state', behaviour)``; ``s`` is not changed."""
-        from ._fast_loop import step_kernel
-
-        proposal = np.empty((len(a_x), 2))
-        proposal[:, 0], proposal[:, 1] = a_x, a_y
-        rows = self.rows_after(s)
-        behaviour, finite = np.empty(len(a_x), np.int64), np.empty(len(a_x), np.bool_)
-        step_kernel(self.prm_vec, self.period_prm, self.batch, rows, proposal, behaviour, finite)
-        self.check_finite(rows, finite)
-        return StepState(rows), behaviour
-
-    def splice(self, rows: np.ndarray, part: Stepper) -> None:
-        """Rows ``rows`` of the batch become ``part``'s rows, in place: ``part`` steps ``len(rows)`` other scenarios
-        (same settings and seed) and its kernel inputs replace those rows' (:func:`kernel_inputs` per row, so the
-        rows' inputs are what a :class:`Stepper` over the spliced batch would hold); the envs' resets, which would
-        otherwise rebuild the whole batch's inputs for a few rows. ``sim`` then describes the batch before the
-        splice: :meth:`observe`, :meth:`step` and :meth:`finish`, which read it, refuse (the envs step with
-        :meth:`step_with` and the kernels; :meth:`check_finite` reads the spliced scenario ids)."""
-        same = (part.sim.seed == self.sim.seed and part.batch.x.shape[1] == self.batch.x.shape[1]
-                and np.array_equal(part.prm_vec, self.prm_vec) and np.array_equal(part.period_prm, self.period_prm))
-        if not same:
-            raise ValueError("Stepper.splice: the part has other settings, another seed or another number of vehicle "
-                             "slots than this batch")  # fmt: skip
-        if any(getattr(b, name).shape[0] for name in BY_ID for b in (self.batch, part.batch)) or (
-                part.batch.profile_t.shape[1] != self.batch.profile_t.shape[1]):  # fmt: skip
-            raise ValueError("Stepper.splice: traffic hooks as data (WaveHooks, by scenario id) or L(N+1) profiles of "
-                             "another length: such batches are not spliced")  # fmt: skip
-        if not self.spliced:  # (kernel_inputs may hand over the ClosedLoop's own arrays: from now on, ours)
-            self.batch = type(self.batch)(*[a.copy() for a in self.batch])
-        for name, into, new in zip(self.batch._fields, self.batch, part.batch, strict=True):
-            if name in BATCH_LAST:
-                into[:, rows] = new
-            elif name not in BATCH_SHARED and name not in BY_ID:
-                into[rows] = new
-        self.spliced = True
-
-    def _whole(self, what: str) -> None:
-        if self.spliced:
-            raise RuntimeError(f"Stepper.{what}: rows were spliced into this batch (splice), so its ClosedLoop no "
-                               "longer describes them; build a Stepper over the batch as it is now")  # fmt: skip
-
-    @staticmethod
-    def rows_after(s: StepState):
-        """A copy of ``s``'s rows for a kernel to advance in place (``s`` stays the state before the period)."""
-        from ._fast_rows import Rows
-
-        return Rows(*[a.copy() for a in s.rows])
-
-    def check_finite(self, rows, finite: np.ndarray) -> None:
-        """A :class:`FloatingPointError` naming the scenarios whose state a kernel found not finite."""
-        if not finite.all():
-            bad = np.flatnonzero(~finite)
-            _non_finite(self.batch.scenario_id, bad, float(rows.rf[bad[0], 4]))
-
-
-def steps_compiled(batch, cfg, traffic) -> list[str]:
-    """Why :class:`Stepper` does not step this batch (empty: it does): :func:`reasons` without the batch size and the
-    planner (the proposals are given)."""
-    return reasons(batch, cfg, None, traffic, False, False, stepping=True)
 
 
 def _state(f: dict, slow: bool):

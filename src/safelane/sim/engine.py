@@ -21,6 +21,7 @@ from ..planners.base import ExpertPlanner, NominalPlanner
 from . import _fused as fused
 from . import blame_log
 from ._alloc import tune_allocator
+from ._stepper import Stepper
 from .config import SimConfig
 from .inputs import cell_rng, check_cell_args, check_settings, resolve
 from .results import SimResult, results_table, trace_rows
@@ -133,7 +134,7 @@ def simulate_batch(
     if not blame and not fused.reasons(batch, cfg, nominal, traffic, False, False, stepping=True):
         # Everything but the nominal planner, the trace or the observations is compiled: the periods run compiled,
         # the planner between them on the observation (any planner), the trace and observations from the state.
-        sim, engine = fused.Stepper(sim, shared_clock=True), "compiled period"
+        sim, engine = Stepper(sim, shared_clock=True), "compiled period"
     elif os.environ.get("SAFELANE_REQUIRE_COMPILED", "") == "1":
         raise InputError(f"SAFELANE_REQUIRE_COMPILED=1 but this run is not compiled: {'; '.join(why)}",
                          "SAFELANE_REQUIRE_COMPILED")  # fmt: skip

@@ -27,7 +27,7 @@ class SimResult:
     preset: str | None = None
     nominal: str | None = None
     #: Which engine ran it: ``"compiled loop"`` (sim/_fused.py), ``"compiled period"`` (the periods compiled, the
-    #: nominal planner, the trace or the observations between them: ``sim/_fused.Stepper``), ``"period by period"``
+    #: nominal planner, the trace or the observations between them: ``sim/_stepper.Stepper``), ``"period by period"``
     #: (with ``engine_reasons``, why the compiled loop did not take it), or ``None`` (split over workers).
     engine: str | None = None
     engine_reasons: tuple = ()
