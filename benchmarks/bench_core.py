@@ -9,6 +9,10 @@ Prints, never asserts (timings depend on the machine and on what else runs on it
   (``SAFELANE_NO_NUMBA=1``) and on the kernel, through the public function (input validation included), the two
   interleaved, best of ``--repeat`` rounds each, with the verdicts compared; beside the wall-clock rate, the rate
   per CPU second of this process (on a shared machine the wall clock also counts time the process waited);
+* the same in the realistic world (the ``realistic`` preset: an own-lane leader L0, sensing error, actuation delay;
+  its expert planner), N = 3: the default path (compiled where ``sim/_fused.reasons`` is empty, else period by
+  period; the line says which) on 10^4 scenarios beside the period-by-period path on ``--realistic-rows`` of the same
+  scenarios (2,000 by default: its tables are compared with the default path's rows), vehicles counted with L0;
 * the closed-loop simulator's vehicle-steps/s at N = 3, batch 10^4 (``bench_sim``'s setting) on three paths,
   interleaved, with their tables compared: the NumPy path (``SAFELANE_NO_NUMBA=1``), the loop period by period with
   its part kernels (``SAFELANE_NO_FUSED=1``: the previous implementation) and the fused loop (the default,
@@ -48,6 +52,7 @@ from safelane.sim import SimConfig, paper_scenarios, simulate_batch
 
 TARGET_CHECKS = 6e6  # checks/s at batch 1e6, one core
 TARGET_SIM = 25e6  # vehicle-steps/s at N = 3, batch 1e4, one core (the full supervisor, default settings)
+TARGET_REAL = 15e6  # vehicle-steps/s at N = 3, one core, the realistic preset (L0, sensing error, actuation delay)
 _COMPILE = """
 import time
 import numpy as np
@@ -157,10 +162,44 @@ def part_times(run) -> tuple[dict[str, float], float]:
     return spent, total
 
 
+def realistic_world(n_sim: int, repeat: int, base_rows: int) -> None:
+    """The realistic preset's closed loop (N = 3): the default path beside the period-by-period one, rates per CPU s."""
+    from safelane import load_preset
+    from safelane.sim import _fused
+
+    preset = load_preset("realistic")
+    prm, cfg, expert = preset.params, preset.sim, preset.expert()
+    steps = round(cfg.horizon_s / prm.dt)
+    batch = paper_scenarios("CV_all", 3, 5.0, n_sim, np.random.default_rng(3))
+    small = batch.take(np.arange(min(base_rows, n_sim)))
+    why = _fused.reasons(batch, cfg, expert, None, False, False)
+    run = lambda b: simulate_batch(b, seed=0, params=prm, config=cfg, nominal=expert).table  # noqa: E731
+    full = lambda: run(batch)  # noqa: E731
+    periods = with_env(lambda: run(small), "SAFELANE_NO_FUSED")
+    a, b = full(), periods()
+    identical = all(_same(np.asarray(a[k])[: len(small)], b[k]) for k in b)
+    best = interleaved({"default": full, "per period": periods}, max(1, repeat // 2))
+    path = "compiled loop" if not why else "period by period (" + "; ".join(why) + ")"
+    print(
+        f"\nsimulate_batch, realistic preset, CV_all, N = 3, {steps} steps; default path: {path}; the first "
+        f"{len(small):,} rows identical on both paths: {identical}"
+    )
+    for name, rows in (("default", n_sim), ("per period", len(small))):
+        w, c = best[name]
+        work = (3 + 4) * steps * rows  # ego, F, L1..L3, L4 = L(N+1), L0
+        ratio = "" if name == "per period" else f"   {best['per period'][1] / len(small) / (c / rows):5.2f}x CPU"
+        mark = "pass" if work / c >= TARGET_REAL else "MISS"
+        print(
+            f"  {name:<11} {rows:>6,} scenarios {work / w / 1e6:6.2f} M vehicle-steps/s wall ({w:5.2f} s), "
+            f"{work / c / 1e6:6.2f} M per CPU s{ratio}   target >= {TARGET_REAL / 1e6:g} M: {mark}"
+        )
+
+
 def main(argv=None) -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--repeat", type=int, default=5, help="rounds per figure (the best counts)")
     ap.add_argument("--quick", action="store_true", help="batch 10^5 checks and 10^3 scenarios, 2 rounds")
+    ap.add_argument("--realistic-rows", type=int, default=2000, help="scenarios of the realistic world's baseline")
     args = ap.parse_args(argv)
     os.environ.pop("SAFELANE_NO_NUMBA", None)
     n_checks, n_sim = (100_000, 1_000) if args.quick else (1_000_000, 10_000)
@@ -235,6 +274,7 @@ def main(argv=None) -> None:
         rows.append(("whole run", numpy_total, total))
         for label, a, b in rows:
             print(f"  {label:<48} {a:10.3f} {b:10.3f} {a / b:6.2f}x")
+        realistic_world(n_sim, repeat, args.realistic_rows)
     load = os.getloadavg()
     print(f"\nload average at the end: {load[0]:.1f} {load[1]:.1f} {load[2]:.1f} on {os.cpu_count()} logical CPUs")
 
