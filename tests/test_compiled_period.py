@@ -48,10 +48,22 @@ def test_a_trace_runs_compiled_periods_with_the_numpy_paths_trace_and_the_loops_
     assert compiled.trace["behaviour"].isin([1, 2]).any()  # the shield acted in the traced rows
 
 
-@pytest.mark.parametrize("nominal", [Oscillating(), RecklessMerge(), ExpertPlanner(k_p=0.5)], ids=type)
+@dataclasses.dataclass(frozen=True)
+class UsersPlanner:
+    """A planner of the user's own (here the oscillating adversary behind a class the loop does not know)."""
+
+    inner: object = Oscillating()
+
+    def __call__(self, obs, params):
+        return self.inner(obs, params)
+
+
+@pytest.mark.parametrize("nominal", [UsersPlanner(), UsersPlanner(RecklessMerge()), Oscillating(), RecklessMerge(),
+                                     ExpertPlanner(k_p=0.5)], ids=type)  # fmt: skip
 def test_any_nominal_planner_runs_compiled_periods_with_the_numpy_paths_table(monkeypatch, nominal):
     compiled, reference = both(monkeypatch, batch(), nominal=nominal)
-    assert compiled.engine == ("compiled loop" if type(nominal) is ExpertPlanner else "compiled period")
+    # the expert and the adversaries (as data) run in the whole-episode loop, any other planner between periods
+    assert compiled.engine == ("compiled period" if type(nominal) is UsersPlanner else "compiled loop")
     pd.testing.assert_frame_equal(compiled.table, reference.table)
     assert (compiled.table["n_hesitate"] + compiled.table["n_abort"]).sum() > 0
 

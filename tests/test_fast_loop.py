@@ -188,11 +188,11 @@ def test_the_fused_loop_runs_profiles_and_leaves_other_rules_to_the_period_by_pe
     batch = paper_scenarios("CV_all", 3, 5.0, 80, rng)
     profiled = with_last_profile(batch, np.tile([0.0, 1.0], (80, 1)), np.tile([0.0, -5.0], (80, 1)))
     assert _covers(profiled)  # (tests/test_fast_profiles.py: the same bits)
-    # Traffic hooks as data run on the compiled period (the loop's chunks rebuild the default traffic), callables not.
+    # Traffic hooks as data run in the loop and on its compiled period, callables on neither.
     waves = WaveHooks(**{name: np.zeros((80, 5)) for name in ("task_low", "task_span", "task_hi", "task_lo",
                                                               "task_phase")},
                       **{name: np.ones(80) for name in ("task_period", "f_period", "f_phase", "f_hi", "f_lo")})
-    assert not _covers(batch, traffic=waves)
+    assert _covers(batch, traffic=waves)
     assert not steps_compiled(batch, SimConfig(), waves)
     assert steps_compiled(batch, SimConfig(), TrafficHooks(follower_wish=lambda view, prm: view.v[:, 0]))
     rss = concat([batch, paper_scenarios("RSS", 3, 5.0, 10, rng, first_id=500)])

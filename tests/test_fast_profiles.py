@@ -12,7 +12,7 @@ import pytest
 from safelane import Params
 from safelane.experiments import falsify as fz
 from safelane.experiments import falsify_space as space
-from safelane.sim import SimConfig, checks, concat, paper_scenarios, simulate_batch
+from safelane.sim import SimConfig, _fused, checks, concat, paper_scenarios, simulate_batch
 from safelane.sim.traffic import with_last_profile
 from test_fast_core import needs_numba
 
@@ -91,7 +91,7 @@ def _round(world: str, rows: int, seed: int) -> list[dict]:
             space.knife_specs(rng[2], rows, PRM, 0.0, world)]  # fmt: skip
 
 
-def test_the_falsifiers_hooks_and_profiles_on_the_compiled_period_give_the_numpy_paths_bits(monkeypatch):
+def test_the_falsifiers_hooks_planners_and_profiles_compiled_give_the_numpy_paths_bits(monkeypatch):
     specs = _round("paper", 150, 11)
     setting = fz.Setting(sim=SimConfig(assessment="truth", horizon_s=5.0)).resolved()
     engines = []
@@ -108,8 +108,12 @@ def test_the_falsifiers_hooks_and_profiles_on_the_compiled_period_give_the_numpy
     for path in PATHS:
         _env(monkeypatch, path)
         outcomes[path] = fz.evaluate_round(specs, setting)[0]
-    assert engines[0] == "compiled period" and engines[1] == "period by period"
-    for path in ("period by period", "numpy"):
+    # the same round on the compiled period, the adversaries between its periods (the loop refused by its size)
+    _env(monkeypatch, "compiled")
+    monkeypatch.setattr(_fused, "FUSED_MIN_ROWS", 10**9)
+    outcomes["compiled period"] = fz.evaluate_round(specs, setting)[0]
+    assert engines == ["compiled loop", "period by period", "period by period", "compiled period"]
+    for path in ("period by period", "numpy", "compiled period"):
         for mine, theirs in zip(outcomes["compiled"], outcomes[path], strict=True):
             assert mine.equals(theirs), path
     assert all(np.isfinite(o["lane_ratio"]).any() for o in outcomes["compiled"])  # the lane-gap sample ran

@@ -45,8 +45,49 @@ def _per_row(name: str, value, n: int) -> np.ndarray:
 
 def _lateral(obs: Observation, params: Params, omega, zeta):
     n = len(obs.p_y)
-    w, z = _per_row("omega", omega, n), _per_row("zeta", zeta, n)
-    return w * w * (params.lane_width - obs.p_y) - 2.0 * z * w * obs.v_y
+    return lateral_pd(ARRAY, params.lane_width, obs.p_y, obs.v_y, _per_row("omega", omega, n),
+                      _per_row("zeta", zeta, n))  # fmt: skip
+
+
+#: The shortest period of :class:`Oscillating`'s waves [s] (a period of 0 would divide by zero).
+MIN_PERIOD_S = 1e-3
+
+
+def lateral_pd(xp, lane_width, p_y, v_y, omega, zeta):
+    """The longitudinal adversaries' lateral law: a damped PD toward the target-lane centre,
+    ``ω² (w_l − p_y) − 2 ζ ω v_y`` (unclipped). Backend-generic, like every closed form below: the planners evaluate
+    them on NumPy arrays, the compiled closed loop per row (``planners/_fast_adversary.py``)."""
+    return omega * omega * (lane_width - p_y) - 2.0 * zeta * omega * v_y
+
+
+def hug_accel(xp, target, p_x, v_ref, v_x, k_p, k_v):
+    """:class:`HugLeader`'s and :class:`HugFollower`'s longitudinal law toward ``target`` at the speed ``v_ref``:
+    ``k_p (target − p_x) + k_v (v_ref − v_x)`` (unclipped)."""
+    return k_p * (target - p_x) + k_v * (v_ref - v_x)
+
+
+def hug_leader_accel(xp, p_x, v_x, p_x_l, v_x_l, p_m, offset_m, k_p, k_v):
+    """:class:`HugLeader`'s longitudinal law: to ``p_m + offset_m`` behind L1 at L1's speed (unclipped)."""
+    return hug_accel(xp, p_x_l - p_m - offset_m, p_x, v_x_l, v_x, k_p, k_v)
+
+
+def hug_follower_accel(xp, p_x, v_x, p_x_f, v_x_f, p_m, offset_m, k_p, k_v):
+    """:class:`HugFollower`'s longitudinal law: to ``p_m + offset_m`` ahead of F at F's speed (unclipped)."""
+    return hug_accel(xp, p_x_f + p_m + offset_m, p_x, v_x_f, v_x, k_p, k_v)
+
+
+def oscillating_accel(xp, t, period_s, phase_x, phase_y, amp_x, mean_x, amp_y, mean_y):
+    """:class:`Oscillating`'s ``(a_x, a_y)`` at time ``t`` (unclipped)."""
+    period = xp.maximum(period_s, MIN_PERIOD_S)
+    a_x = mean_x + amp_x * wave_level(xp, t, period, phase_x, 1.0, -1.0)
+    a_y = mean_y + amp_y * wave_level(xp, t, period, phase_y, 1.0, -1.0)
+    return a_x, a_y
+
+
+def reckless_lateral(xp, lateral_gain, a_y_m, lane_width, p_y):
+    """:class:`RecklessMerge`'s lateral command: ``lateral_gain · a_y_m`` toward the target-lane centre (0 on it)."""
+    side = lane_width - p_y
+    return lateral_gain * a_y_m * xp.where(side > 0.0, 1.0, xp.where(side < 0.0, -1.0, 0.0))
 
 
 def wave_level(xp, t, period, phase, high, low):
@@ -78,8 +119,8 @@ class HugLeader:
 
     def __call__(self, obs: Observation, params: Params) -> tuple[np.ndarray, np.ndarray]:
         n = len(obs.p_x)
-        target = obs.p_x_l - params.p_m - _per_row("offset_m", self.offset_m, n)
-        a_x = _per_row("k_p", self.k_p, n) * (target - obs.p_x) + _per_row("k_v", self.k_v, n) * (obs.v_x_l - obs.v_x)
+        offset, k_p, k_v = (_per_row(name, getattr(self, name), n) for name in ("offset_m", "k_p", "k_v"))
+        a_x = hug_leader_accel(ARRAY, obs.p_x, obs.v_x, obs.p_x_l, obs.v_x_l, params.p_m, offset, k_p, k_v)
         return clip_actions(a_x, _lateral(obs, params, self.omega, self.zeta), params)
 
 
@@ -95,9 +136,13 @@ class HugFollower:
 
     def __call__(self, obs: Observation, params: Params) -> tuple[np.ndarray, np.ndarray]:
         n = len(obs.p_x)
-        target = obs.p_x_f + params.p_m + _per_row("offset_m", self.offset_m, n)
-        a_x = _per_row("k_p", self.k_p, n) * (target - obs.p_x) + _per_row("k_v", self.k_v, n) * (obs.v_x_f - obs.v_x)
+        offset, k_p, k_v = (_per_row(name, getattr(self, name), n) for name in ("offset_m", "k_p", "k_v"))
+        a_x = hug_follower_accel(ARRAY, obs.p_x, obs.v_x, obs.p_x_f, obs.v_x_f, params.p_m, offset, k_p, k_v)
         return clip_actions(a_x, _lateral(obs, params, self.omega, self.zeta), params)
+
+
+#: :class:`Oscillating`'s parameters in :func:`oscillating_accel`'s order.
+OSCILLATING = ("period_s", "phase_x", "phase_y", "amp_x", "mean_x", "amp_y", "mean_y")
 
 
 @dataclass(frozen=True)
@@ -118,13 +163,9 @@ class Oscillating:
     mean_y: object = 0.5
 
     def __call__(self, obs: Observation, params: Params) -> tuple[np.ndarray, np.ndarray]:
-        n, t = len(obs.p_x), obs.t
-        period = np.maximum(_per_row("period_s", self.period_s, n), 1e-3)
-        sq_x = square_wave(t, period, _per_row("phase_x", self.phase_x, n))
-        sq_y = square_wave(t, period, _per_row("phase_y", self.phase_y, n))
-        a_x = _per_row("mean_x", self.mean_x, n) + _per_row("amp_x", self.amp_x, n) * sq_x
-        a_y = _per_row("mean_y", self.mean_y, n) + _per_row("amp_y", self.amp_y, n) * sq_y
-        return clip_actions(a_x, a_y, params)
+        n = len(obs.p_x)
+        q = [_per_row(name, getattr(self, name), n) for name in OSCILLATING]
+        return clip_actions(*oscillating_accel(ARRAY, obs.t, *q), params)
 
 
 @dataclass(frozen=True)
@@ -137,7 +178,8 @@ class RecklessMerge:
 
     def __call__(self, obs: Observation, params: Params) -> tuple[np.ndarray, np.ndarray]:
         n = len(obs.p_x)
-        a_y = _per_row("lateral_gain", self.lateral_gain, n) * params.a_y_m * np.sign(params.lane_width - obs.p_y)
+        a_y = reckless_lateral(ARRAY, _per_row("lateral_gain", self.lateral_gain, n), params.a_y_m, params.lane_width,
+                               obs.p_y)  # fmt: skip
         return clip_actions(_per_row("a_x", self.a_x, n), a_y, params)
 
 
@@ -164,6 +206,38 @@ class Mixture:
         return a_x, a_y
 
 
+#: Each adversary's kind in the compiled loop (``planner_kind``: :func:`adversary_table`) and its parameters in the
+#: order of the table's columns; ``ZERO``: a :class:`Mixture` row whose choice names none of its planners (0, 0).
+KINDS = {HugLeader: 0, HugFollower: 1, Oscillating: 2, RecklessMerge: 3}
+ZERO = 4
+COLUMNS = {
+    HugLeader: ("k_p", "k_v", "offset_m", "omega", "zeta"), HugFollower: ("k_p", "k_v", "offset_m", "omega", "zeta"),
+    Oscillating: OSCILLATING, RecklessMerge: ("a_x", "lateral_gain"),
+}  # fmt: skip
+
+
+def adversary_table(planner, n: int) -> tuple[np.ndarray, np.ndarray] | None:
+    """The planner as data for the compiled closed loop: ``(kind (n,) int64, q (n, 7))``, each row's adversary
+    (:data:`KINDS`) and its parameters (:data:`COLUMNS`' order); ``None`` unless ``planner`` is one of the four
+    adversaries or a :class:`Mixture` of them. Every parameter is checked as calling the planner checks it."""
+    if type(planner) in KINDS:
+        planners, choice = (planner,), np.zeros(n, np.int64)
+    elif type(planner) is Mixture and all(type(p) in KINDS for p in planner.planners):
+        planners, choice = planner.planners, np.asarray(planner.choice)
+        if choice.shape != (n,):
+            raise ValueError(f"Mixture.choice has shape {choice.shape}; the observation batch has {n} rows")
+    else:
+        return None
+    kind, q = np.full(n, ZERO, np.int64), np.zeros((n, max(map(len, COLUMNS.values()))))
+    for i, p in enumerate(planners):
+        values = [_per_row(name, getattr(p, name), n) for name in COLUMNS[type(p)]]
+        rows = choice == i
+        kind[rows] = KINDS[type(p)]
+        for j, value in enumerate(values):
+            q[rows, j] = value[rows]
+    return kind, q
+
+
 #: The adversaries by name, in :class:`Mixture` order as the falsifier uses them.
 ADVERSARIES = {
     "hug_leader": HugLeader,
@@ -173,4 +247,4 @@ ADVERSARIES = {
 }
 
 
-jitable(wave_level)
+jitable(wave_level, lateral_pd, hug_accel, hug_leader_accel, hug_follower_accel, oscillating_accel, reckless_lateral)

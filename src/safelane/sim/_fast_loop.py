@@ -30,6 +30,7 @@ import numba
 import numpy as np
 
 from .._splitmix import counter_uniform4
+from ..planners._fast_adversary import adversary_row
 from ..planners.base import ExpertGains, expert_accel
 from ..safety import _compile
 from ..safety._backend import SCALAR, Limits
@@ -63,13 +64,14 @@ LoopBatch = collections.namedtuple("LoopBatch", (
     "is_last", "acts", "v_desired", "promise_decel", "promise_accel", "decel_last", "gap0", "lane_valid", "lane_margin",
     "p_v", "scenario_id", "key", "rule",
     "profile_t", "profile_a", "task_wave", "task_period", "f_wave", "wave_lane_valid", "wave_lane_margin",
-    "lane_sample",
+    "lane_sample", "planner_kind", "planner_q",
 ))  # fmt: skip
 #: ``LoopBatch``'s last fields: ``L(N+1)``'s profile ``profile_t``, ``profile_a`` ``(B, P)`` (``P = 0``: none, the
 #: sudden braking); :class:`~.traffic.WaveHooks` by scenario id (none: no rows) — ``task_wave`` ``(S, K, 5)`` (low,
 #: span, high, low level, phase), ``task_period`` ``(S,)``, ``f_wave`` ``(S, 4)`` (period, phase, high, low level),
 #: the lane-gap sample's pairs and margins ``(S, K−1)`` and its running minimum ``lane_sample`` ``(S,)`` (written;
-#: none: no rows).
+#: none: no rows); the nominal planner as data, ``planner_kind`` ``(B,)`` and ``planner_q`` ``(B, 7)``
+#: (:func:`~safelane.planners.adversarial.adversary_table`; no rows: the expert planner).
 #: What :func:`loop_kernel` writes: :data:`OUT_F`, :data:`OUT_B` per scenario, ``counts (B, 3)``, ``n_invalid``,
 #: ``breach_flags (B, 5)`` and ``bad_step`` (the first period whose state is not finite, ``-1`` if none).
 LoopOut = collections.namedtuple("LoopOut", ("f", "b", "counts", "n_invalid", "breach_flags", "bad_step"))
@@ -84,9 +86,9 @@ OUT_B = ("completed", "collided", "violated", "leader_collided", "leader_violate
 @numba.njit(cache=True, nogil=True, error_model="numpy")
 def loop_kernel(n_steps, prm, period_prm, batch, start, out):
     """Run every scenario of ``batch`` (:class:`LoopBatch`) from its row of ``start`` (:data:`~._fast_rows.Rows`)
-    through ``n_steps`` periods of the expert planner and the final observation (see the module docstring), into
-    ``out`` (:class:`LoopOut`); ``prm``: :data:`PRM`'s values, ``period_prm``: the shield's
-    (``shield/_fast_period.PRM``)."""
+    through ``n_steps`` periods of its nominal planner (the expert, or ``batch``'s adversaries) and the final
+    observation (see the module docstring), into ``out`` (:class:`LoopOut`); ``prm``: :data:`PRM`'s values,
+    ``period_prm``: the shield's (``shield/_fast_period.PRM``)."""
     _loop_rows(n_steps, prm, batch, start, out, _scratch(start, period_prm))
 
 
@@ -124,6 +126,7 @@ def _loop_rows(n_steps, prm, batch, start, out, w):
     x, v = x2[0], v2[0]
     k = x.shape[0]
     den = _window(w.times, dt)
+    adversaries = batch.planner_kind.shape[0] > 0
     for b in range(start.x.shape[0]):
         _load(start, b, batch, w)
         bad = -1
@@ -134,9 +137,13 @@ def _loop_rows(n_steps, prm, batch, start, out, w):
                         px2[0, i] = x[i]
                     monitor_row(0, rf[0, 4], dt, mon_tol, px2, snap_x, snap_v, snap_b, snap_nc, st, sk)
                 break
-            # --- observe, the expert planner (planners.base.ExpertPlanner) ---
-            ax_n, ay_n = expert_accel(SCALAR, x[0], x[1], v[1], rf[0, 0], rf[0, 1], rf[0, 2], rf[0, 3], gains, lane_w,
-                                      lim)  # fmt: skip
+            # --- observe, the nominal planner: the expert (planners.base.ExpertPlanner) or an adversary as data ---
+            if adversaries:
+                ax_n, ay_n = adversary_row(batch.planner_kind[b], batch.planner_q, b, rf[0, 4], rf[0, 0], rf[0, 1],
+                                           rf[0, 2], rf[0, 3], x[1], v[1], x[0], v[0], prm[5], lane_w, lim)  # fmt: skip
+            else:
+                ax_n, ay_n = expert_accel(SCALAR, x[0], x[1], v[1], rf[0, 0], rf[0, 1], rf[0, 2], rf[0, 3], gains,
+                                          lane_w, lim)  # fmt: skip
             _, finite = _period(prm, batch, b, w, den, ax_n, ay_n)
             if not finite:
                 bad = step

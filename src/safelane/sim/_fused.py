@@ -2,8 +2,9 @@
 :class:`~.step.ClosedLoop`'s arrays to :func:`._fast_loop.loop_kernel` and returns what the results table reads.
 
 The loop covers batches of :data:`FUSED_MIN_ROWS` scenarios or more with the expert planner (``ExpertPlanner`` itself,
-any gains), the paper's traffic without hooks (with unexpected promise violations, with or without L(N+1)'s profiles;
-its period, :class:`~._stepper.Stepper`, also with :class:`~.traffic.WaveHooks`: hooks as data), the paper's
+any gains) or the adversarial planners (:func:`~safelane.planners.adversarial.adversary_table`: the four, or a
+``Mixture`` of them, as data), the paper's traffic (with unexpected promise violations, with or without L(N+1)'s
+profiles, with or without :class:`~.traffic.WaveHooks`: hooks as data), the paper's
 four variants and the RSS variants (their rule: ``shield/_fast_rules.py``), the settings of the default and paper
 presets (any assessment, the commit guard or the paper's completion rule, the monitor on or off, either leader rule,
 supervised, none of the real-world settings) and an F that ignores the ego, without a trace or recorded observations
@@ -20,6 +21,7 @@ from types import SimpleNamespace
 
 import numpy as np
 
+from ..planners.adversarial import adversary_table
 from ..planners.base import ExpertPlanner
 from ..safety.evasion import fast_kernel
 from ..safety.lateral import LATERAL_TOL_M
@@ -121,14 +123,14 @@ def reasons(batch, cfg, nominal, traffic, trace: bool, record_observations: bool
         out.append("a trace is recorded")
     if record_observations:
         out.append("observations are recorded")
-    if traffic is not None and not (stepping and type(traffic) is WaveHooks):
-        # WaveHooks (the paper's traffic, its wishes as data) run on the compiled period; the loop's chunks and the
-        # blame's rerun (engine.py) rebuild the closed loop with the default traffic
+    if traffic is not None and type(traffic) is not WaveHooks:
+        # WaveHooks (the paper's traffic, its wishes as data) run compiled, in the loop and in its period
         out.append("a traffic model other than the paper's default")
     if len(batch) < FUSED_MIN_ROWS and not stepping:
         out.append(f"fewer than {FUSED_MIN_ROWS} scenarios")
-    if type(nominal) is not ExpertPlanner and not stepping:
-        out.append(f"the nominal planner {type(nominal).__name__} (the loop runs ExpertPlanner only)")
+    if not stepping and type(nominal) is not ExpertPlanner and adversary_table(nominal, len(batch)) is None:
+        out.append(f"the nominal planner {type(nominal).__name__} (the loop runs ExpertPlanner and the adversarial "
+                   "planners only)")  # fmt: skip
     out.extend(f"config.{name}={setting(cfg, name)!r} (compiled: {value!r})" for name, value in FIXED.items()
                if setting(cfg, name) not in implemented(name))  # fmt: skip
     if batch.l0_x is not None:
@@ -148,7 +150,7 @@ def run(sim, n_steps: int, progress: bool = False):
     """The final state's fields that :func:`~.results.results_table` reads, from :func:`run_chunk` on the whole
     batch; with ``progress``, in chunks of :data:`PROGRESS_CHUNK` scenarios behind a
     bar (the same table: the scenarios are independent)."""
-    if not progress or len(sim.b) <= PROGRESS_CHUNK:
+    if not progress or len(sim.b) <= PROGRESS_CHUNK or not chunkable(sim):
         return _state(run_chunk(sim, n_steps), _slow(sim))
     from .._progress import track
     from .step import ClosedLoop
@@ -160,13 +162,20 @@ def run(sim, n_steps: int, progress: bool = False):
     return _state({name: np.concatenate([fields[name] for fields in done]) for name in done[0]}, _slow(sim))
 
 
+def chunkable(sim) -> bool:
+    """Whether rows of ``sim`` can run apart, rebuilt with the default traffic and its nominal planner (:func:`run`'s
+    progress chunks, the blame's rerun): not with traffic hooks as data (by scenario id), nor with a planner whose
+    parameters are per row (the adversaries index theirs by batch row)."""
+    return type(sim.traffic_step.hooks) is not WaveHooks and type(sim.nominal) is ExpertPlanner
+
+
 def run_chunk(sim, n_steps: int) -> dict:
     """The final state's arrays by name, from :func:`._fast_loop.loop_kernel` on :class:`~.step.ClosedLoop`
     ``sim``'s arrays."""
     from ._fast_loop import OUT_B, OUT_F, LoopOut, loop_kernel
 
     start = sim.initial_state()
-    prm_vec, period_prm, batch = kernel_inputs(sim)
+    prm_vec, period_prm, batch = kernel_inputs(sim, planner=True)
     n = len(sim.b)
     out_f, out_b = np.empty((n, len(OUT_F))), np.empty((n, len(OUT_B)), np.bool_)
     counts, n_invalid = np.empty((n, 3), np.int64), np.empty(n, np.int64)
@@ -180,9 +189,10 @@ def run_chunk(sim, n_steps: int) -> dict:
                 n_invalid=n_invalid, breach_flags=flags, initial_safe=start.initial_safe)  # fmt: skip
 
 
-def kernel_inputs(sim):
+def kernel_inputs(sim, planner: bool = False):
     """The compiled loop's inputs from :class:`~.step.ClosedLoop` ``sim``: its parameter vector (``_fast_loop.PRM``),
-    the shield's (``shield/_fast_period.PRM``) and the batch's arrays (``_fast_loop.LoopBatch``)."""
+    the shield's (``shield/_fast_period.PRM``) and the batch's arrays (``_fast_loop.LoopBatch``); ``planner``: with
+    the nominal planner as data where it is an adversary (the loop's; the period's callers propose themselves)."""
     from ..shield.fast_step import period_constants
     from ..shield.policies import variant_flags
     from ._fast_loop import PRM, LoopBatch
@@ -209,8 +219,15 @@ def kernel_inputs(sim):
         c(b.decel_last.astype(np.float64)), c(traffic.gap0), c(sim.lane_pairs[0]), c(sim.lane_pairs[1]),
         c(b.p_v.astype(np.float64)), c(b.scenario_id.astype(np.int64)), np.array([sim.seed % 2**64], np.uint64),
         rule_table(rule_rows(b.variant, len(b)), len(b), prm), *_profile(b), *_waves(traffic.hooks, b),
+        *_planner(nominal if planner else None, len(b)),
     )  # fmt: skip
     return np.array([float(values[name]) for name in PRM]), period_constants(prm, cfg.shield), batch
+
+
+def _planner(nominal, n: int) -> tuple:
+    """``LoopBatch``'s ``planner_kind``, ``planner_q``: an adversarial planner as data (none: no rows, the expert)."""
+    table = None if nominal is None or type(nominal) is ExpertPlanner else adversary_table(nominal, n)
+    return (np.zeros(0, np.int64), np.zeros((0, 7))) if table is None else table
 
 
 def _profile(b) -> tuple:
@@ -244,6 +261,8 @@ def _waves(hooks, b) -> tuple:
 #: by scenario id (no rows without them): a batch with them is not spliced.
 BATCH_LAST, BATCH_SHARED = ("promise", "chain_margin"), ("key",)
 BY_ID = ("task_wave", "task_period", "f_wave", "wave_lane_valid", "wave_lane_margin", "lane_sample")
+#: ``_fast_loop.LoopBatch``'s fields the loop alone reads (the nominal planner as data; no rows in a period's inputs).
+LOOP_ONLY = ("planner_kind", "planner_q")
 
 
 def rows_of(start):

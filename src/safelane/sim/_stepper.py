@@ -9,7 +9,18 @@ import dataclasses
 
 import numpy as np
 
-from ._fused import BATCH_LAST, BATCH_SHARED, BY_ID, _non_finite, _slow, _state, kernel_inputs, reasons, rows_of
+from ._fused import (
+    BATCH_LAST,
+    BATCH_SHARED,
+    BY_ID,
+    LOOP_ONLY,
+    _non_finite,
+    _slow,
+    _state,
+    kernel_inputs,
+    reasons,
+    rows_of,
+)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -126,7 +137,7 @@ class Stepper:
         for name, into, new in zip(self.batch._fields, self.batch, part.batch, strict=True):
             if name in BATCH_LAST:
                 into[:, rows] = new
-            elif name not in BATCH_SHARED and name not in BY_ID:
+            elif name not in BATCH_SHARED and name not in BY_ID and name not in LOOP_ONLY:
                 into[rows] = new
         self.spliced = True
 

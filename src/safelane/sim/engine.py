@@ -125,6 +125,8 @@ def simulate_batch(
     sim = ClosedLoop(batch, seed, prm, cfg, nominal, traffic, blame=blame or None)
     n_steps = round(cfg.horizon_s / prm.dt)
     why = fused.reasons(batch, cfg, nominal, traffic, trace, record_observations)
+    if blame and not fused.chunkable(sim):  # (the blame's rerun rebuilds rows with the defaults)
+        why = [*why, "blame with traffic hooks or a planner with per-row parameters"]
     if not why:  # the whole run compiled
         table = results_table(batch, fused.run(sim, n_steps, progress))
         if blame:
