@@ -9,15 +9,17 @@ import dataclasses
 
 import numpy as np
 import pytest
-from test_fast_period import advance, proposals, random_world, same, situation_of
 
 from safelane import Params
 from safelane.shield import ABORT, Shield, ShieldConfig, fast_step
 from safelane.shield import core as shield_core
 from safelane.shield import rows as rws
+from test_fast_period import advance, proposals, random_world, same, situation_of
 
-pytestmark = [pytest.mark.compiled,
-              pytest.mark.skipif(fast_step.kernel() is None, reason="numba missing or SAFELANE_NO_NUMBA=1")]  # fmt: skip
+pytestmark = [
+    pytest.mark.compiled,
+    pytest.mark.skipif(fast_step.kernel() is None, reason="numba missing or SAFELANE_NO_NUMBA=1"),
+]
 
 _MIXED = ("CV_follow", "CV_all", "RSS", "CV_none", "No_agg_assess", "RSS_V2X_matched")
 
@@ -57,7 +59,7 @@ def test_delayed_period_is_the_stages(seed, n, m, periods, variant, config, own)
     for k in range(50):
         s = situation_of(world, k * params.dt, params)
         prop = proposals(rng, n)
-        before = _aborts_in_flight(state)
+        leaving = int(state.pending.commands[0].rows.size)  # the oldest command's aborting rows: popped this period
         fast = shield.step(s, prop)
         assert shield.last_path == "compiled", shield.refusals(s)
         state, ref = shield_core.stages_step(state, s, prop, params, cfg, variant)
@@ -66,7 +68,7 @@ def test_delayed_period_is_the_stages(seed, n, m, periods, variant, config, own)
         assert len(state.pending.commands) == periods
         aborts += int((ref.behaviour == ABORT).sum())
         queued = max(queued, _aborts_in_flight(state))
-        left += int(before > 0 and state.pending.commands[0].rows.size < before)
+        left += leaving
         advance(world, ref, rng, params.dt)
     if n > 1:  # aborts on the held plan entered the queue with their knots, and left it
         assert aborts > 0 and queued > 0 and left > 0, (aborts, queued, left)

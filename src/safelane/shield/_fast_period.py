@@ -205,7 +205,10 @@ def period_row(b, prm, times, den, sf, sb, rule, chain_x, chain_v, link_promise,
     (``history``, ``count``, ``st``, ``sk``, ``plan``; the snapshot ``snap_*`` of the last period is read, the
     caller keeps this one), writes ``bounds`` (or reads them, with ``given_unsafe``, where the caller's chain
     analysis is given: a non-empty ``given_unsafe``), ``of``, ``ob`` and, for an abort, the held plan's knots
-    ``knots[b] (5, 8)`` (``t, px, vx, py, vy``; also left in the scratch ``kn``); returns the behaviour. ``times``,
+    ``knots[b] (5, 8)`` (``t, px, vx, py, vy``; also left in the scratch ``kn``); returns the behaviour. Under an
+    actuation delay (``prm``'s ``delay_s`` > 0) it decides from the frame of :func:`~.stages.frame`: the ego of
+    ``sf``'s ``carried_*`` columns (the caller's :func:`carried_ego`), the others carried along their worst cases.
+    ``times``,
     ``den``: the assessment's window; ``x2, v2, b2, kn``: scratch (``b2`` holds the chain's bounds with F's slot
     after the call)."""
     t, dt, a_a, a_d, a_ym, y_safe, p_m, _, y_bound, lane_w, a_o, lat_tol, tol, mon_tol, thr, mon = prm[:16]
