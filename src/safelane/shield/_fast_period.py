@@ -476,8 +476,8 @@ def period_kernel(prm, sf, sb, rule, chain_x, chain_v, chain_promise, chain_huma
             link_margin[i, b] = p_m_h if (chain_human[b, i] and connected) else p_m
     c = _SF_CARRIED
     for b in range(bsz):
-        sf[b, c], sf[b, c + 1], sf[b, c + 2], sf[b, c + 3] = carried_ego(b, dt, segs, q_knots, q_seg, q_acc, q_flag,
-                                                                         sf[b, 0], sf[b, 1], sf[b, 2], sf[b, 3])
+        carried = carried_ego(b, dt, segs, q_knots, q_seg, q_acc, q_flag, sf[b, 0], sf[b, 1], sf[b, 2], sf[b, 3])
+        sf[b, c], sf[b, c + 1], sf[b, c + 2], sf[b, c + 3] = carried
         behaviour[b] = period_row(b, prm, times, den, sf, sb, rule, chain_x, chain_v, link_promise, link_margin, own_x,
                                   own_v, own_promise, own_nc, history, count, st, sk, plan, has_last, snap_x, snap_v,
                                   snap_bounds, snap_nc, bounds, given_unsafe, of, ob, knots, x2, v2, b2,
