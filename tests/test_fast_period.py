@@ -200,7 +200,6 @@ def test_every_config_field_is_classified():
     [
         ({"completion": "paper_body_across"}, "ShieldConfig.completion='paper_body_across'"),
         ({"enabled": False}, "ShieldConfig.enabled=False"),
-        ({"actuation_delay_s": 0.2}, "ShieldConfig.actuation_delay_s=0.2"),
     ],
 )
 def test_refused_settings_run_the_stages(config, reason):
@@ -217,12 +216,14 @@ def test_refused_settings_run_the_stages(config, reason):
 
 def test_functional_step_runs_the_compiled_period(monkeypatch):
     """shield.core.step (the functional API the simulator calls) takes the compiled period where it is implemented:
-    the same decisions and states as the stages, and the stages where it is refused (a delay)."""
+    the same decisions and states as the stages (with a delay too: tests/test_fast_delay.py), and the stages where it
+    is refused (the shield disabled)."""
     params = Params()
     rng = np.random.default_rng(21)
     world = random_world(rng, 16, 3, stale=False)
     s = situation_of(world, 0.0, params)
-    for cfg, compiled in ((ShieldConfig(), True), (ShieldConfig(actuation_delay_s=0.1), False)):
+    for cfg, compiled in ((ShieldConfig(), True), (ShieldConfig(actuation_delay_s=0.1), True),
+                          (ShieldConfig(enabled=False), False)):  # fmt: skip
         state = shield_core.init(s, params, cfg, "CV_all")
         prop = proposals(rng, 16)
         calls = []

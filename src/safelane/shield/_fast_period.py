@@ -8,7 +8,10 @@ assessment's :func:`~.assessment.belief_core`, the chain scan's link (``_chain_r
 :func:`~.proposals.proposal_core`, the candidate check (``_candidate`` → :func:`~.decide.candidate_row`), the
 completion guard :func:`~.decide.commit_guard_core`, :func:`~.decide.hesitate_core`, the own-lane leader ``L0`` (its
 chain's bound through :func:`~safelane.safety.chain.chain_link`, the period with it
-:func:`~safelane.safety.own_lane.own_period`, its evasion check ``_fast_own._own_lane``), the responsible follow
+:func:`~safelane.safety.own_lane.own_period`, its evasion check ``_fast_own._own_lane``), the frame of a delayed
+decision (the ego carried over the commands in flight, :func:`carried_ego` → :func:`~.command.segment_core`; the
+others along their worst cases, :func:`~.realworld.carried_others`, :func:`~.realworld.carry_worst_core`; the new
+command queued, :func:`push_row`), the responsible follow
 (:mod:`safelane.safety.responsible`), :func:`~.stages.lane_keep_accel`, the held plan's motion
 (:func:`~safelane.safety.plan.plan_state`, :func:`~.decide.plan_switches`) and
 :func:`~safelane.safety.plan.plan_reason`.
@@ -37,11 +40,13 @@ from ..safety.own_lane import own_period
 from ..safety.plan import PlanRecord, plan_reason, plan_state
 from ..safety.responsible import responsible_accel_core, responsible_ok_core
 from ..sim._fast_traffic import _chain_row
+from ..sim.kinematics import piece_acc
 from ._fast_decide import _candidate
 from ._fast_monitor import _breach_row
 from ._fast_own import _own_lane
 from ._fast_rules import rule_row
 from .assessment import belief_core
+from .command import segment_core
 from .decide import (
     ABORT,
     COMPLETED,
@@ -54,6 +59,7 @@ from .decide import (
 )
 from .policies import slow_belief, slow_draws
 from .proposals import proposal_core
+from .realworld import carried_others, carry_worst_core
 from .stages import lane_keep_accel, worst_case_core
 
 _compile.register_rows()
@@ -65,9 +71,14 @@ PRM = (
     "t", "dt", "a_x_a", "a_x_d", "a_y_m", "y_safe", "p_m", "p_m_human", "y_boundary", "lane_width", "a_o_d",
     "lat_tol", "tol", "monitor_tol", "assess_threshold", "monitor", "own_level", "own_margin", "truth",
     "paper_evasion", "slow", "assess_delay_s", "assess_miss", "time_tol", "vehicle_length", "vehicle_width",
+    "delay_s",
 )  # fmt: skip
+_PRM_DELAY = PRM.index("delay_s")  # the actuation delay [s] (whole periods; 0: none)
 #: Columns of the situation's per-row floats ``sf``.
-SIT_F = ("ego_x", "ego_y", "ego_vx", "ego_vy", "f_x", "f_v", "f_observed", "a_x", "a_y", "n_connected")
+SIT_F = ("ego_x", "ego_y", "ego_vx", "ego_vy", "f_x", "f_v", "f_observed", "a_x", "a_y", "n_connected",
+         "carried_x", "carried_y", "carried_vx", "carried_vy")  # fmt: skip
+#: The first of the ego's columns carried over the commands in flight (:func:`carried_ego`; read under a delay).
+_SF_CARRIED = SIT_F.index("carried_x")
 #: Columns of the situation's per-row flags ``sb``: F trusted over V2X (connected and collaborative), a stale V2X
 #: sender, the variant's flags (uses the chain, F's V2X, the assessment), F's true type (the ``truth`` assessment).
 SIT_B = ("f_trusted", "stale", "uses_chain", "uses_f_v2x", "uses_assessment", "f_aggressive_truth")
@@ -194,7 +205,10 @@ def period_row(b, prm, times, den, sf, sb, rule, chain_x, chain_v, link_promise,
     (``history``, ``count``, ``st``, ``sk``, ``plan``; the snapshot ``snap_*`` of the last period is read, the
     caller keeps this one), writes ``bounds`` (or reads them, with ``given_unsafe``, where the caller's chain
     analysis is given: a non-empty ``given_unsafe``), ``of``, ``ob`` and, for an abort, the held plan's knots
-    ``knots[b] (5, 8)`` (``t, px, vx, py, vy``; also left in the scratch ``kn``); returns the behaviour. ``times``,
+    ``knots[b] (5, 8)`` (``t, px, vx, py, vy``; also left in the scratch ``kn``); returns the behaviour. Under an
+    actuation delay (``prm``'s ``delay_s`` > 0) it decides from the frame of :func:`~.stages.frame`: the ego of
+    ``sf``'s ``carried_*`` columns (the caller's :func:`carried_ego`), the others carried along their worst cases.
+    ``times``,
     ``den``: the assessment's window; ``x2, v2, b2, kn``: scratch (``b2`` holds the chain's bounds with F's slot
     after the call)."""
     t, dt, a_a, a_d, a_ym, y_safe, p_m, _, y_bound, lane_w, a_o, lat_tol, tol, mon_tol, thr, mon = prm[:16]
@@ -252,6 +266,16 @@ def period_row(b, prm, times, den, sf, sb, rule, chain_x, chain_v, link_promise,
         bound0, unsafe0 = _own_decel(own_x, own_v, own_promise, own_nc[b], b, p_m, a_o)
         if sb[b, 2] and not unsafe0 and not broken:
             l0_decel = bound0
+    # --- frame (stages.frame): with an actuation delay, the states once the commands in flight have acted ---
+    delay = prm[_PRM_DELAY]
+    ex0, evx0, fx0, fv0 = ex, evx, fx, fv  # (the period's start: what stages.remember keeps)
+    l1x, l1v = chain_x[b, 0], chain_v[b, 0]
+    if delay > 0.0:
+        c = _SF_CARRIED
+        ex, ey, evx, evy = sf[b, c], sf[b, c + 1], sf[b, c + 2], sf[b, c + 3]
+        l1x, l1v, fx, fv = carried_others(SCALAR, l1x, l1v, l1_decel, fx, fv, f_aggr, a_a, a_d, delay)
+        if has_l0:
+            l0x, l0v = carry_worst_core(SCALAR, l0x, l0v, l0_decel, delay)
     # --- the proposal (stages.proposal) ---
     ok, ax_ok, ay_ok = proposal_core(SCALAR, sf[b, 7], sf[b, 8], lim)
     invalid = not ok
@@ -270,7 +294,7 @@ def period_row(b, prm, times, den, sf, sb, rule, chain_x, chain_v, link_promise,
             (l0x, l0v), (dt, lane_w, prm[24], prm[25], a_d, a_ym, y_bound),
         )  # fmt: skip
         if code_b == PROCEED or code_b == HESITATE:  # (stages.remember: the plan's start moves, the plan stays)
-            st[b, 0] = t + 0.0 + dt
+            st[b, 0] = t + delay + dt
     elif active:
         code_b = ABORT
         for code in range(2):
@@ -279,7 +303,7 @@ def period_row(b, prm, times, den, sf, sb, rule, chain_x, chain_v, link_promise,
             lateral = a_y if code == 0 else a_yh
             if has_l0:  # decide._with_own: the candidate with L0 (_fast_own.check_kernel's row)
                 state, period_ok, crossing = candidate_period(
-                    SCALAR, ex, ey, evx, evy, a_x, lateral, chain_x[b, 0], chain_v[b, 0], l1_decel, fx, fv,
+                    SCALAR, ex, ey, evx, evy, a_x, lateral, l1x, l1v, l1_decel, fx, fv,
                     f_aggr, lim, p_m, dt, own_level, lat_tol, tol,
                 )  # fmt: skip
                 period_ok, crossing, ox, ov = own_period(SCALAR, ex, evx, a_x, l0x, l0v, l0_decel, period_ok,
@@ -294,7 +318,7 @@ def period_row(b, prm, times, den, sf, sb, rule, chain_x, chain_v, link_promise,
                 own_gap = of_[5]
             else:
                 state, period_ok, crossing, parts, bits5 = _candidate(
-                    ex, ey, evx, evy, a_x, lateral, chain_x[b, 0], chain_v[b, 0], l1_decel, fx, fv, f_aggr, a_a,
+                    ex, ey, evx, evy, a_x, lateral, l1x, l1v, l1_decel, fx, fv, f_aggr, a_a,
                     a_d, a_ym, y_safe, p_m, dt, y_bound, lat_tol, tol,
                 )  # fmt: skip
                 bits = (bits5[0], bits5[1], bits5[2], bits5[3], bits5[4], False)
@@ -329,7 +353,7 @@ def period_row(b, prm, times, den, sf, sb, rule, chain_x, chain_v, link_promise,
                     for j in range(6):  # no own-lane leader: EvasionPlan's defaults
                         plan[b, _P_OWN + j] = _OWN_DEFAULTS[j]
                 sk[b, 0] = f_aggr
-                st[b, 0] = t + 0.0 + dt
+                st[b, 0] = t + delay + dt
                 break
     # --- command (stages.command) ---
     ax_cmd = a_x
@@ -338,15 +362,15 @@ def period_row(b, prm, times, den, sf, sb, rule, chain_x, chain_v, link_promise,
     if ruled:
         ax_cmd, ay_cmd = ax_rule, ay_rule
     elif not active:  # after completion: centre in the target lane, follow L1 responsibly
-        slack = chain_x[b, 0] - ex - p_m
-        ax_cmd = responsible_accel_core(SCALAR, a_x, _responsible_bound(slack, evx, chain_v[b, 0], l1_decel, a_d,
+        slack = l1x - ex - p_m
+        ax_cmd = responsible_accel_core(SCALAR, a_x, _responsible_bound(slack, evx, l1v, l1_decel, a_d,
                                                                         dt), a_d)  # fmt: skip
         if l1_decel > a_d:
-            if not responsible_ok_core(SCALAR, ax_cmd, slack, evx, chain_v[b, 0], l1_decel, a_d, dt, tol):
+            if not responsible_ok_core(SCALAR, ax_cmd, slack, evx, l1v, l1_decel, a_d, dt, tol):
                 ax_cmd = -a_d
         ay_cmd = lane_keep_accel(SCALAR, ey, evy, lane_w, a_ym)
     if on_plan:  # the held plan's exact motion over the period
-        age = SCALAR.maximum(t + 0.0 - st[b, 0], 0.0)
+        age = SCALAR.maximum(t + delay - st[b, 0], 0.0)
         _held_motion(plan, b, age, dt, a_a, a_d, kt, kx, kv, ky, kvy)
         for j in range(8):
             knots[b, 0, j], knots[b, 1, j], knots[b, 2, j] = kt[j], kx[j], kv[j]
@@ -361,9 +385,9 @@ def period_row(b, prm, times, den, sf, sb, rule, chain_x, chain_v, link_promise,
         ay_cmd = (kvy[first + 1] - kvy[first]) / span
     # --- remember: what a responsible F may do this period, for the monitor (stages.remember) ---
     limit = _INF
-    if active and not sk[b, 0] and ex - fx > 0.0:
-        limit = SCALAR.maximum(_responsible_bound(ex - fx - p_m, fv, evx, a_d, a_o, dt), -a_o)
-    st[b, 3], st[b, 4], st[b, 5], st[b, 6] = fx, fv, limit, plan[b, _HELD[6]]
+    if active and not sk[b, 0] and ex0 - fx0 > 0.0:
+        limit = SCALAR.maximum(_responsible_bound(ex0 - fx0 - p_m, fv0, evx0, a_d, a_o, dt), -a_o)
+    st[b, 3], st[b, 4], st[b, 5], st[b, 6] = fx0, fv0, limit, plan[b, _HELD[6]]
     sk[b, 4] = active
     if active and sb[b, 1] and not sk[b, 9]:  # stages.with_stale
         sk[b, 9] = True
@@ -376,13 +400,63 @@ def period_row(b, prm, times, den, sf, sb, rule, chain_x, chain_v, link_promise,
     return code_b
 
 
+@row_function
+def carried_ego(b, dt, segs, q_knots, q_seg, q_acc, q_flag, ex, ey, evx, evy):
+    """:meth:`~.command.InFlight.carry` of row ``b``: the ego ``(x, y, vx, vy)`` once the commands in flight have
+    acted (the queue ``q_*``, oldest first, as :class:`.fast_step.Packed` holds it), segment by segment
+    (:func:`~.command.segment_core`) as :meth:`~.command.Command.piece` lays a command out: ``segs[c]`` segments for
+    command ``c`` (its knots less one where some row aborts, else 1); an aborting row follows its knots, another
+    row its constant command for ``dt``, then segments of length 0."""
+    for c in range(q_knots.shape[1]):
+        for k in range(segs[c]):
+            if q_flag[b, c, 1]:
+                h, a_x, a_y = q_knots[b, c, k + 1] - q_knots[b, c, k], q_seg[b, c, 0, k], q_seg[b, c, 1, k]
+            else:
+                h, a_x, a_y = dt if k == 0 else 0.0, q_acc[b, c, 0], q_acc[b, c, 1]
+            ex, ey, evx, evy = segment_core(SCALAR, ex, ey, evx, evy, h, a_x, a_y)
+    return ex, ey, evx, evy
+
+
+@row_function
+def push_row(b, of, ob, knots, q_knots, q_seg, q_acc, q_flag):
+    """:meth:`~.command.InFlight.push` of row ``b``'s command of this period (:meth:`~.command.Command.issued`: the
+    accelerations ``of[b, :2]``, completing ``ob[b, 0]``, following the held plan ``ob[b, 4]`` over the knots
+    ``knots[b]`` with their segments' accelerations, :func:`~safelane.sim.kinematics.piece_acc`): the oldest
+    command, which acts now, leaves the queue ``q_*``; a row that does not abort has zero knots and segments."""
+    d, s = q_knots.shape[1], q_seg.shape[3]
+    if d == 0:
+        return
+    for c in range(d - 1):
+        for j in range(s + 1):
+            q_knots[b, c, j] = q_knots[b, c + 1, j]
+        for j in range(s):
+            q_seg[b, c, 0, j], q_seg[b, c, 1, j] = q_seg[b, c + 1, 0, j], q_seg[b, c + 1, 1, j]
+        q_acc[b, c, 0], q_acc[b, c, 1] = q_acc[b, c + 1, 0], q_acc[b, c + 1, 1]
+        q_flag[b, c, 0], q_flag[b, c, 1] = q_flag[b, c + 1, 0], q_flag[b, c + 1, 1]
+    c = d - 1
+    aborts = ob[b, 4]
+    q_acc[b, c, 0], q_acc[b, c, 1] = of[b, 0], of[b, 1]
+    q_flag[b, c, 0], q_flag[b, c, 1] = ob[b, 0], aborts
+    for j in range(s + 1):
+        q_knots[b, c, j] = knots[b, 0, j] if aborts else 0.0
+    for j in range(s):
+        if aborts:
+            span = knots[b, 0, j + 1] - knots[b, 0, j]
+            q_seg[b, c, 0, j] = piece_acc(SCALAR, knots[b, 2, j], knots[b, 2, j + 1], span)
+            q_seg[b, c, 1, j] = piece_acc(SCALAR, knots[b, 4, j], knots[b, 4, j + 1], span)
+        else:
+            q_seg[b, c, 0, j], q_seg[b, c, 1, j] = 0.0, 0.0
+
+
 @numba.njit(cache=True, nogil=True, error_model="numpy")
 def period_kernel(prm, sf, sb, rule, chain_x, chain_v, chain_promise, chain_human, n_connected, own_x, own_v,
                   own_promise, own_nc, history, count, st, sk, plan, has_last, snap_x, snap_v, snap_bounds, snap_nc,
-                  bounds, given_unsafe, behaviour, of, ob, knots):  # fmt: skip
+                  bounds, given_unsafe, behaviour, of, ob, knots, segs, q_knots, q_seg, q_acc, q_flag):  # fmt: skip
     """One period of every row: :func:`period_row` after resolving each link's promise and margin as
     :func:`~.stages.chain_analysis` does (the promise of a connected leader, else ``a_o_d``; ``p_m_human`` for a
-    connected human-driven one, else ``p_m``)."""
+    connected human-driven one, else ``p_m``). With commands in flight (``q_*``: ``(B, d, .)``, oldest first;
+    ``segs (d,)`` each command's segments), the ego carried over them first (:func:`carried_ego`, into ``sf``'s
+    ``carried_*`` columns) and this period's command pushed after (:func:`push_row`)."""
     dt, p_m, p_m_h, a_o = prm[1], prm[6], prm[7], prm[10]
     bsz, m = chain_x.shape
     window = history.shape[1]
@@ -400,8 +474,12 @@ def period_kernel(prm, sf, sb, rule, chain_x, chain_v, chain_promise, chain_huma
             connected = i < n_connected[b]
             link_promise[i, b] = chain_promise[b, i] if connected else a_o
             link_margin[i, b] = p_m_h if (chain_human[b, i] and connected) else p_m
+    c = _SF_CARRIED
     for b in range(bsz):
+        carried = carried_ego(b, dt, segs, q_knots, q_seg, q_acc, q_flag, sf[b, 0], sf[b, 1], sf[b, 2], sf[b, 3])
+        sf[b, c], sf[b, c + 1], sf[b, c + 2], sf[b, c + 3] = carried
         behaviour[b] = period_row(b, prm, times, den, sf, sb, rule, chain_x, chain_v, link_promise, link_margin, own_x,
                                   own_v, own_promise, own_nc, history, count, st, sk, plan, has_last, snap_x, snap_v,
                                   snap_bounds, snap_nc, bounds, given_unsafe, of, ob, knots, x2, v2, b2,
                                   kn)  # fmt: skip
+        push_row(b, of, ob, knots, q_knots, q_seg, q_acc, q_flag)

@@ -7,8 +7,10 @@ plan's exact knots over the period with the constant accelerations between them 
 Its :meth:`~Command.piece` is the same command as piecewise-constant accelerations ``(dur, a_x, a_y)``, arrays
 ``(B, S)`` (S segments: an abort's knots less one — 7 for the shield's plans; the other rows one segment of the
 whole period and empty ones; S = 1 where no row aborts), and
-:meth:`~Command.carry` moves an ego over it exactly (stopping rather than reversing). :class:`InFlight` is the
-queue of commands issued but not acting yet, oldest first.
+:meth:`~Command.carry` moves an ego over it exactly (stopping rather than reversing), one segment at a time by
+:func:`segment_core`, the one source of that motion (the compiled period, ``_fast_period.carried_ego``, calls it per
+row). :class:`InFlight` is the queue of commands issued but not acting yet, oldest first; both select and join rows
+(:meth:`Command.take`, :meth:`Command.join`: a shield over vehicles that come and go, :mod:`.rows`).
 """
 
 from __future__ import annotations
@@ -17,7 +19,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .._motion import advance
+from .._motion import advance_core
+from ..safety._backend import ARRAY, jitable
 
 
 @dataclass(frozen=True)
@@ -42,13 +45,14 @@ class Command:
     def issued(cls, a_x, a_y, abort, completing) -> Command:
         """From the shield's commands: ``abort`` is the aborting rows' exact motion ``(rows, knots, px, vx, py, vy)``
         (:meth:`~.decision.Decision.abort_motion`)."""
+        from ..sim.kinematics import piece_acc  # (the segment's acceleration from its end speeds: its one source)
+
         rows, knots, _, vx, _, vy = abort
         ax_seg = ay_seg = None
         if rows.size:
             span = np.diff(knots, axis=-1)
-            safe = np.where(span > 0.0, span, 1.0)
-            ax_seg = np.where(span > 0.0, np.diff(vx, axis=-1) / safe, 0.0)
-            ay_seg = np.where(span > 0.0, np.diff(vy, axis=-1) / safe, 0.0)
+            ax_seg = piece_acc(ARRAY, vx[..., :-1], vx[..., 1:], span)
+            ay_seg = piece_acc(ARRAY, vy[..., :-1], vy[..., 1:], span)
         return cls(a_x, a_y, rows, knots, ax_seg, ay_seg, completing)
 
     @classmethod
@@ -82,6 +86,30 @@ class Command:
         return tuple(np.stack(s, -1) for s in segment_states((ex[r], ey[r], evx[r], evy[r]), dur, self.ax_seg,
                                                               self.ay_seg))  # fmt: skip
 
+    def take(self, rows) -> Command:
+        """The rows ``rows`` (indices) only, in that order (an aborting row keeps its knots)."""
+        rows = np.asarray(rows, np.intp)
+        slot = np.full(len(self.a_x), -1, np.intp)
+        slot[self.rows] = np.arange(self.rows.size)
+        src = slot[rows]
+        kept = np.flatnonzero(src >= 0)
+        src = src[kept]
+        knots, ax_seg, ay_seg = (None, None, None) if not kept.size else (self.knots[src], self.ax_seg[src],
+                                                                          self.ay_seg[src])  # fmt: skip
+        return Command(self.a_x[rows], self.a_y[rows], kept, knots, ax_seg, ay_seg, self.completing[rows])
+
+    def join(self, other: Command) -> Command:
+        """These rows, then ``other``'s (aborting rows of both: the same number of knots)."""
+        parts = [c for c in (self, other) if c.rows.size]
+        if len(parts) == 2 and self.knots.shape[1] != other.knots.shape[1]:
+            raise ValueError("Command.join: the aborting rows of the two commands have different numbers of knots")
+        rows = np.concatenate([self.rows, other.rows + len(self.a_x)]).astype(np.intp)
+        knots, ax_seg, ay_seg = (None, None, None) if not parts else (
+            np.concatenate([c.knots for c in parts]), np.concatenate([c.ax_seg for c in parts]),
+            np.concatenate([c.ay_seg for c in parts]))  # fmt: skip
+        return Command(np.concatenate([self.a_x, other.a_x]), np.concatenate([self.a_y, other.a_y]), rows, knots,
+                       ax_seg, ay_seg, np.concatenate([self.completing, other.completing]))  # fmt: skip
+
 
 def segment_states(ego, dur, ax, ay):
     """``(xs, ys, vxs, vys)``: lists of the states at the start and after each of the piecewise-constant segments
@@ -89,13 +117,22 @@ def segment_states(ego, dur, ax, ay):
     free)."""
     x, y, vx, vy = ([q] for q in ego)
     for k in range(dur.shape[1]):
-        h = dur[:, k]
-        x1, v1 = advance(x[-1], vx[-1], ax[:, k], h)
+        with np.errstate(over="ignore"):  # (as _motion.advance: a vanishing deceleration stops at the horizon)
+            x1, y1, v1, vy1 = segment_core(ARRAY, x[-1], y[-1], vx[-1], vy[-1], dur[:, k], ax[:, k], ay[:, k])
         x.append(x1)
+        y.append(y1)
         vx.append(v1)
-        y.append(y[-1] + vy[-1] * h + 0.5 * ay[:, k] * h * h)
-        vy.append(vy[-1] + ay[:, k] * h)
+        vy.append(vy1)
     return x, y, vx, vy
+
+
+def segment_core(xp, x, y, vx, vy, h, a_x, a_y):
+    """``(x, y, vx, vy)`` after one segment of length ``h`` at constant accelerations ``(a_x, a_y)``: exact;
+    longitudinally it stops rather than reverses (:func:`~safelane._motion.advance_core`), laterally it is free.
+    Backend-generic, the one source of a command's motion (:func:`segment_states` on arrays, the compiled period per
+    row)."""
+    x1, vx1 = advance_core(xp, x, vx, a_x, h)
+    return x1, y + vy * h + 0.5 * a_y * h * h, vx1, vy + a_y * h
 
 
 @dataclass(frozen=True)
@@ -118,3 +155,16 @@ class InFlight:
         for command in self.commands:
             ex, ey, evx, evy = command.carry(ex, ey, evx, evy, dt)
         return ex, ey, evx, evy
+
+    def take(self, rows) -> InFlight:
+        """The rows ``rows`` of every command (:meth:`Command.take`)."""
+        return InFlight(commands=tuple(c.take(rows) for c in self.commands))
+
+    def join(self, other: InFlight) -> InFlight:
+        """These rows, then ``other``'s, command by command (both queues as long)."""
+        if len(self.commands) != len(other.commands):
+            raise ValueError("InFlight.join: the two queues hold different numbers of commands")
+        return InFlight(commands=tuple(a.join(b) for a, b in zip(self.commands, other.commands, strict=True)))
+
+
+jitable(segment_core)

@@ -10,8 +10,8 @@ state are the NumPy stages' (``core.step``) bits: ``tests/test_fast_period.py``.
 configuration's own field list (:data:`COMPILED`: each :class:`~.config.ShieldConfig` field with the values the kernel
 implements; a field missing there refuses, so a new setting is never run at its default) and from what the
 situation and the state carry (:data:`SITUATION_FIELDS`: sensing bounds, and any field not classified there — the
-world model's other vehicles are folded into the roles first, :func:`.core.fold_world`; commands in flight; the
-monitor's cumulative anchor; another decision rule). A
+world model's other vehicles are folded into the roles first, :func:`.core.fold_world`; commands in flight that
+the kernel's queue cannot hold; the monitor's cumulative anchor; another decision rule). A
 refused period runs the stages; ``Shield.last_path`` says which ran, ``Shield.refusals(situation)`` why.
 """
 
@@ -30,11 +30,17 @@ from ..safety.lateral import LATERAL_TOL_M
 from ..safety.plan import EvasionPlan
 from ..tolerances import TIME_TOL_S
 from .assessment import AssessmentState
+from .command import Command, InFlight
 from .config import ShieldConfig
 from .decide import own_completion_level, own_margin
 from .decision import Decision
 from .monitor import TOL_M, Breach, Snapshot
+from .realworld import delay_periods
 from .rules import rule_rows, uncompiled_rules
+
+#: The knots of an aborting row's command (``plan_knots``': the period's ends and the plan's six switches), as the
+#: kernel's queue of commands in flight holds them.
+KNOTS = 8
 
 #: Each :class:`ShieldConfig` field and the values the compiled period implements (``None``: every value).
 COMPILED: dict[str, tuple | None] = {
@@ -46,7 +52,7 @@ COMPILED: dict[str, tuple | None] = {
     "assess_delay_s": None,  # read by the 'slow' assessment
     "assess_miss": None,  # read by the 'slow' assessment
     "enabled": (True,),
-    "actuation_delay_s": (0.0,),
+    "actuation_delay_s": None,  # whole periods (realworld.delay_periods); the commands in flight packed (Packed.queue)
     "own_lane": None,
     "sensing": None,  # a situation with sensing bounds refuses where sensing is on (situation_refusals)
 }
@@ -103,8 +109,11 @@ def situation_refusals(situation, config: ShieldConfig, state) -> list[str]:
     if config.sensing and situation.has_errors:
         out.append("sensing-error bounds")
     if state is not None:
-        if state.pending is not None:
-            out.append("commands in flight")
+        if state.pending is None and config.actuation_delay_s > 0.0:
+            out.append("an actuation delay without commands in flight")
+        elif state.pending is not None and any(c.rows.size and c.knots.shape[1] != KNOTS
+                                               for c in state.pending.commands):  # fmt: skip
+            out.append(f"commands in flight with other than {KNOTS} knots")
         if state.last is not None and state.last.anchor is not None:
             out.append("the monitor's cumulative anchor")
     return out
@@ -122,6 +131,11 @@ class Packed:
     sk: np.ndarray  # (B, len(STATE_B)) bool
     snapshot: tuple | None  # (chain_x, chain_v, bounds, n_connected) of the last period, or None
     slow: bool = False  # the belief is the 'slow' assessment's (policies.SlowState): its draws and belief packed too
+    #: The commands in flight (actuation delay), oldest first, or None: ``(knots (B, d, KNOTS), seg (B, d, 2,
+    #: KNOTS − 1), acc (B, d, 2), flags (B, d, 2))`` — an aborting row's knots and its segments' ``a_x``, ``a_y``
+    #: (zeros for the other rows), each row's ``a_x``, ``a_y`` at the period's start, and its completing and aborting
+    #: flags (:class:`~.command.Command`'s fields, row by row).
+    queue: tuple | None = None
 
     @classmethod
     def of(cls, state) -> Packed:
@@ -150,24 +164,30 @@ class Packed:
             sk[:, 4] = last.active
             snapshot = (last.chain_x, last.chain_v, last.bounds, np.asarray(last.n_connected, np.int64))
         return cls(float(state.t), plan, inner.history.copy(), np.asarray(inner.count, np.int64).copy(), st, sk,
-                   snapshot, slow)  # fmt: skip
+                   snapshot, slow, _queue_of(state.pending, n))  # fmt: skip
 
     def take(self, rows) -> Packed:
         """The rows ``rows`` only, in that order (copies)."""
         snapshot = None if self.snapshot is None else tuple(a[rows] for a in self.snapshot)
+        queue = None if self.queue is None else tuple(a[rows] for a in self.queue)
         return Packed(self.t, np.asfortranarray(self.plan[rows]), self.history[rows], self.count[rows],
-                      self.st[rows], self.sk[rows], snapshot, self.slow)  # fmt: skip
+                      self.st[rows], self.sk[rows], snapshot, self.slow, queue)  # fmt: skip
 
     def join(self, other: Packed) -> Packed:
         """These rows, then ``other``'s (its time is this one's; both have a snapshot, or neither)."""
         if (self.snapshot is None) != (other.snapshot is None):
             raise ValueError("Packed.join: one state has a monitor snapshot and the other has none")
+        if (self.queue is None) != (other.queue is None) or (
+                self.queue is not None and self.queue[0].shape[1] != other.queue[0].shape[1]):  # fmt: skip
+            raise ValueError("Packed.join: the two states hold different numbers of commands in flight")
         snapshot = None if self.snapshot is None else tuple(
             np.concatenate([a, b]) for a, b in zip(self.snapshot, other.snapshot, strict=True))  # fmt: skip
+        queue = None if self.queue is None else tuple(
+            np.concatenate([a, b]) for a, b in zip(self.queue, other.queue, strict=True))  # fmt: skip
         return Packed(self.t, np.asfortranarray(np.concatenate([self.plan, other.plan])),
                       np.concatenate([self.history, other.history]), np.concatenate([self.count, other.count]),
                       np.concatenate([self.st, other.st]), np.concatenate([self.sk, other.sk]), snapshot,
-                      self.slow)  # fmt: skip
+                      self.slow, queue)  # fmt: skip
 
     def plan_of(self, params: Params) -> EvasionPlan:
         from ._fast_period import PLAN
@@ -201,7 +221,36 @@ class Packed:
             belief = SlowState(belief, p.st[:, 7], p.sk[:, 10], p.sk[:, 11])
         plan, breach = (p.plan_of(params), p.breach()) if decision is None else (decision.plan, decision.breach)
         return ShieldState(t=p.t, plan=plan, plan_t0=p.st[:, 0], plan_f_aggr=p.sk[:, 0], belief=belief, breach=breach,
-                           completed=p.sk[:, 3], last=last, pending=None)  # fmt: skip
+                           completed=p.sk[:, 3], last=last, pending=_in_flight(self.queue))  # fmt: skip
+
+
+def _queue_of(pending: InFlight | None, n: int) -> tuple | None:
+    """:attr:`Packed.queue` of the commands in flight ``pending`` (``None``: none)."""
+    if pending is None:
+        return None
+    d = len(pending.commands)
+    knots, seg = np.zeros((n, d, KNOTS)), np.zeros((n, d, 2, KNOTS - 1))
+    acc, flags = np.empty((n, d, 2)), np.zeros((n, d, 2), bool)
+    for c, command in enumerate(pending.commands):
+        acc[:, c, 0], acc[:, c, 1], flags[:, c, 0] = command.a_x, command.a_y, command.completing
+        if command.rows.size:
+            r = command.rows
+            flags[r, c, 1] = True
+            knots[r, c], seg[r, c, 0], seg[r, c, 1] = command.knots, command.ax_seg, command.ay_seg
+    return knots, seg, acc, flags
+
+
+def _in_flight(queue: tuple | None) -> InFlight | None:
+    """The :class:`~.command.InFlight` of :attr:`Packed.queue` (copies)."""
+    if queue is None:
+        return None
+    knots, seg, acc, flags = queue
+    commands = []
+    for c in range(knots.shape[1]):
+        rows = np.flatnonzero(flags[:, c, 1])
+        parts = (None, None, None) if not rows.size else (knots[rows, c], seg[rows, c, 0], seg[rows, c, 1])
+        commands.append(Command(acc[:, c, 0].copy(), acc[:, c, 1].copy(), rows, *parts, flags[:, c, 0].copy()))
+    return InFlight(commands=tuple(commands))
 
 
 @functools.cache
@@ -219,6 +268,15 @@ def _no_own(n: int) -> tuple:
 
 
 @functools.lru_cache(maxsize=16)
+def _no_queue(n: int) -> tuple:
+    """The kernel's queue of commands in flight for ``n`` rows without a delay (empty: shared between calls)."""
+    return np.zeros((n, 0, KNOTS)), np.zeros((n, 0, 2, KNOTS - 1)), np.zeros((n, 0, 2)), np.zeros((n, 0, 2), bool)
+
+
+_NO_SEGS = np.zeros(0, np.int64)
+
+
+@functools.lru_cache(maxsize=16)
 def _paper_rule(n: int) -> np.ndarray:
     """The kernel's rule vectors for ``n`` rows under the paper's rule alone (an input only: shared between calls)."""
     return np.zeros((n, 1))
@@ -233,7 +291,7 @@ def period_constants(prm: Params, cfg: ShieldConfig) -> np.ndarray:
                     float(cfg.monitor), max(own_completion_level(prm), prm.y_boundary), own_margin(prm),
                     float(cfg.assessment == "truth"), float(cfg.completion == "paper_evasion"),
                     float(cfg.assessment == "slow"), cfg.assess_delay_s, cfg.assess_miss, TIME_TOL_S,
-                    prm.vehicle_length, prm.vehicle_width])  # fmt: skip
+                    prm.vehicle_length, prm.vehicle_width, delay_periods(cfg, prm) * prm.dt])  # fmt: skip
     out.flags.writeable = False
     return out
 
@@ -249,7 +307,7 @@ def step(packed: Packed, situation, proposal, params: Params, config: ShieldConf
     fp = _period_module()
     s, prm, cfg = situation, params, config
     n, m = s.chain_x.shape
-    sf = np.empty((n, len(fp.SIT_F)))
+    sf = np.empty((n, len(fp.SIT_F)))  # (the carried_* columns: the kernel's)
     sf[:, 0], sf[:, 1], sf[:, 2], sf[:, 3], sf[:, 4], sf[:, 5] = s.ego_x, s.ego_y, s.ego_vx, s.ego_vy, s.f_x, s.f_v
     sf[:, 6], sf[:, 7], sf[:, 8], sf[:, 9] = s.observed_f_speed, proposal[0], proposal[1], s.n_connected
     sb = np.empty((n, len(fp.SIT_B)), bool)
@@ -271,8 +329,13 @@ def step(packed: Packed, situation, proposal, params: Params, config: ShieldConf
                np.ascontiguousarray(s.own_promise, float).reshape(n, k - 1), np.asarray(s.own_n_connected, np.int64))
     else:
         own = _no_own(n)
+    queue = None if packed.queue is None else tuple(a.copy() for a in packed.queue)
     out = Packed(s.t + prm.dt, packed.plan.copy(order="F"), packed.history.copy(), packed.count.copy(),
-                 packed.st.copy(), packed.sk.copy(), None, packed.slow)  # fmt: skip
+                 packed.st.copy(), packed.sk.copy(), None, packed.slow, queue)  # fmt: skip
+    if queue is None:
+        queue, segs = _no_queue(n), _NO_SEGS
+    else:  # (Command.piece: the knots less one where some row aborts, else one segment)
+        segs = np.where(queue[3][:, :, 1].any(0), KNOTS - 1, 1).astype(np.int64)
     snap = packed.snapshot
     if snap is None:
         snap = (np.zeros((n, m)), np.zeros((n, m)), np.zeros((n, m)), np.zeros(n, np.int64))
@@ -291,7 +354,7 @@ def step(packed: Packed, situation, proposal, params: Params, config: ShieldConf
                      np.ascontiguousarray(s.chain_human, bool).reshape(n, max(m - 1, 0)), nc, *own, out.history,
                      out.count,
                      out.st, out.sk, out.plan, packed.snapshot is not None, *snap, bounds, given_unsafe, behaviour,
-                     of, ob, knots)  # fmt: skip
+                     of, ob, knots, segs, *queue)  # fmt: skip
     out.snapshot = (s.chain_x, s.chain_v, bounds, nc)
     rows = ob[:, 4].nonzero()[0]  # the aborts on the held plan (an RSS response is a constant command)
     if rows.size:

@@ -22,9 +22,9 @@ import dataclasses
 
 import numpy as np
 
-from .._motion import advance
+from .._motion import advance_core
 from ..params import Params
-from ..safety._backend import ARRAY, FEASIBILITY_TOL_M
+from ..safety._backend import ARRAY, FEASIBILITY_TOL_M, jitable
 from ..safety.chain import chain_link
 from ..safety.lateral import LATERAL_TOL_M
 from ..safety.own_lane import own_lane_core
@@ -97,8 +97,23 @@ def own_lane_decel(s: Situation, prm: Params, informed, broken) -> np.ndarray:
 
 def carry_worst(x, v, decel, horizon: float):
     """A vehicle's state after ``horizon`` along its worst-case trajectory: constant acceleration ``-decel``
-    (``decel`` may be negative: an aggressive F accelerates), stopping at rest."""
-    return advance(x, v, -np.asarray(decel, float), horizon)
+    (``decel`` may be negative: an aggressive F accelerates), stopping at rest (:func:`carry_worst_core`)."""
+    with np.errstate(over="ignore"):  # (as _motion.advance)
+        return carry_worst_core(ARRAY, x, v, np.asarray(decel, float), horizon)
+
+
+def carry_worst_core(xp, x, v, decel, horizon):
+    """Backend-generic :func:`carry_worst` (the compiled period carries ``L0`` with it, row by row)."""
+    return advance_core(xp, x, v, -decel, horizon)
+
+
+def carried_others(xp, l1_x, l1_v, l1_decel, f_x, f_v, f_aggressive, a_x_a, a_x_d, delay):
+    """``(l1_x, l1_v, f_x, f_v)`` after the delay along their worst cases (the frame of a delayed decision,
+    :func:`.stages.frame`): L1 braking at ``l1_decel``, F accelerating at ``a_x_a`` where it is taken for
+    aggressive, else braking at ``a_x_d``; both stop at rest. Backend-generic (the compiled period, per row)."""
+    l1_x, l1_v = carry_worst_core(xp, l1_x, l1_v, l1_decel, delay)
+    f_x, f_v = carry_worst_core(xp, f_x, f_v, xp.where(f_aggressive, -a_x_a, a_x_d), delay)
+    return l1_x, l1_v, f_x, f_v
 
 
 def delay_periods(cfg, prm: Params) -> int:
@@ -143,3 +158,6 @@ def own_plan(plan: EvasionPlan, args, own, prm: Params) -> EvasionPlan:
         piece = plan_from_core(ARRAY, rows.shape, (*sub, prm.p_m, prm.p_m), exists, parts, prm.p_m, prm.p_m, prm,
                                own=(*own_r, margin))  # fmt: skip
     return set_rows(plan, [(rows, piece)])
+
+
+jitable(carry_worst_core, carried_others)

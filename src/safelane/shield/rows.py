@@ -13,6 +13,7 @@ import dataclasses
 import numpy as np
 
 from ..params import Params
+from .command import InFlight
 from .monitor import Snapshot
 
 _FAR_BEHIND_M = -1e9
@@ -25,6 +26,8 @@ def take_rows(obj, rows):
         return obj
     if isinstance(obj, np.ndarray):
         return obj[rows] if obj.ndim else obj
+    if isinstance(obj, InFlight):  # (its commands index their aborting rows)
+        return obj.take(rows)
     if dataclasses.is_dataclass(obj):
         return dataclasses.replace(obj, **{f.name: take_rows(getattr(obj, f.name), rows)
                                            for f in dataclasses.fields(obj) if f.init})  # fmt: skip
@@ -37,6 +40,8 @@ def join_rows(a, b):
         return a
     if isinstance(a, np.ndarray):
         return np.concatenate([a, b]) if a.ndim else a
+    if isinstance(a, InFlight):
+        return a.join(b)
     if dataclasses.is_dataclass(a):
         return dataclasses.replace(a, **{f.name: join_rows(getattr(a, f.name), getattr(b, f.name))
                                          for f in dataclasses.fields(a) if f.init})  # fmt: skip

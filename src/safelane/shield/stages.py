@@ -39,7 +39,7 @@ from .decide import ABORT, COMPLETED, HESITATE, PROCEED, check_candidate, hesita
 from .monitor import BREACH_KINDS, Anchor, Breach, Snapshot, observe_breaches
 from .policies import ASSESSMENTS, COMPLETION_RULES
 from .proposals import check_proposal
-from .realworld import carry_worst, chain_bounds, delay_periods, own_lane_decel, worst_corners
+from .realworld import carried_others, carry_worst, chain_bounds, delay_periods, own_lane_decel, worst_corners
 from .rules import RuleInputs
 from .situation import Situation
 from .world import fold as fold_others
@@ -194,8 +194,10 @@ def frame(state, obs: Observed, worst: WorstCase, prm: Params, cfg: ShieldConfig
     delay = delay_periods(cfg, prm) * prm.dt
     if delay > 0.0:
         ego = state.pending.carry(*ego, prm.dt)
-        l1 = carry_worst(*l1, worst.l1_decel, delay)
-        f = carry_worst(*f, np.where(worst.f_aggr, -prm.a_x_a, prm.a_x_d), delay)
+        with np.errstate(over="ignore"):  # (as _motion.advance)
+            l1x, l1v, fx, fv = carried_others(ARRAY, *l1, worst.l1_decel, *f, worst.f_aggr, prm.a_x_a, prm.a_x_d,
+                                              delay)  # fmt: skip
+        l1, f = (l1x, l1v), (fx, fv)
         if own is not None:
             own = (*carry_worst(own[0], own[1], own[2], delay), own[2])
     return Frame(ego, l1, f, own, delay)
