@@ -28,6 +28,13 @@ def advance_core(xp, x, v, a, dt):
     return x + v * ts + 0.5 * a * ts * ts, xp.where(ts < dt, 0.0, xp.maximum(v + a * dt, 0.0))
 
 
+def piece_acc(xp, v0, v1, span):
+    """The constant acceleration of a segment of length ``span`` from its end speeds ``v0``, ``v1`` (0 on a
+    zero-length segment: a repeated knot). Backend-generic: the simulator's motions (``sim/kinematics.py``) and the
+    shield's commands (``shield/command.py``)."""
+    return xp.where(span > 0.0, (v1 - v0) / xp.where(span > 0.0, span, 1.0), 0.0)
+
+
 def stop_time(v, a, horizon):
     """Time at which a vehicle at speed ``v >= 0`` with acceleration ``a`` stops, capped at ``horizon``."""
     with np.errstate(over="ignore"):  # a vanishing deceleration: v / tiny -> inf, then capped at the horizon

@@ -19,7 +19,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .._motion import advance_core
+from .._motion import advance_core, piece_acc
 from ..safety._backend import ARRAY, jitable
 
 
@@ -45,8 +45,6 @@ class Command:
     def issued(cls, a_x, a_y, abort, completing) -> Command:
         """From the shield's commands: ``abort`` is the aborting rows' exact motion ``(rows, knots, px, vx, py, vy)``
         (:meth:`~.decision.Decision.abort_motion`)."""
-        from ..sim.kinematics import piece_acc  # (the segment's acceleration from its end speeds: its one source)
-
         rows, knots, _, vx, _, vy = abort
         ax_seg = ay_seg = None
         if rows.size:

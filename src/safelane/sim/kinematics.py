@@ -23,7 +23,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .._motion import stop_time, stop_time_core
+from .._motion import piece_acc, stop_time, stop_time_core
 from ..safety._backend import ARRAY, INF, jitable
 
 __all__ = [
@@ -271,12 +271,6 @@ def state_at(xp, x, v, a, tau):
     """``(x, v)`` a time ``tau`` into a segment at constant acceleration ``a`` that starts at ``(x, v)``.
     Backend-generic; every argument broadcasts."""
     return x + v * tau + 0.5 * a * tau * tau, v + a * tau
-
-
-def piece_acc(xp, v0, v1, span):
-    """The constant acceleration of a segment of length ``span`` from its end speeds ``v0``, ``v1`` (0 on a
-    zero-length segment: a repeated knot). Backend-generic."""
-    return xp.where(span > 0.0, (v1 - v0) / xp.where(span > 0.0, span, 1.0), 0.0)
 
 
 def vertex_extrema(xp, d0, dv0, acc, span):
