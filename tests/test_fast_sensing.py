@@ -158,3 +158,43 @@ def test_no_sensing_refusal_remains():
     assert shield.refusals(s) == []
     shield.step(s, (0.0, 0.0))
     assert shield.last_path == "compiled"
+
+
+def test_world_model_with_bounds_is_folded_and_runs_compiled():
+    """The world model's other vehicles with sensing-error bounds (an inserted vehicle takes the row's loosest bound,
+    ``world.fold``): folded first, then the compiled period with the box; the stages' decisions and states."""
+    from safelane.shield.world import Others
+
+    params = Params()
+    rng = np.random.default_rng(29)
+    n, k = 24, 4
+    world = random_world(rng, n, 3, stale=False, own=True)
+    lanes = np.array([-1.0, 0.0, 1.0, 2.0])
+    ox = rng.uniform(-30.0, 60.0, (n, k))
+    oy = lanes * params.lane_width + rng.uniform(-1.2, 1.2, (n, k))
+    ovx = world["ego"][2][:, None] + rng.uniform(-5.0, 3.0, (n, k))
+    ovy = rng.uniform(-0.8, 0.8, (n, k))
+    connected = rng.random((n, k)) < 0.3
+    box_rng = np.random.default_rng(30)
+
+    def observed(t):
+        others = Others.from_arrays(ox + ovx * t, oy + ovy * np.minimum(t, 1.0), np.maximum(ovx, 0.0), ovy,
+                                    connected, np.full((n, k), Others.empty(1, 1).announce_lane[0, 0]),
+                                    np.full((n, k), np.inf))  # fmt: skip
+        s = with_box(situation_of(world, t, params), box_rng, "all")
+        return dataclasses.replace(s, others=others)
+
+    shield = Shield(params)
+    start = observed(0.0)
+    shield.reset(start)
+    state = shield_core.init(start, params, ShieldConfig(), "CV_all")
+    for step in range(30):
+        s = observed(step * params.dt)
+        prop = proposals(rng, n)
+        fast = shield.step(s, prop)
+        assert shield.last_path == "compiled", shield.refusals(s)
+        state, ref = shield_core.stages_step(state, s, prop, params)
+        same(fast, ref, f"period {step}")
+        same(shield.state, state, f"period {step}: state")
+        advance(world, ref, rng, params.dt)
+    assert state.last.anchor is not None
