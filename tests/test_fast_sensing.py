@@ -198,3 +198,35 @@ def test_world_model_with_bounds_is_folded_and_runs_compiled():
         same(shield.state, state, f"period {step}: state")
         advance(world, ref, rng, params.dt)
     assert state.last.anchor is not None
+
+
+def test_a_chain_that_changes_length_renews_the_anchor():
+    """The last leader leaves the chain for a while (M 3 → 2 → 3): the anchor's chain is not compared across the
+    change and is taken anew (``Anchor.carried``), on both paths alike."""
+    params = Params()
+    rng = np.random.default_rng(5)
+    n = 20
+    world = random_world(rng, n, 3, stale=False, own=True)
+    box_rng = np.random.default_rng(6)
+
+    def observed(k):
+        s = situation_of(world, k * params.dt, params)
+        if 5 <= k < 10:
+            s = dataclasses.replace(s, chain_x=s.chain_x[:, :2].copy(), chain_v=s.chain_v[:, :2].copy(),
+                                    chain_promise=s.chain_promise[:, :1].copy(),
+                                    chain_human=s.chain_human[:, :1].copy(), n_connected=np.minimum(s.n_connected, 1))
+        return with_box(s, box_rng, "all")
+
+    shield = Shield(params)
+    start = observed(0)
+    shield.reset(start)
+    state = shield_core.init(start, params, ShieldConfig(), "CV_all")
+    for k in range(20):
+        s = observed(k)
+        prop = proposals(rng, n)
+        fast = shield.step(s, prop)
+        assert shield.last_path == "compiled"
+        state, ref = shield_core.stages_step(state, s, prop, params)
+        same(fast, ref, f"period {k}")
+        same(shield.state, state, f"period {k}: state")
+        advance(world, ref, rng, params.dt)
