@@ -230,3 +230,37 @@ def test_a_chain_that_changes_length_renews_the_anchor():
         same(fast, ref, f"period {k}")
         same(shield.state, state, f"period {k}: state")
         advance(world, ref, rng, params.dt)
+
+
+def test_regrouping_keeps_the_packed_anchor():
+    """``Shield.regroup`` keeping some rows (the traffic pool's use) takes the packed anchor's rows with the rest of
+    the state: the stages' decisions on the unpacked state's rows (:func:`safelane.shield.rows.take_rows`)."""
+    from safelane.shield import rows as rws
+
+    params = Params()
+    rng = np.random.default_rng(31)
+    world = random_world(rng, 16, 3, stale=False, own=True)
+    box_rng = np.random.default_rng(32)
+    active = np.arange(16)
+    start = with_box(situation_of(world, 0.0, params), box_rng, "all")
+    shield = Shield(params)
+    shield.reset(start)
+    state = shield_core.init(start, params, ShieldConfig(), "CV_all")
+    for k in range(24):
+        t = k * params.dt
+        if k in (6, 15):
+            keep = np.arange(0, len(active), 2 if k == 6 else 3)
+            shield.regroup(keep, None, t)
+            assert shield._state is None and shield._packed.anchor is not None  # regrouped packed
+            state = dataclasses.replace(rws.take_rows(state, keep), t=t)
+            active = active[keep]
+        s = with_box(rws.take_rows(situation_of(world, t, params), active), box_rng, "all")
+        prop = proposals(rng, len(active))
+        fast = shield.step(s, prop)
+        assert shield.last_path == "compiled"
+        state, ref = shield_core.stages_step(state, s, prop, params, ShieldConfig(), "CV_all")
+        same(fast, ref, f"period {k}")
+        a_x, a_y = np.zeros(16), np.zeros(16)
+        a_x[active], a_y[active] = ref.a_x, ref.a_y
+        advance(world, dataclasses.replace(ref, a_x=a_x, a_y=a_y), rng, params.dt)
+    same(shield.state, state, "the state read back")
