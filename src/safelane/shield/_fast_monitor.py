@@ -84,6 +84,25 @@ _ANCHOR_SIGNATURE = types.void(
 )  # fmt: skip
 
 
+@row_function
+def anchor_row(chain_x, chain_v, bounds, r, now_x, nr, off, l1_decel, n_connected, f_x, f_v, f_accel, now_f_x, own_x,
+               own_v, own_decel, now_own_x, age, age_f, age_own, same_chain, tol):  # fmt: skip
+    """One active row of :func:`anchor_kernel` (and of the compiled period): row ``r`` of the anchor's chain
+    (``(., M)``), the chain now at row ``nr``, columns from ``off`` of ``now_x``; the four flags."""
+    l1 = leader = last = False
+    if same_chain:
+        for i in range(chain_x.shape[1]):
+            behind = braked_harder(SCALAR, now_x[nr, i + off], chain_x[r, i], chain_v[r, i], bounds[r, i], age, tol)
+            if i < n_connected:
+                leader = leader or behind
+            elif i == n_connected:
+                last = last or behind
+        l1 = braked_harder(SCALAR, now_x[nr, off], chain_x[r, 0], chain_v[r, 0], l1_decel, age, tol)
+    if own_x < np.inf and now_own_x < np.inf:
+        last = last or braked_harder(SCALAR, now_own_x, own_x, own_v, own_decel, age_own, tol)
+    return l1, leader, last, pushed_harder(SCALAR, now_f_x, f_x, f_v, f_accel, age_f, tol)
+
+
 @kernel(_ANCHOR_SIGNATURE)
 def anchor_kernel(
     chain_x, chain_v, bounds, now_x, l1_decel, n_connected, f_x, f_v, f_accel, now_f_x, own_x, own_v, own_decel,
@@ -95,19 +114,10 @@ def anchor_kernel(
     for b in range(chain_x.shape[0]):
         if not active[b]:
             continue
-        l1 = leader = last = False
-        if same_chain:
-            for i in range(chain_x.shape[1]):
-                behind = braked_harder(SCALAR, now_x[b, i], chain_x[b, i], chain_v[b, i], bounds[b, i], age[b], tol)
-                if i < n_connected[b]:
-                    leader = leader or behind
-                elif i == n_connected[b]:
-                    last = last or behind
-            l1 = braked_harder(SCALAR, now_x[b, 0], chain_x[b, 0], chain_v[b, 0], l1_decel[b], age[b], tol)
-        if own_x[b] < np.inf and now_own_x[b] < np.inf:
-            last = last or braked_harder(SCALAR, now_own_x[b], own_x[b], own_v[b], own_decel[b], age_own[b], tol)
-        flags[b, 0], flags[b, 1], flags[b, 2] = l1, leader, last
-        flags[b, 3] = pushed_harder(SCALAR, now_f_x[b], f_x[b], f_v[b], f_accel[b], age_f[b], tol)
+        flags[b, 0], flags[b, 1], flags[b, 2], flags[b, 3] = anchor_row(
+            chain_x, chain_v, bounds, b, now_x, b, 0, l1_decel[b], n_connected[b], f_x[b], f_v[b], f_accel[b],
+            now_f_x[b], own_x[b], own_v[b], own_decel[b], now_own_x[b], age[b], age_f[b], age_own[b], same_chain, tol,
+        )  # fmt: skip
 
 
 def anchor_flags(anchor, active, now_chain_x, now_f_x, now_own_x, age, age_f, age_own):

@@ -6,8 +6,11 @@ assessment's :func:`~.assessment.belief_core`, the chain scan's link (``_chain_r
 :func:`~safelane.safety.chain.chain_link`), the monitor's comparisons (``_breach_row`` →
 :func:`~.monitor.braked_harder`, :func:`~.monitor.pushed_harder`), :func:`~.stages.worst_case_core`,
 :func:`~.proposals.proposal_core`, the candidate check (``_candidate`` → :func:`~.decide.candidate_row`), the
-completion guard :func:`~.decide.commit_guard_core`, :func:`~.decide.hesitate_core`, the own-lane leader ``L0`` (its
-chain's bound through :func:`~safelane.safety.chain.chain_link`, the period with it
+completion guard :func:`~.decide.commit_guard_core`, :func:`~.decide.hesitate_core`, the sensing box's corners
+(:func:`~.realworld.behind_corner`, :func:`~.realworld.ahead_corner`; each chain link at its own corner,
+:func:`~.realworld.link_at_corner`) and the monitor's cumulative comparison (``_fast_monitor.anchor_row``,
+:func:`~.monitor.anchor_renewal`, :func:`~.monitor.anchor_carry`), the own-lane leader ``L0`` (its
+chain's bound through :func:`~.realworld.link_at_corner`, the period with it
 :func:`~safelane.safety.own_lane.own_period`, its evasion check ``_fast_own._own_lane``), the frame of a delayed
 decision (the ego carried over the commands in flight, :func:`carried_ego` → :func:`~.command.segment_core`; the
 others along their worst cases, :func:`~.realworld.carried_others`, :func:`~.realworld.carry_worst_core`; the new
@@ -35,14 +38,13 @@ from ..safety import _compile
 from ..safety._backend import SCALAR, Limits, _clip
 from ..safety._fast_base import announce_compiles, float_bits, row_function, sort_short
 from ..safety._fast_responsible import _responsible_bound
-from ..safety.chain import chain_link
 from ..safety.own_lane import own_period
 from ..safety.plan import PlanRecord, plan_reason, plan_state
 from ..safety.responsible import responsible_accel_core, responsible_ok_core
 from ..sim._fast_traffic import _chain_row
 from ..sim.kinematics import piece_acc
 from ._fast_decide import _candidate
-from ._fast_monitor import _breach_row
+from ._fast_monitor import _breach_row, anchor_row
 from ._fast_own import _own_lane
 from ._fast_rules import rule_row
 from .assessment import belief_core
@@ -57,9 +59,10 @@ from .decide import (
     hesitate_core,
     plan_switches,
 )
+from .monitor import anchor_carry, anchor_renewal
 from .policies import slow_belief, slow_draws
 from .proposals import proposal_core
-from .realworld import carried_others, carry_worst_core
+from .realworld import ahead_corner, behind_corner, carried_others, carry_worst_core, link_at_corner
 from .stages import lane_keep_accel, worst_case_core
 
 _compile.register_rows()
@@ -130,18 +133,18 @@ _PARTS = np.array([_PF[n] for n in ("t_y_f", "t_y_switch", "y_acc_1", "y_acc_2",
 
 
 @numba.njit(inline="always")
-def _own_decel(own_x, own_v, own_promise, nc, r, p_m, a_o):
-    """``realworld.chain_bounds`` of row ``r``'s own-lane chain (``L0`` first; exact states, no human margins):
-    ``(L0's bound, unsafe)``; an empty slot pair (``+inf`` positions) leaves the link free."""
+def _own_decel(own_x, own_v, own_promise, nc, r, p_m, a_o, sense):
+    """``realworld.chain_bounds`` of row ``r``'s own-lane chain (``L0`` first; no human margins), each link at its
+    own corner of the sensing box (``sense``'s ``err_own``; exact states without one): ``(L0's bound, unsafe)``; an
+    empty slot pair (``+inf`` positions) leaves the link free."""
     a_ahead = a_o
     unsafe = False
     for i in range(own_x.shape[1] - 2, -1, -1):
-        slack = own_x[r, i + 1] - own_x[r, i] - p_m - (0.0 + 0.0)
-        if slack != slack:
-            slack = _INF
         promise = own_promise[r, i] if i < nc else a_o
-        _, a_ahead, broken = chain_link(SCALAR, slack, own_v[r, i] + 0.0, SCALAR.maximum(own_v[r, i + 1] - 0.0, 0.0),
-                                        a_ahead, promise, a_o)  # fmt: skip
+        a_ahead, broken = link_at_corner(SCALAR, own_x[r, i], own_v[r, i], _own_err(sense, r, i, 0),
+                                         _own_err(sense, r, i, 1), own_x[r, i + 1], own_v[r, i + 1],
+                                         _own_err(sense, r, i + 1, 0), _own_err(sense, r, i + 1, 1), p_m, a_ahead,
+                                         promise, a_o)  # fmt: skip
         unsafe = unsafe or broken
     return a_ahead, unsafe
 
@@ -194,10 +197,147 @@ def monitor_row(b, t, dt, mon_tol, now, snap_x, snap_v, snap_bounds, snap_nc, st
     sk[b, 5], sk[b, 6], sk[b, 7], sk[b, 8] = sk[b, 5] or f0, sk[b, 6] or f1, sk[b, 7] or f2, sk[b, 8] or f3
 
 
+#: The held anchor's per-row floats (:class:`~.monitor.Anchor`'s fields; :class:`.fast_step.Packed` packs them).
+ANCHOR_F = ("t", "f_t", "own_t", "l1_decel", "f_x", "f_v", "f_accel", "own_x", "own_v", "own_decel")
+#: The entries of :func:`period_row`'s ``sense`` tuple (:func:`.fast_step.sense_arrays` builds it): the sensing box
+#: (``err_f (B, 2)``, ``err_chain (B, M, 2)``, ``err_own (B, K, 2)``, zeros where the situation bounds nothing;
+#: no rows: no box), its modes (a box, the chain's errors bounded, the own lane analysed), the chain at the
+#: analysis' corner (written: the snapshot), the held anchor (:data:`ANCHOR_F`, chain, bounds, number connected; no
+#: rows: none) and the new one (written; no rows: none made).
+SENSE = ("err_f", "err_chain", "err_own", "modes", "corner_x", "corner_v", "anchor_f", "anchor_x", "anchor_v",
+         "anchor_b", "anchor_nc", "new_f", "new_x", "new_v", "new_b", "new_nc")  # fmt: skip
+
+
+@row_function
+def _own_boxed(sense):
+    """A sensing box and an own lane analysed (``stages.own_leader`` is not ``None``)."""
+    if sense is None:
+        return False
+    return sense[3][0] and sense[3][2]
+
+
+@row_function
+def _own_err(sense, r, i, j):
+    """The own lane's sensing bound ``err_own[r, i, j]`` (0 without a box)."""
+    if sense is None:
+        return 0.0
+    if not sense[3][0]:
+        return 0.0
+    return sense[2][r, i, j]
+
+
+@row_function
+def _chain_box(sense, chain_x, chain_v, link_promise, link_margin, b, a_o, b2):
+    """``(done, unsafe)``: row ``b``'s chain analysis with each link at its own corner of the sensing box
+    (:func:`~.realworld.chain_bounds`, what :func:`~.stages.chain_analysis` runs where the chain's errors are
+    bounded), its bounds into ``b2`` as ``_chain_row`` writes them; ``done`` false where the chain's states are
+    exact (the caller's ``_chain_row``)."""
+    if sense is None:
+        return False, False
+    if not (sense[3][0] and sense[3][1]):
+        return False, False
+    err = sense[1]
+    m = chain_x.shape[1]
+    a_ahead = a_o
+    unsafe = False
+    b2[0, 0] = a_o
+    b2[0, m] = a_o
+    for i in range(m - 2, -1, -1):
+        a_ahead, broken = link_at_corner(SCALAR, chain_x[b, i], chain_v[b, i], err[b, i, 0], err[b, i, 1],
+                                         chain_x[b, i + 1], chain_v[b, i + 1], err[b, i + 1, 0], err[b, i + 1, 1],
+                                         link_margin[i, b], a_ahead, link_promise[i, b], a_o)  # fmt: skip
+        unsafe = unsafe or broken
+        b2[0, i + 1] = a_ahead
+    return True, unsafe
+
+
+@row_function
+def _corners(sense, b, chain_x, chain_v, own_x, own_v, fx, fv, x2):
+    """Row ``b`` at the sensing box's corners (:func:`~.realworld.worst_corners`): ``(fx, fv, fx_o, fv_o, l1x, l1v,
+    l0x, l0v, l0x_o)`` — F, L1 and L0 at the analysis' corner (leaders behind and slower, F ahead and faster), then
+    F and L0 at the observed one (the opposite, what the monitor compares with). The chain at the analysis' corner
+    into ``sense``'s snapshot arrays, its observed positions into ``x2``'s slots from 1 and F's into slot 0. Without
+    a box: the states as measured, ``x2`` untouched."""
+    if sense is None:
+        return fx, fv, fx, fv, chain_x[b, 0], chain_v[b, 0], own_x[b, 0], own_v[b, 0], own_x[b, 0]
+    if not sense[3][0]:
+        return fx, fv, fx, fv, chain_x[b, 0], chain_v[b, 0], own_x[b, 0], own_v[b, 0], own_x[b, 0]
+    ef, ec, eo, cx, cv = sense[0], sense[1], sense[2], sense[4], sense[5]
+    for i in range(chain_x.shape[1]):
+        cx[b, i], cv[b, i] = behind_corner(SCALAR, chain_x[b, i], chain_v[b, i], ec[b, i, 0], ec[b, i, 1])
+        x2[0, i + 1] = ahead_corner(SCALAR, chain_x[b, i], chain_v[b, i], ec[b, i, 0], ec[b, i, 1])[0]
+    fxa, fva = ahead_corner(SCALAR, fx, fv, ef[b, 0], ef[b, 1])
+    fxo, fvo = behind_corner(SCALAR, fx, fv, ef[b, 0], ef[b, 1])
+    x2[0, 0] = fxo
+    l0x, l0v = behind_corner(SCALAR, own_x[b, 0], own_v[b, 0], eo[b, 0, 0], eo[b, 0, 1])
+    l0x_o = ahead_corner(SCALAR, own_x[b, 0], own_v[b, 0], eo[b, 0, 0], eo[b, 0, 1])[0]
+    return fxa, fva, fxo, fvo, cx[b, 0], cv[b, 0], l0x, l0v, l0x_o
+
+
+@row_function
+def _anchor_check(sense, b, t, tol, now, now_own_x, st, sk):
+    """The monitor's cumulative comparison of row ``b`` (:func:`~.monitor.anchor_flags`, recorded as
+    ``observe_breaches`` records it, before the period's own comparison) with the held anchor, where there is one:
+    ``now`` ``(1, M + 1)`` the observation (F in slot 0), ``now_own_x`` L0's (``+inf``: none)."""
+    if sense is None:
+        return
+    af, ax, av, ab, anc = sense[6], sense[7], sense[8], sense[9], sense[10]
+    if af.shape[0] == 0 or not sk[b, 4]:
+        return
+    same = ax.shape[1] == now.shape[1] - 1
+    f0, f1, f2, f3 = anchor_row(ax, av, ab, b, now, 0, 1, af[b, 3], anc[b], af[b, 4], af[b, 5], af[b, 6], now[0, 0],
+                                af[b, 7], af[b, 8], af[b, 9], now_own_x, SCALAR.maximum(t - af[b, 0], 0.0),
+                                SCALAR.maximum(t - af[b, 1], 0.0), SCALAR.maximum(t - af[b, 2], 0.0), same,
+                                tol)  # fmt: skip
+    new = (f0 and not sk[b, 5]) or (f1 and not sk[b, 6]) or (f2 and not sk[b, 7]) or (f3 and not sk[b, 8])
+    if st[b, 2] != st[b, 2] and new:
+        st[b, 2] = t
+    sk[b, 5], sk[b, 6], sk[b, 7], sk[b, 8] = sk[b, 5] or f0, sk[b, 6] or f1, sk[b, 7] or f2, sk[b, 8] or f3
+
+
+@row_function
+def _anchor_remember(sense, b, t, a_a, nc, bounds, fx, fv, l0x, l0v, l0_decel, st, sk):
+    """Row ``b``'s anchor for the next period (``stages.remember``: this period's worst case at the analysis' corner,
+    carried from the held anchor by :meth:`~.monitor.Anchor.carried`'s rule) into ``sense``'s new anchor, where
+    one is made; ``st``, ``sk`` after the period (the plan's L1 deceleration and F type)."""
+    if sense is None:
+        return
+    nf, nx, nv, nb, nnc = sense[11], sense[12], sense[13], sense[14], sense[15]
+    if nf.shape[0] == 0:
+        return
+    cx, cv = sense[4], sense[5]
+    hf, hx, hv, hb, hnc = sense[6], sense[7], sense[8], sense[9], sense[10]
+    f_accel = a_a if sk[b, 0] else _INF
+    if not sense[3][2]:  # no own lane analysed (stages.worst_case's own is None)
+        l0x, l0v, l0_decel = _INF, 0.0, 0.0
+    nnc[b] = nc
+    if hf.shape[0] > 0 and hx.shape[1] == cx.shape[1]:
+        renew, renew_f, renew_own = anchor_renewal(SCALAR, hnc[b], nc, hf[b, 6], f_accel, hf[b, 7])
+        nf[b, 0] = anchor_carry(SCALAR, renew, hf[b, 0], t, False)
+        nf[b, 1] = anchor_carry(SCALAR, renew_f, hf[b, 1], t, False)
+        nf[b, 2] = anchor_carry(SCALAR, renew_own, hf[b, 2], t, False)
+        nf[b, 3] = anchor_carry(SCALAR, renew, hf[b, 3], st[b, 6], True)
+        nf[b, 4] = anchor_carry(SCALAR, renew_f, hf[b, 4], fx, False)
+        nf[b, 5] = anchor_carry(SCALAR, renew_f, hf[b, 5], fv, False)
+        nf[b, 7] = anchor_carry(SCALAR, renew_own, hf[b, 7], l0x, False)
+        nf[b, 8] = anchor_carry(SCALAR, renew_own, hf[b, 8], l0v, False)
+        nf[b, 9] = anchor_carry(SCALAR, renew_own, hf[b, 9], l0_decel, True)
+        for i in range(cx.shape[1]):
+            nx[b, i] = anchor_carry(SCALAR, renew, hx[b, i], cx[b, i], False)
+            nv[b, i] = anchor_carry(SCALAR, renew, hv[b, i], cv[b, i], False)
+            nb[b, i] = anchor_carry(SCALAR, renew, hb[b, i], bounds[b, i], True)
+    else:
+        nf[b, 0], nf[b, 1], nf[b, 2], nf[b, 3], nf[b, 4], nf[b, 5] = t, t, t, st[b, 6], fx, fv
+        nf[b, 7], nf[b, 8], nf[b, 9] = l0x, l0v, l0_decel
+        for i in range(cx.shape[1]):
+            nx[b, i], nv[b, i], nb[b, i] = cx[b, i], cv[b, i], bounds[b, i]
+    nf[b, 6] = f_accel
+
+
 @row_function
 def period_row(b, prm, times, den, sf, sb, rule, chain_x, chain_v, link_promise, link_margin, own_x, own_v,
                own_promise, own_nc, history, count, st, sk, plan, has_last, snap_x, snap_v, snap_bounds, snap_nc,
-               bounds, given_unsafe, of, ob, knots, x2, v2, b2, kn):  # fmt: skip
+               bounds, given_unsafe, of, ob, knots, x2, v2, b2, kn, sense=None):  # fmt: skip
     """One period of row ``b`` (the module docstring): the stages of :func:`~.core.step` in their order. Reads the
     situation (``sf``, ``sb``, the chain; ``rule``: the row's decision rule, :data:`._fast_rules.RULE` — one column
     of zeros for a batch under the paper's rule alone; ``link_promise``, ``link_margin`` ``(M − 1, .)``: each link's
@@ -210,7 +350,7 @@ def period_row(b, prm, times, den, sf, sb, rule, chain_x, chain_v, link_promise,
     ``sf``'s ``carried_*`` columns (the caller's :func:`carried_ego`), the others carried along their worst cases.
     ``times``,
     ``den``: the assessment's window; ``x2, v2, b2, kn``: scratch (``b2`` holds the chain's bounds with F's slot
-    after the call)."""
+    after the call); ``sense``: the sensing box and the monitor's anchors (:data:`SENSE`; ``None``: neither)."""
     t, dt, a_a, a_d, a_ym, y_safe, p_m, _, y_bound, lane_w, a_o, lat_tol, tol, mon_tol, thr, mon = prm[:16]
     own_level, own_margin = prm[16], prm[17]
     paper = prm[19] > 0.0  # ShieldConfig.completion == "paper_evasion" (else "commit_guard")
@@ -246,11 +386,16 @@ def period_row(b, prm, times, den, sf, sb, rule, chain_x, chain_v, link_promise,
         for i in range(m):
             b2[0, i + 1] = bounds[b, i]
     else:
-        unsafe = _chain_row(x2, v2, 0, link_promise, link_margin, b, a_o, b2)
+        done, unsafe = _chain_box(sense, chain_x, chain_v, link_promise, link_margin, b, a_o, b2)
+        if not done:
+            unsafe = _chain_row(x2, v2, 0, link_promise, link_margin, b, a_o, b2)
         for i in range(m):
             bounds[b, i] = b2[0, i + 1]
+    # --- the sensing box's corners (realworld.worst_corners): x2 becomes the observation the monitor compares ---
+    fx, fv, fx_o, fv_o, l1x, l1v, l0x_a, l0v_a, l0x_o = _corners(sense, b, chain_x, chain_v, own_x, own_v, fx, fv, x2)
     # --- the monitor's comparison of the last period (monitor.observe_breaches) ---
     if has_last:
+        _anchor_check(sense, b, t, mon_tol, x2, l0x_o, st, sk)
         monitor_row(b, t, dt, mon_tol, x2, snap_x, snap_v, snap_bounds, snap_nc, st, sk)
     # --- worst case (stages.worst_case) ---
     broken = sk[b, 5] or sk[b, 6] or sk[b, 7] or sk[b, 8] or sk[b, 9]
@@ -262,14 +407,14 @@ def period_row(b, prm, times, den, sf, sb, rule, chain_x, chain_v, link_promise,
                                        broken)  # fmt: skip
     l0x, l0v, l0_decel = own_x[b, 0], own_v[b, 0], a_o  # (stages.own_leader; +inf: no L0)
     has_l0 = l0x < _INF
-    if has_l0:
-        bound0, unsafe0 = _own_decel(own_x, own_v, own_promise, own_nc[b], b, p_m, a_o)
+    if has_l0 or _own_boxed(sense):  # (with a box, the anchor holds every row's L0 bound)
+        bound0, unsafe0 = _own_decel(own_x, own_v, own_promise, own_nc[b], b, p_m, a_o, sense)
         if sb[b, 2] and not unsafe0 and not broken:
             l0_decel = bound0
+    l0x, l0v = l0x_a, l0v_a  # (the analysis' corner)
     # --- frame (stages.frame): with an actuation delay, the states once the commands in flight have acted ---
     delay = prm[_PRM_DELAY]
     ex0, evx0, fx0, fv0 = ex, evx, fx, fv  # (the period's start: what stages.remember keeps)
-    l1x, l1v = chain_x[b, 0], chain_v[b, 0]
     if delay > 0.0:
         c = _SF_CARRIED
         ex, ey, evx, evy = sf[b, c], sf[b, c + 1], sf[b, c + 2], sf[b, c + 3]
@@ -386,13 +531,14 @@ def period_row(b, prm, times, den, sf, sb, rule, chain_x, chain_v, link_promise,
     # --- remember: what a responsible F may do this period, for the monitor (stages.remember) ---
     limit = _INF
     if active and not sk[b, 0] and ex0 - fx0 > 0.0:
-        limit = SCALAR.maximum(_responsible_bound(ex0 - fx0 - p_m, fv0, evx0, a_d, a_o, dt), -a_o)
+        limit = SCALAR.maximum(_responsible_bound(ex0 - fx_o - p_m, fv_o, evx0, a_d, a_o, dt), -a_o)
     st[b, 3], st[b, 4], st[b, 5], st[b, 6] = fx0, fv0, limit, plan[b, _HELD[6]]
     sk[b, 4] = active
     if active and sb[b, 1] and not sk[b, 9]:  # stages.with_stale
         sk[b, 9] = True
         if st[b, 2] != st[b, 2]:
             st[b, 2] = t
+    _anchor_remember(sense, b, t, a_a, int(sf[b, 9]), bounds, fx0, fv0, l0x_a, l0v_a, l0_decel, st, sk)
     completing = completing and active
     sk[b, 3] = sk[b, 3] or completing
     of[b, 0], of[b, 1], of[b, 2], of[b, 3], of[b, 4] = ax_cmd, ay_cmd, ax_ok, ay_ok, l1_decel
@@ -451,12 +597,15 @@ def push_row(b, of, ob, knots, q_knots, q_seg, q_acc, q_flag):
 @numba.njit(cache=True, nogil=True, error_model="numpy")
 def period_kernel(prm, sf, sb, rule, chain_x, chain_v, chain_promise, chain_human, n_connected, own_x, own_v,
                   own_promise, own_nc, history, count, st, sk, plan, has_last, snap_x, snap_v, snap_bounds, snap_nc,
-                  bounds, given_unsafe, behaviour, of, ob, knots, segs, q_knots, q_seg, q_acc, q_flag):  # fmt: skip
+                  bounds, given_unsafe, behaviour, of, ob, knots, segs, q_knots, q_seg, q_acc, q_flag,
+                  sense=None):  # fmt: skip
     """One period of every row: :func:`period_row` after resolving each link's promise and margin as
     :func:`~.stages.chain_analysis` does (the promise of a connected leader, else ``a_o_d``; ``p_m_human`` for a
     connected human-driven one, else ``p_m``). With commands in flight (``q_*``: ``(B, d, .)``, oldest first;
     ``segs (d,)`` each command's segments), the ego carried over them first (:func:`carried_ego`, into ``sf``'s
-    ``carried_*`` columns) and this period's command pushed after (:func:`push_row`)."""
+    ``carried_*`` columns) and this period's command pushed after (:func:`push_row`); ``sense``: :data:`SENSE`
+    (omitted where there is neither a sensing box nor an anchor: a compiled version of its own, which pays nothing
+    for them)."""
     dt, p_m, p_m_h, a_o = prm[1], prm[6], prm[7], prm[10]
     bsz, m = chain_x.shape
     window = history.shape[1]
@@ -481,5 +630,5 @@ def period_kernel(prm, sf, sb, rule, chain_x, chain_v, chain_promise, chain_huma
         behaviour[b] = period_row(b, prm, times, den, sf, sb, rule, chain_x, chain_v, link_promise, link_margin, own_x,
                                   own_v, own_promise, own_nc, history, count, st, sk, plan, has_last, snap_x, snap_v,
                                   snap_bounds, snap_nc, bounds, given_unsafe, of, ob, knots, x2, v2, b2,
-                                  kn)  # fmt: skip
+                                  kn, sense)  # fmt: skip
         push_row(b, of, ob, knots, q_knots, q_seg, q_acc, q_flag)

@@ -9,9 +9,9 @@ state are the NumPy stages' (``core.step``) bits: ``tests/test_fast_period.py``.
 **Dispatch never guesses.** :func:`refusals` names every reason a period cannot run compiled, from the
 configuration's own field list (:data:`COMPILED`: each :class:`~.config.ShieldConfig` field with the values the kernel
 implements; a field missing there refuses, so a new setting is never run at its default) and from what the
-situation and the state carry (:data:`SITUATION_FIELDS`: sensing bounds, and any field not classified there — the
-world model's other vehicles are folded into the roles first, :func:`.core.fold_world`; commands in flight that
-the kernel's queue cannot hold; the monitor's cumulative anchor; another decision rule). A
+situation and the state carry (:data:`SITUATION_FIELDS`: any field not classified there — the world model's other
+vehicles are folded into the roles first, :func:`.core.fold_world`; commands in flight that the kernel's queue cannot
+hold; another decision rule). A
 refused period runs the stages; ``Shield.last_path`` says which ran, ``Shield.refusals(situation)`` why.
 """
 
@@ -34,7 +34,7 @@ from .command import Command, InFlight
 from .config import ShieldConfig
 from .decide import own_completion_level, own_margin
 from .decision import Decision
-from .monitor import TOL_M, Breach, Snapshot
+from .monitor import TOL_M, Anchor, Breach, Snapshot
 from .realworld import delay_periods
 from .rules import rule_rows, uncompiled_rules
 
@@ -54,7 +54,7 @@ COMPILED: dict[str, tuple | None] = {
     "enabled": (True,),
     "actuation_delay_s": None,  # whole periods (realworld.delay_periods); the commands in flight packed (Packed.queue)
     "own_lane": None,
-    "sensing": None,  # a situation with sensing bounds refuses where sensing is on (situation_refusals)
+    "sensing": None,  # the sensing box's corners, the chain at them and the monitor's anchor (sense_arrays)
 }
 
 
@@ -81,15 +81,14 @@ def refusals(config: ShieldConfig, variant, batch: int) -> list[str]:
     return out
 
 
-#: Each :class:`~.situation.Situation` field: ``"read"`` (the kernel reads it), ``"sensing"`` (refused where the
-#: configuration takes the bounds into account and the situation has some), ``"refused"`` (refused where not
+#: Each :class:`~.situation.Situation` field: ``"read"`` (the kernel reads it) or ``"refused"`` (refused where not
 #: ``None``).
 SITUATION_FIELDS: dict[str, str] = {
     **dict.fromkeys(("t", "ego_x", "ego_y", "ego_vx", "ego_vy", "f_x", "f_v", "f_connected", "f_collaborative",
                      "chain_x", "chain_v", "chain_promise", "chain_human", "n_connected", "f_speed_observed",
                      "v2x_stale", "own_x", "own_v", "own_promise", "own_n_connected"), "read"),
     "f_aggressive_truth": "read",
-    **dict.fromkeys(("err_f", "err_chain", "err_own"), "sensing"),
+    **dict.fromkeys(("err_f", "err_chain", "err_own"), "read"),  # where ShieldConfig.sensing: sense_arrays
 }
 
 
@@ -106,16 +105,12 @@ def situation_refusals(situation, config: ShieldConfig, state) -> list[str]:
     that :data:`SITUATION_FIELDS` does not classify refuses wherever it is set."""
     refused = _refused_fields(type(situation), tuple(SITUATION_FIELDS.items()))
     out = [f"Situation.{name}" for name in refused if getattr(situation, name) is not None]
-    if config.sensing and situation.has_errors:
-        out.append("sensing-error bounds")
     if state is not None:
         if state.pending is None and config.actuation_delay_s > 0.0:
             out.append("an actuation delay without commands in flight")
         elif state.pending is not None and any(c.rows.size and c.knots.shape[1] != KNOTS
                                                for c in state.pending.commands):  # fmt: skip
             out.append(f"commands in flight with other than {KNOTS} knots")
-        if state.last is not None and state.last.anchor is not None:
-            out.append("the monitor's cumulative anchor")
     return out
 
 
@@ -136,6 +131,8 @@ class Packed:
     #: (zeros for the other rows), each row's ``a_x``, ``a_y`` at the period's start, and its completing and aborting
     #: flags (:class:`~.command.Command`'s fields, row by row).
     queue: tuple | None = None
+    anchor: tuple | None = None  # the monitor's cumulative anchor (f (B, len(ANCHOR_F)), chain_x, chain_v, bounds,
+    # n_connected), or None (no sensing box)
 
     @classmethod
     def of(cls, state) -> Packed:
@@ -156,22 +153,24 @@ class Packed:
         sk[:, 0], sk[:, 1], sk[:, 2], sk[:, 3] = state.plan_f_aggr, inner.latched, inner.aggressive, state.completed
         sk[:, 5:10] = breach.flags
         sk[:, 10], sk[:, 11] = (belief.missed, belief.aggressive) if slow else (False, inner.aggressive)
-        snapshot = None
+        snapshot = anchor = None
         if last is None:
             st[:, 3:], sk[:, 4] = 0.0, False
         else:
             st[:, 3], st[:, 4], st[:, 5], st[:, 6] = last.f_x, last.f_v, last.f_limit, last.plan_l1_decel
             sk[:, 4] = last.active
             snapshot = (last.chain_x, last.chain_v, last.bounds, np.asarray(last.n_connected, np.int64))
+            anchor = None if last.anchor is None else _pack_anchor(last.anchor, n)
         return cls(float(state.t), plan, inner.history.copy(), np.asarray(inner.count, np.int64).copy(), st, sk,
-                   snapshot, slow, _queue_of(state.pending, n))  # fmt: skip
+                   snapshot, slow, _queue_of(state.pending, n), anchor)  # fmt: skip
 
     def take(self, rows) -> Packed:
         """The rows ``rows`` only, in that order (copies)."""
         snapshot = None if self.snapshot is None else tuple(a[rows] for a in self.snapshot)
         queue = None if self.queue is None else tuple(a[rows] for a in self.queue)
+        anchor = None if self.anchor is None else tuple(a[rows] for a in self.anchor)
         return Packed(self.t, np.asfortranarray(self.plan[rows]), self.history[rows], self.count[rows],
-                      self.st[rows], self.sk[rows], snapshot, self.slow, queue)  # fmt: skip
+                      self.st[rows], self.sk[rows], snapshot, self.slow, queue, anchor)  # fmt: skip
 
     def join(self, other: Packed) -> Packed:
         """These rows, then ``other``'s (its time is this one's; both have a snapshot, or neither)."""
@@ -180,14 +179,16 @@ class Packed:
         if (self.queue is None) != (other.queue is None) or (
                 self.queue is not None and self.queue[0].shape[1] != other.queue[0].shape[1]):  # fmt: skip
             raise ValueError("Packed.join: the two states hold different numbers of commands in flight")
-        snapshot = None if self.snapshot is None else tuple(
-            np.concatenate([a, b]) for a, b in zip(self.snapshot, other.snapshot, strict=True))  # fmt: skip
-        queue = None if self.queue is None else tuple(
-            np.concatenate([a, b]) for a, b in zip(self.queue, other.queue, strict=True))  # fmt: skip
+        if (self.anchor is None) != (other.anchor is None):
+            raise ValueError("Packed.join: one state has the monitor's anchor (a sensing box) and the other has none")
+        snapshot, queue, anchor = (None if mine is None else tuple(
+            np.concatenate([a, b]) for a, b in zip(mine, theirs, strict=True))
+            for mine, theirs in ((self.snapshot, other.snapshot), (self.queue, other.queue),
+                                 (self.anchor, other.anchor)))  # fmt: skip
         return Packed(self.t, np.asfortranarray(np.concatenate([self.plan, other.plan])),
                       np.concatenate([self.history, other.history]), np.concatenate([self.count, other.count]),
                       np.concatenate([self.st, other.st]), np.concatenate([self.sk, other.sk]), snapshot,
-                      self.slow, queue)  # fmt: skip
+                      self.slow, queue, anchor)  # fmt: skip
 
     def plan_of(self, params: Params) -> EvasionPlan:
         from ._fast_period import PLAN
@@ -212,7 +213,8 @@ class Packed:
             cx, cv, bounds, nc = p.snapshot
             last = Snapshot(chain_x=cx, chain_v=cv, bounds=bounds, n_connected=nc, f_x=p.st[:, 3], f_v=p.st[:, 4],
                             f_limit=p.st[:, 5], plan_l1_decel=p.st[:, 6], plan_f_aggr=p.sk[:, 0].copy(),
-                            active=p.sk[:, 4])  # fmt: skip
+                            active=p.sk[:, 4],
+                            anchor=None if p.anchor is None else _unpack_anchor(p.anchor))  # fmt: skip
         belief = AssessmentState(history=self.history.copy(), count=self.count.copy(), aggressive=p.sk[:, 2],
                                  latched=p.sk[:, 1], first_collaborative_s=p.st[:, 1])  # fmt: skip
         if self.slow:
@@ -251,6 +253,68 @@ def _in_flight(queue: tuple | None) -> InFlight | None:
         parts = (None, None, None) if not rows.size else (knots[rows, c], seg[rows, c, 0], seg[rows, c, 1])
         commands.append(Command(acc[:, c, 0].copy(), acc[:, c, 1].copy(), rows, *parts, flags[:, c, 0].copy()))
     return InFlight(commands=tuple(commands))
+
+
+def _pack_anchor(anchor: Anchor, n: int) -> tuple:
+    """An :class:`~.monitor.Anchor` as :attr:`Packed.anchor` (copies)."""
+    from ._fast_period import ANCHOR_F
+
+    f = np.empty((n, len(ANCHOR_F)))
+    for j, name in enumerate(ANCHOR_F):
+        f[:, j] = getattr(anchor, name)
+    m = np.shape(anchor.chain_x)[1]
+    chain = tuple(np.array(np.broadcast_to(getattr(anchor, name), (n, m)), float) for name in ("chain_x", "chain_v",
+                                                                                              "bounds"))  # fmt: skip
+    return (f, *chain, np.array(np.broadcast_to(anchor.n_connected, (n,)), np.int64))
+
+
+def _unpack_anchor(packed: tuple) -> Anchor:
+    """:attr:`Packed.anchor` as an :class:`~.monitor.Anchor` (copies)."""
+    from ._fast_period import ANCHOR_F
+
+    f, cx, cv, cb, nc = (a.copy() for a in packed)
+    return Anchor(chain_x=cx, chain_v=cv, bounds=cb, n_connected=nc, **{name: f[:, j] for j, name in
+                                                                        enumerate(ANCHOR_F)})  # fmt: skip
+
+
+@functools.lru_cache(maxsize=16)
+def _no_anchor(m: int) -> tuple:
+    """The kernel's anchor arrays where there is none (no rows; inputs only: shared between calls)."""
+    f = np.zeros((0, len(_period_module().ANCHOR_F)))
+    return f, np.zeros((0, m)), np.zeros((0, m)), np.zeros((0, m)), np.zeros(0, np.int64)
+
+
+def sense_arrays(situation, config: ShieldConfig, packed: Packed, own: tuple) -> tuple | None:
+    """The kernel's ``sense`` tuple (:data:`._fast_period.SENSE`) for this period, or ``None`` where the
+    configuration takes no sensing box into account and no anchor is held (the kernel's version without them).
+    ``own``: the kernel's own-lane arrays. A box is the stages' ``observe``: every bound the situation gives, zeros
+    for the others (:func:`~.realworld.worst_corners`), the chain's links at their corners where ``err_chain`` is
+    given (:func:`~.stages.chain_analysis`); a new anchor where ``err_f`` or ``err_chain`` is
+    (:func:`~.stages.remember`)."""
+    s = situation
+    boxed = config.sensing and s.has_errors
+    if not boxed and packed.anchor is None:
+        return None
+    n, m = s.chain_x.shape
+    k = own[0].shape[1]
+    if boxed:
+        err_f = np.zeros((n, 2)) if s.err_f is None else np.ascontiguousarray(s.err_f, float)
+        err_chain = np.zeros((n, m, 2)) if s.err_chain is None else np.ascontiguousarray(s.err_chain, float)
+        given = s.err_own is not None and config.own_lane  # (step's own-lane arrays are the situation's)
+        err_own = np.ascontiguousarray(s.err_own, float) if given else np.zeros((n, k, 2))
+        own_lane = config.own_lane and s.has_own_lane  # (stages.own_leader)
+        modes = np.array([True, s.err_chain is not None, own_lane])
+        corner = np.empty((n, m)), np.empty((n, m))
+    else:
+        err_f, err_chain, err_own = np.zeros((0, 2)), np.zeros((0, m, 2)), np.zeros((0, k, 2))
+        modes, corner = np.zeros(3, bool), (np.zeros((0, m)), np.zeros((0, m)))
+    held = _no_anchor(m) if packed.anchor is None else packed.anchor
+    if boxed and (s.err_chain is not None or s.err_f is not None):
+        new = (np.empty((n, held[0].shape[1])), np.empty((n, m)), np.empty((n, m)), np.empty((n, m)),
+               np.empty(n, np.int64))
+    else:
+        new = _no_anchor(m)
+    return (err_f, err_chain, err_own, modes, *corner, *held, *new)
 
 
 @functools.cache
@@ -349,13 +413,17 @@ def step(packed: Packed, situation, proposal, params: Params, config: ShieldConf
     knots = np.empty((n, 5, 8))
     nc = np.asarray(s.n_connected, np.int64)
     rule = _paper_rule(n) if rule is None else rule
+    sense = sense_arrays(s, cfg, packed, own)
     fp.period_kernel(prm_vec, sf, sb, rule, np.ascontiguousarray(s.chain_x), np.ascontiguousarray(s.chain_v),
                      np.ascontiguousarray(s.chain_promise, float).reshape(n, max(m - 1, 0)),
                      np.ascontiguousarray(s.chain_human, bool).reshape(n, max(m - 1, 0)), nc, *own, out.history,
                      out.count,
                      out.st, out.sk, out.plan, packed.snapshot is not None, *snap, bounds, given_unsafe, behaviour,
-                     of, ob, knots, segs, *queue)  # fmt: skip
+                     of, ob, knots, segs, *queue, *(() if sense is None else (sense,)))  # fmt: skip
     out.snapshot = (s.chain_x, s.chain_v, bounds, nc)
+    if sense is not None:  # the snapshot at the analysis' corner; the anchor made, if any
+        out.snapshot = (sense[4], sense[5], bounds, nc) if sense[3][0] else out.snapshot
+        out.anchor = sense[11:] if len(sense[11]) else None
     rows = ob[:, 4].nonzero()[0]  # the aborts on the held plan (an RSS response is a constant command)
     if rows.size:
         k = knots[rows]

@@ -117,21 +117,21 @@ class Anchor:
         plan's assumption about it changed, L0 where there was none."""
         if self.chain_x.shape != now.chain_x.shape:
             return now
-        renew = np.asarray(self.n_connected != now.n_connected)
-        renew_f = renew | (self.f_accel != now.f_accel)
-        renew_own = renew | ~np.isfinite(self.own_x)
-        pick = lambda rows, a, b: np.where(rows.reshape(rows.shape + (1,) * (np.ndim(a) - 1)), b, a)  # noqa: E731
-        raise_ = lambda a, b: pick(renew, np.maximum(a, b), b)  # noqa: E731
+        renew, renew_f, renew_own = anchor_renewal(ARRAY, self.n_connected, now.n_connected, self.f_accel,
+                                                   now.f_accel, self.own_x)  # fmt: skip
+        renew = np.asarray(renew)
+
+        def pick(rows, a, b, raised=False):
+            return anchor_carry(ARRAY, rows.reshape(rows.shape + (1,) * (np.ndim(a) - 1)), a, b, raised)
+
         return Anchor(
             t=pick(renew, self.t, now.t), chain_x=pick(renew, self.chain_x, now.chain_x),
-            chain_v=pick(renew, self.chain_v, now.chain_v), bounds=raise_(self.bounds, now.bounds),
-            l1_decel=raise_(self.l1_decel, now.l1_decel), n_connected=now.n_connected,
+            chain_v=pick(renew, self.chain_v, now.chain_v), bounds=pick(renew, self.bounds, now.bounds, True),
+            l1_decel=pick(renew, self.l1_decel, now.l1_decel, True), n_connected=now.n_connected,
             f_x=pick(renew_f, self.f_x, now.f_x), f_v=pick(renew_f, self.f_v, now.f_v), f_accel=now.f_accel,
             f_t=pick(renew_f, self.f_t, now.f_t), own_x=pick(renew_own, self.own_x, now.own_x),
-            own_v=pick(renew_own, self.own_v, now.own_v), own_decel=pick(renew_own, np.maximum(self.own_decel,
-                                                                                            now.own_decel),
-                                                                       now.own_decel),
-            own_t=pick(renew_own, self.own_t, now.own_t),
+            own_v=pick(renew_own, self.own_v, now.own_v), own_t=pick(renew_own, self.own_t, now.own_t),
+            own_decel=pick(renew_own, self.own_decel, now.own_decel, True),
         )  # fmt: skip
 
 
@@ -225,6 +225,22 @@ def predicted_positions(snapshot: Snapshot, dt: float):
     return tx, fx
 
 
+def anchor_renewal(xp, held_nc, now_nc, held_f_accel, now_f_accel, held_own_x):
+    """``(renew, renew_f, renew_own)``: which of a row's anchors :meth:`Anchor.carried` takes from the new one — the
+    chain where its number connected changed, F also where the plan's assumption about it changed, L0 also where
+    there was none (a position not finite). Backend-generic, the one source (the compiled period evaluates it per
+    row)."""
+    renew = held_nc != now_nc
+    no_own = (held_own_x != held_own_x) | (held_own_x == INF) | (held_own_x == -INF)
+    return renew, renew | (held_f_accel != now_f_accel), renew | no_own
+
+
+def anchor_carry(xp, renew, held, now, raised):
+    """One anchored value for the next period: ``now`` where ``renew``, else ``held`` — raised to ``now`` where
+    ``raised`` (an assumed deceleration: the largest any plan held since the anchor assumed). Backend-generic."""
+    return xp.where(renew, now, xp.maximum(held, now) if raised else held)
+
+
 def braked_harder(xp, now, p, v, decel, dt, tol):
     """The breach test of a vehicle assumed to brake at no more than ``decel`` (a leader at its chain bound, L1 at the
     held plan's deceleration): it is now (``now``) more than ``tol`` behind where braking at ``decel`` from ``(p, v)``
@@ -244,4 +260,4 @@ def pushed_harder(xp, now, p, v, limit, dt, tol):
 
 
 # The comparisons compiled into the monitor's kernel and the closed loop (safety/_compile.py): the same functions.
-jitable(braked_harder, pushed_harder)
+jitable(braked_harder, pushed_harder, anchor_renewal, anchor_carry)

@@ -24,7 +24,7 @@ import numpy as np
 
 from .._motion import advance_core
 from ..params import Params
-from ..safety._backend import ARRAY, FEASIBILITY_TOL_M, jitable
+from ..safety._backend import ARRAY, FEASIBILITY_TOL_M, INF, jitable
 from ..safety.chain import chain_link
 from ..safety.lateral import LATERAL_TOL_M
 from ..safety.own_lane import own_lane_core
@@ -42,24 +42,47 @@ def _err(arr, shape):
 def worst_corners(s: Situation) -> tuple[Situation, Situation]:
     """``(analysis, observed)``: the situation at the corners the analysis must assume (leaders low and slow, F
     high and fast) and at the opposite corners (what the monitor compares a new observation with, so that a
-    measurement error is never taken for a breach). Without error bounds both are ``s``."""
+    measurement error is never taken for a breach). Without error bounds both are ``s``. Each vehicle's corner is
+    :func:`behind_corner` or :func:`ahead_corner` (the compiled period evaluates them per row)."""
     if not s.has_errors:
         return s, s
     b, m = s.chain_x.shape
     ef, ec = _err(s.err_f, (b,)), _err(s.err_chain, (b, m))
-    low = dict(
-        chain_x=s.chain_x - ec[..., 0], chain_v=np.maximum(s.chain_v - ec[..., 1], 0.0),
-        f_x=s.f_x + ef[:, 0], f_v=s.f_v + ef[:, 1],
-    )  # fmt: skip
-    high = dict(
-        chain_x=s.chain_x + ec[..., 0], chain_v=s.chain_v + ec[..., 1],
-        f_x=s.f_x - ef[:, 0], f_v=np.maximum(s.f_v - ef[:, 1], 0.0),
-    )  # fmt: skip
+    lx, lv = behind_corner(ARRAY, s.chain_x, s.chain_v, ec[..., 0], ec[..., 1])
+    fx, fv = ahead_corner(ARRAY, s.f_x, s.f_v, ef[:, 0], ef[:, 1])
+    low = dict(chain_x=lx, chain_v=lv, f_x=fx, f_v=fv)
+    hx, hv = ahead_corner(ARRAY, s.chain_x, s.chain_v, ec[..., 0], ec[..., 1])
+    fx, fv = behind_corner(ARRAY, s.f_x, s.f_v, ef[:, 0], ef[:, 1])
+    high = dict(chain_x=hx, chain_v=hv, f_x=fx, f_v=fv)
     if s.own_x is not None:
         eo = _err(s.err_own, s.own_x.shape)
-        low.update(own_x=s.own_x - eo[..., 0], own_v=np.maximum(s.own_v - eo[..., 1], 0.0))
-        high.update(own_x=s.own_x + eo[..., 0], own_v=s.own_v + eo[..., 1])
+        ox, ov = behind_corner(ARRAY, s.own_x, s.own_v, eo[..., 0], eo[..., 1])
+        low.update(own_x=ox, own_v=ov)
+        ox, ov = ahead_corner(ARRAY, s.own_x, s.own_v, eo[..., 0], eo[..., 1])
+        high.update(own_x=ox, own_v=ov)
     return dataclasses.replace(s, **low), dataclasses.replace(s, **high)
+
+
+def behind_corner(xp, x, v, err_x, err_v):
+    """``(x, v)``: a vehicle measured at ``(x, v)`` within ``(err_x, err_v)`` at the box's corner behind and slower
+    (speeds stay at or above zero). Backend-generic, the one source (the compiled period evaluates it per row)."""
+    return x - err_x, xp.maximum(v - err_v, 0.0)
+
+
+def ahead_corner(xp, x, v, err_x, err_v):
+    """``(x, v)``: the box's corner ahead and faster (:func:`behind_corner`'s opposite). Backend-generic."""
+    return x + err_x, v + err_v
+
+
+def link_at_corner(xp, x_f, v_f, err_f_x, err_f_v, x_l, v_l, err_l_x, err_l_v, margin, a_ahead, promise, a_o):
+    """``(decel, broken)`` of one chain link (:func:`~safelane.safety.chain.chain_link`) at its own worst corner: the
+    slack shrunk by both position bounds, the follower ``(x_f, v_f)`` faster, the leader ``(x_l, v_l)`` slower (the
+    module docstring); a slack of NaN (both slots empty, ``+inf`` positions) leaves the link free. Backend-generic,
+    the one source of :func:`chain_bounds` and of the compiled period's chains."""
+    slack = x_l - x_f - margin - (err_f_x + err_l_x)
+    slack = xp.where(slack != slack, INF, slack)
+    _, decel, broken = chain_link(xp, slack, v_f + err_f_v, xp.maximum(v_l - err_l_v, 0.0), a_ahead, promise, a_o)
+    return decel, broken
 
 
 def chain_bounds(x, v, promise, n_connected, human, err, prm: Params):
@@ -77,11 +100,9 @@ def chain_bounds(x, v, promise, n_connected, human, err, prm: Params):
     a_ahead = decel[0]
     with np.errstate(all="ignore"):
         for i in range(m - 2, -1, -1):
-            slack = x[:, i + 1] - x[:, i] - margin[:, i] - (e[:, i, 0] + e[:, i + 1, 0])
-            slack = np.where(np.isnan(slack), np.inf, slack)  # both slots empty
-            v_f = v[:, i] + e[:, i, 1]
-            v_l = np.maximum(v[:, i + 1] - e[:, i + 1, 1], 0.0)
-            _, a_ahead, broken = chain_link(ARRAY, slack, v_f, v_l, a_ahead, promise[:, i], a_o)
+            a_ahead, broken = link_at_corner(ARRAY, x[:, i], v[:, i], e[:, i, 0], e[:, i, 1], x[:, i + 1],
+                                             v[:, i + 1], e[:, i + 1, 0], e[:, i + 1, 1], margin[:, i], a_ahead,
+                                             promise[:, i], a_o)  # fmt: skip
             unsafe |= broken
             decel.insert(0, a_ahead)
     return np.column_stack(decel), unsafe
@@ -160,4 +181,4 @@ def own_plan(plan: EvasionPlan, args, own, prm: Params) -> EvasionPlan:
     return set_rows(plan, [(rows, piece)])
 
 
-jitable(carry_worst_core, carried_others)
+jitable(carry_worst_core, carried_others, behind_corner, ahead_corner, link_at_corner)
