@@ -1,0 +1,141 @@
+"""The realistic world's side in the compiled closed loop (:mod:`safelane.sim._fast_loop`, its rows
+``sim/_fast_world.py``) against the loop period by period (``SAFELANE_NO_FUSED=1``): the same per-scenario table,
+column for column and bit for bit, with the own lane's leader ``L0`` (its profile motion, the ego's exact checks
+against it, the shield's own lane on and off), with sensing error (the measurement draws, with and without the edge
+share; the shield's sensing off: it takes the measurements as exact) and both together — each on a batch where the
+feature changes the outcome, so that the comparison can fail. And the dispatch: what the loop does not run yet (a
+connected own lane, the shield's sensing, the actuation delay) runs period by period, saying why."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from safelane.planners.base import ExpertPlanner
+from safelane.sim import ScenarioConfig, SimConfig, _fused, concat, paper_scenarios, simulate_batch
+from safelane.sim.preset import load_preset
+from test_fast_core import needs_numba
+
+pytestmark = [pytest.mark.compiled, needs_numba, pytest.mark.filterwarnings("ignore:a_x_N\\+1_d")]
+
+VARIANTS = ("CV_all", "CV_follow", "CV_none", "No_agg_assess")
+MIXED_F = ScenarioConfig(follower_connected_share=0.5)
+#: The realistic preset's vehicles (others brake up to a_o_d = 9.5).
+REALISTIC = load_preset("realistic").params
+
+
+def _mixed(n_leaders, decel, per_variant=60, seed=0):
+    return concat([paper_scenarios(v, n_leaders, decel, per_variant, np.random.default_rng(100 * seed + k), MIXED_F,
+                                   first_id=1000 * k) for k, v in enumerate(VARIANTS)])  # fmt: skip
+
+
+def _two_paths(monkeypatch, batch, **kwargs):
+    """``(compiled loop, period by period)`` tables and how often the compiled loop ran."""
+    calls = []
+    real = _fused.run_chunk
+    monkeypatch.setattr(_fused, "run_chunk", lambda *a: calls.append(1) or real(*a))
+    for name in ("SAFELANE_NO_NUMBA", "SAFELANE_NO_FUSED"):
+        monkeypatch.delenv(name, raising=False)
+    fused = simulate_batch(batch, seed=4, **kwargs)
+    assert fused.engine == "compiled loop", fused.engine_reasons
+    monkeypatch.setenv("SAFELANE_NO_FUSED", "1")
+    periods = simulate_batch(batch, seed=4, **kwargs)
+    assert periods.engine == "period by period"
+    return fused.table, periods.table, len(calls)
+
+
+#: An own-lane leader near and braking early (collisions and p_m violations against it where the shield ignores it).
+NEAR_L0 = dict(own_lane=True, l0_gap_min_m=6.0, l0_gap_max_m=30.0, l0_brake_window_s=2.0)
+
+CASES = {
+    "own lane: L0, the shield's own lane on": (
+        lambda: _mixed(3, 5.0), dict(params=REALISTIC, config=SimConfig(**NEAR_L0)), "own"),
+    "own lane: L0, the shield ignores it": (
+        lambda: _mixed(3, 5.0, seed=1), dict(params=REALISTIC, config=SimConfig(**NEAR_L0, shield={"own_lane": False})),
+        "own"),
+    "own lane: L0 by the default distribution, slow assessment, reactive leaders": (
+        lambda: _mixed(2, 7.0, seed=2),
+        dict(params=REALISTIC, config=SimConfig(own_lane=True, leader_rule="reactive", assessment="slow",
+                                                assess_delay_s=2.388, assess_miss=0.259)),
+        "own"),
+    "sensing error, the shield takes the measurements as exact": (
+        lambda: _mixed(3, 5.0, seed=3),
+        dict(params=REALISTIC, config=SimConfig(sensing_error=True, sense_sensed_pos_m=2.0, sense_sensed_speed_mps=1.0,
+                                                shield={"sensing": False})),
+        "sensing"),
+    "sensing error with the edge share, N = 5": (
+        lambda: _mixed(5, 6.0, seed=4),
+        dict(params=REALISTIC, config=SimConfig(sensing_error=True, sensing_edge_share=0.5,
+                                                shield={"sensing": False})),
+        "sensing"),
+    "own lane and sensing error (the realistic preset's world, its shield's sensing and delay off)": (
+        lambda: _mixed(3, 6.0, seed=5),
+        dict(params=REALISTIC, config=SimConfig(**NEAR_L0, sensing_error=True, shield={"sensing": False}),
+             nominal=ExpertPlanner(k_p=0.728, k_v=0.023, omega=0.732, gap_fraction=0.441, brake_comfort=6.296)),
+        "both"),
+}
+
+
+@pytest.mark.parametrize("case", list(CASES))
+def test_the_compiled_loop_runs_the_realistic_world_with_the_period_by_period_table(monkeypatch, case):
+    make, kwargs, feature = CASES[case]
+    batch = make()
+    fused, periods, calls = _two_paths(monkeypatch, batch, **kwargs)
+    assert calls == 1
+    assert fused.equals(periods), case
+    assert (periods[["n_proceed", "n_hesitate", "n_abort"]].sum() > 0).all()
+    if feature in ("own", "both"):  # L0 is in the table and comes near: the checks against it can fail the comparison
+        gap = periods["min_gap_own_lane_m"]
+        assert gap.notna().any() and (gap < 2 * REALISTIC.p_m).sum() > 5, gap.describe()
+        if "ignores" in case:
+            assert periods["own_lane_collision"].any() and periods["own_lane_violation"].any()
+    # the feature changes the outcome: without it the table differs
+    cfg = kwargs["config"]
+    off = dict(own_lane=False) if feature == "own" else dict(sensing_error=False)
+    monkeypatch.setenv("SAFELANE_NO_FUSED", "1")
+    without = simulate_batch(batch, seed=4, **{**kwargs, "config": cfg.model_copy(update=off)}).table
+    cols = ["n_proceed", "n_hesitate", "n_abort", "min_gap_follower_m", "completion_time_s", "collision",
+            "safety_violation"]
+    changed = ~(without[cols].fillna(-1.0).to_numpy() == periods[cols].fillna(-1.0).to_numpy()).all(1)
+    assert changed.sum() > len(batch) // 20, changed.sum()
+
+
+def test_the_numpy_path_gives_the_same_table_with_the_own_lane_and_sensing(monkeypatch):
+    """The compiled loop against the NumPy path itself (``SAFELANE_NO_NUMBA=1``) on a smaller batch."""
+    batch = _mixed(3, 6.0, per_variant=20, seed=6)
+    kwargs = dict(params=REALISTIC, config=SimConfig(**NEAR_L0, sensing_error=True, sensing_edge_share=0.3,
+                                                     shield={"sensing": False}))  # fmt: skip
+    monkeypatch.delenv("SAFELANE_NO_FUSED", raising=False)
+    monkeypatch.delenv("SAFELANE_NO_NUMBA", raising=False)
+    fused = simulate_batch(batch, seed=4, **kwargs)
+    assert fused.engine == "compiled loop", fused.engine_reasons
+    monkeypatch.setenv("SAFELANE_NO_NUMBA", "1")
+    assert fused.table.equals(simulate_batch(batch, seed=4, **kwargs).table)
+
+
+REFUSED = {
+    "a connected own lane": (SimConfig(own_lane=True, own_lane_connected=1), "config.own_lane_connected=1"),
+    "the shield's sensing": (SimConfig(sensing_error=True), "config.sensing_error=True"),
+    "the actuation delay": (SimConfig(actuation_delay_s=0.2, sensing_error=True, shield={"sensing": False}),
+                            "config.actuation_delay_s=0.2"),
+    "the realistic preset": (load_preset("realistic").sim, "config.actuation_delay_s="),
+}
+
+
+@pytest.mark.parametrize("case", list(REFUSED))
+def test_what_the_loop_does_not_run_yet_runs_period_by_period_and_says_why(monkeypatch, case):
+    cfg, reason = REFUSED[case]
+    for name in ("SAFELANE_NO_NUMBA", "SAFELANE_NO_FUSED"):
+        monkeypatch.delenv(name, raising=False)
+    why = _fused.reasons(_mixed(1, 5.0, per_variant=20), cfg, ExpertPlanner(), None, False, False)
+    assert any(r.startswith(reason) for r in why), why
+
+
+def test_the_realistic_world_without_its_shield_sides_runs_compiled(monkeypatch):
+    """The realistic preset's config with the shield's sensing and the delay off (what this loop runs) is covered."""
+    for name in ("SAFELANE_NO_NUMBA", "SAFELANE_NO_FUSED"):
+        monkeypatch.delenv(name, raising=False)
+    cfg = load_preset("realistic").sim
+    cfg = cfg.model_copy(update=dict(actuation_delay_s=0.0, shield=cfg.shield.model_copy(
+        update=dict(sensing=False, actuation_delay_s=0.0))))  # fmt: skip
+    assert _fused.reasons(_mixed(1, 5.0, per_variant=20), cfg, ExpertPlanner(), None, False, False) == []
