@@ -4,7 +4,7 @@ column for column and bit for bit, with the own lane's leader ``L0`` (its profil
 against it, the shield's own lane on and off), with sensing error (the measurement draws, with and without the edge
 share; the shield's sensing off: it takes the measurements as exact) and both together — each on a batch where the
 feature changes the outcome, so that the comparison can fail. And the dispatch: what the loop does not run yet (a
-connected own lane, the shield's sensing, the actuation delay) runs period by period, saying why."""
+connected own lane, the shield's sensing and delay) runs period by period, saying why."""
 
 from __future__ import annotations
 
@@ -13,6 +13,7 @@ import pytest
 
 from safelane.planners.base import ExpertPlanner
 from safelane.sim import ScenarioConfig, SimConfig, _fused, concat, paper_scenarios, simulate_batch
+from safelane.sim._stepper import steps_compiled
 from safelane.sim.preset import load_preset
 from test_fast_core import needs_numba
 
@@ -68,11 +69,22 @@ CASES = {
         dict(params=REALISTIC, config=SimConfig(sensing_error=True, sensing_edge_share=0.5,
                                                 shield={"sensing": False})),
         "sensing"),
-    "own lane and sensing error (the realistic preset's world, its shield's sensing and delay off)": (
+    "own lane and sensing error": (
         lambda: _mixed(3, 6.0, seed=5),
-        dict(params=REALISTIC, config=SimConfig(**NEAR_L0, sensing_error=True, shield={"sensing": False}),
-             nominal=ExpertPlanner(k_p=0.728, k_v=0.023, omega=0.732, gap_fraction=0.441, brake_comfort=6.296)),
+        dict(params=REALISTIC, config=SimConfig(**NEAR_L0, sensing_error=True, shield={"sensing": False})),
         "both"),
+    "actuation delay 0.2 s (the shield's off: it decides as if its commands acted at once)": (
+        lambda: _mixed(3, 5.0, seed=7),
+        dict(params=REALISTIC, config=SimConfig(actuation_delay_s=0.2, shield_delay=False)), "delay"),
+    "actuation delay 0.1 s, N = 1, a_N+1 = 9 (aborts on the held plan executed late)": (
+        lambda: _mixed(1, 9.0, seed=8), dict(config=SimConfig(actuation_delay_s=0.1, shield_delay=False)), "delay"),
+    "the realistic preset's world (own lane, sensing error, delay 0.2 s; its shield's sensing and delay off)": (
+        lambda: _mixed(3, 6.0, seed=9),
+        dict(params=REALISTIC,
+             config=SimConfig(**NEAR_L0, sensing_error=True, actuation_delay_s=0.2, shield_delay=False,
+                              shield_sensing=False, assessment="slow", assess_delay_s=2.388, assess_miss=0.259),
+             nominal=ExpertPlanner(k_p=0.728, k_v=0.023, omega=0.732, gap_fraction=0.441, brake_comfort=6.296)),
+        "all"),
 }
 
 
@@ -84,20 +96,22 @@ def test_the_compiled_loop_runs_the_realistic_world_with_the_period_by_period_ta
     assert calls == 1
     assert fused.equals(periods), case
     assert (periods[["n_proceed", "n_hesitate", "n_abort"]].sum() > 0).all()
-    if feature in ("own", "both"):  # L0 is in the table and comes near: the checks against it can fail the comparison
+    if feature in ("own", "both", "all"):  # L0 is in the table and comes near: its checks can fail the comparison
         gap = periods["min_gap_own_lane_m"]
         assert gap.notna().any() and (gap < 2 * REALISTIC.p_m).sum() > 5, gap.describe()
         if "ignores" in case:
             assert periods["own_lane_collision"].any() and periods["own_lane_violation"].any()
     # the feature changes the outcome: without it the table differs
     cfg = kwargs["config"]
-    off = dict(own_lane=False) if feature == "own" else dict(sensing_error=False)
+    off = {"own": dict(own_lane=False), "delay": dict(actuation_delay_s=0.0)}.get(feature, dict(sensing_error=False))
     monkeypatch.setenv("SAFELANE_NO_FUSED", "1")
     without = simulate_batch(batch, seed=4, **{**kwargs, "config": cfg.model_copy(update=off)}).table
     cols = ["n_proceed", "n_hesitate", "n_abort", "min_gap_follower_m", "completion_time_s", "collision",
             "safety_violation"]
     changed = ~(without[cols].fillna(-1.0).to_numpy() == periods[cols].fillna(-1.0).to_numpy()).all(1)
     assert changed.sum() > len(batch) // 20, changed.sum()
+    if feature == "delay":  # the aborts' plans executed a period or two late: the delay reaches the held plan's path
+        assert periods["n_abort"].sum() > 0
 
 
 def test_the_numpy_path_gives_the_same_table_with_the_own_lane_and_sensing(monkeypatch):
@@ -116,9 +130,8 @@ def test_the_numpy_path_gives_the_same_table_with_the_own_lane_and_sensing(monke
 REFUSED = {
     "a connected own lane": (SimConfig(own_lane=True, own_lane_connected=1), "config.own_lane_connected=1"),
     "the shield's sensing": (SimConfig(sensing_error=True), "config.sensing_error=True"),
-    "the actuation delay": (SimConfig(actuation_delay_s=0.2, sensing_error=True, shield={"sensing": False}),
-                            "config.actuation_delay_s=0.2"),
-    "the realistic preset": (load_preset("realistic").sim, "config.actuation_delay_s="),
+    "the shield's actuation delay": (SimConfig(actuation_delay_s=0.2), "config.shield.actuation_delay_s=0.2"),
+    "the realistic preset": (load_preset("realistic").sim, "config.shield.actuation_delay_s="),
 }
 
 
@@ -132,10 +145,12 @@ def test_what_the_loop_does_not_run_yet_runs_period_by_period_and_says_why(monke
 
 
 def test_the_realistic_world_without_its_shield_sides_runs_compiled(monkeypatch):
-    """The realistic preset's config with the shield's sensing and the delay off (what this loop runs) is covered."""
+    """The realistic preset's config with the shield's sensing and delay off (what this loop runs) is covered; stepped
+    from Python (the envs, other planners) the delay is not."""
     for name in ("SAFELANE_NO_NUMBA", "SAFELANE_NO_FUSED"):
         monkeypatch.delenv(name, raising=False)
     cfg = load_preset("realistic").sim
-    cfg = cfg.model_copy(update=dict(actuation_delay_s=0.0, shield=cfg.shield.model_copy(
-        update=dict(sensing=False, actuation_delay_s=0.0))))  # fmt: skip
+    assert cfg.actuation_delay_s > 0.0 and cfg.own_lane and cfg.sensing_error
+    cfg = cfg.model_copy(update=dict(shield=cfg.shield.model_copy(update=dict(sensing=False, actuation_delay_s=0.0))))
     assert _fused.reasons(_mixed(1, 5.0, per_variant=20), cfg, ExpertPlanner(), None, False, False) == []
+    assert any(r.startswith("config.actuation_delay_s=") for r in steps_compiled(_mixed(1, 5.0), cfg, None))

@@ -52,7 +52,7 @@ from ._fast_traffic import (
     _wave_follower,
     _wave_task,
 )
-from ._fast_world import _switched, measure_row, own_checks, own_motion
+from ._fast_world import _switched, executed_plan, measure_row, own_checks, own_motion, push_command
 from .behaviours import hold_speed, last_accel, link_decel, reactive_core, task_core, violation_accel
 from .checks import far_gap, lane_far_ratio, lane_near, lane_verdict, lateral_extent, near_pair, near_threshold
 from .kinematics import constant_segment, piece_acc
@@ -169,7 +169,7 @@ def _loop_rows(n_steps, prm, batch, start, out, w):
         out_f[b, 0], out_f[b, 1], out_f[b, 2], out_f[b, 3] = rf[0, 5], rf[0, 6], rf[0, 7], rf[0, 8]
         out_f[b, 4], out_f[b, 5], out_f[b, 6] = st[0, 1], st[0, 2], st[0, 7]
         out_f[b, 7], out_f[b, 8], out_f[b, 9] = rf[0, 9], rf[0, 10], rf[0, 11]
-        out_b[b, 0], out_b[b, 1], out_b[b, 2] = sk[0, 3], rb[0, 0], rb[0, 1]
+        out_b[b, 0], out_b[b, 1], out_b[b, 2] = rb[0, 7], rb[0, 0], rb[0, 1]
         out_b[b, 3], out_b[b, 4], out_b[b, 5] = rb[0, 2], rb[0, 3], sk[0, 2]
         out_b[b, 6], out_b[b, 7] = sk[0, 10], sk[0, 11]
         out_b[b, 8], out_b[b, 9] = rb[0, 5], rb[0, 6]
@@ -225,7 +225,7 @@ def _period(prm, batch, b, w, den, ax_n, ay_n):
     (x2, v2, f_acc2, f_ts2, f_xe2, f_ve2, acc, cap, general2, pp, sf, sb, chain_x, chain_v, own_x, own_v, own_promise,
      own_nc, history, count, st, sk, plan, snap_x, snap_v, snap_b, snap_nc, bounds_out, no_chain, of, ob, knots, px2,
      pv2, pb2, kn, kax, kay, scratch, lon_t, lon_x, lon_v, lon_a, lat_t, lat_x, lat_v, lat_a, o_t, o_x, o_v, o_a, lo,
-     hi, times, rf, rb, ri, sw, own) = w  # fmt: skip
+     hi, times, rf, rb, ri, sw, own, queue, act) = w  # fmt: skip
     x, v, f_acc, f_ts, f_xe, f_ve = x2[0], v2[0], f_acc2[0], f_ts2[0], f_xe2[0], f_ve2[0]
     general = general2[0]
     consts = (dt, p_m, a_lim, conflict, overlap, length, max_level)
@@ -253,7 +253,7 @@ def _period(prm, batch, b, w, den, ax_n, ay_n):
     sf[0, 0], sf[0, 1], sf[0, 2], sf[0, 3], sf[0, 4], sf[0, 5] = ex, ey, evx, evy, fx_seen, fv_seen
     sf[0, 6], sf[0, 7], sf[0, 8], sf[0, 9] = v[0], ax_n, ay_n, nc
     pp[0] = t
-    completed = sk[0, 3]
+    completed = rb[0, 7]  # the world's (with an actuation delay the command acting completes it, not the one issued)
     active = not completed
     behaviour = period_row(0, pp, times, den, sf, sb, batch.rule[b : b + 1], chain_x, chain_v, link_promise,
                            link_margin, own_x, own_v, own_promise, own_nc, history, count, st, sk, plan, rb[0, 4],
@@ -272,6 +272,15 @@ def _period(prm, batch, b, w, den, ax_n, ay_n):
             span = kt[j + 1] - kt[j]
             kax[j] = piece_acc(SCALAR, kv[j], kv[j + 1], span)
             kay[j] = piece_acc(SCALAR, kvy[j], kvy[j + 1], span)
+    if queue.shape[0] > 0:  # the actuation delay: the oldest command in flight acts, executed from the ego's state
+        push_command(queue, act, on_plan, ax_cmd, ay_cmd, completing, kt, kax, kay)
+        on_plan, ax_cmd, ay_cmd, completing = act[0] > 0.0, act[1], act[2], act[3] > 0.0
+        if on_plan:
+            executed_plan(act, ex, ey, evx, evy, kt, kx, kv, ky, kvy)
+            for j in range(7):
+                span = kt[j + 1] - kt[j]
+                kax[j] = piece_acc(SCALAR, kv[j], kv[j + 1], span)
+                kay[j] = piece_acc(SCALAR, kvy[j], kvy[j + 1], span)
     # --- traffic (behaviours: the leaders by their rule, F) ---
     true_bounds = bounds  # the traffic's chain analysis is on the true states (ClosedLoop.chain)
     if sensing:  # the shield's was on the measured ones
@@ -443,6 +452,7 @@ def _period(prm, batch, b, w, den, ax_n, ay_n):
     completing = completing and active
     if completing and not completed:
         rf[0, 5] = t + dt
+    rb[0, 7] = completed or completing
     rb[0, 0], rb[0, 1] = rb[0, 0] or hit, rb[0, 1] or close
     rb[0, 2], rb[0, 3] = rb[0, 2] or l_hit, rb[0, 3] or l_close
     rf[0, 6], rf[0, 7], rf[0, 8] = gap_f, gap_l1, _min(rf[0, 8], ratio)

@@ -1,7 +1,8 @@
 """The compiled closed loop's world beyond the paper (numba, extra ``fast``; used by ``_fast_loop._period``), row by
 row: the own lane's leader ``L0`` (its profile motion, the ego's exact checks against it: :mod:`.realworld`'s
 :func:`~.realworld.own_lane_checks`, ``ClosedLoop._own_lane``) and the measurement noise of sensing error
-(:func:`~.realworld.measure`). Loops and indexing only.
+(:func:`~.realworld.measure`), and the actuation delay's queue of commands in flight (``InFlight``, the oldest acting,
+executed from the ego's actual state: :func:`~.realworld.executed_motion`). Loops and indexing only.
 
 No rule lives here. ``L0``'s motion is :func:`~.traffic.profile_segment` (``_profile_row``) and
 :meth:`~.kinematics.Fleet.switched`'s numbers (:func:`~.kinematics.constant_segment`, :func:`_switched`); its checks
@@ -16,8 +17,10 @@ from __future__ import annotations
 
 import numpy as np
 
+from .._motion import advance_core
 from .._splitmix import absorb, unit_of
 from ..safety import _compile
+from ..safety import responsible as _responsible  # noqa: F401  (marks advance_core: registered below)
 from ..safety._backend import INF, SCALAR
 from ..safety._fast_base import _max, _min, announce_compiles, row_function
 from ._fast_general import _general_pair
@@ -123,3 +126,43 @@ def measure_row(batch, b, step, share, x, v, chain_x, chain_v, l0x, l0v, own_x, 
         else:
             own_x[0, 0], own_v[0, 0] = INF, 0.0
     return f_x, f_v
+
+
+#: A command's columns in the actuation delay's queue (``_fast_rows.Rows.queue``, ``Scratch.queue``): on the held
+#: plan, its accelerations at the period's start, completing, then the plan's 8 knots and its 7 segments'
+#: accelerations, longitudinal and lateral (:class:`~safelane.shield.command.Command`'s fields for one row).
+COMMAND = 4 + 8 + 7 + 7
+
+
+@row_function
+def push_command(queue, act, on_plan, a_x, a_y, completing, kt, kax, kay):
+    """The actuation delay (``ClosedLoop.step``: ``InFlight.push``): the oldest command in ``queue`` into ``act``,
+    the queue moved on by one and the command issued now (``Command.of``: on the held plan, its knots ``kt`` and
+    segment accelerations ``kax``, ``kay``) appended."""
+    d = queue.shape[0]
+    for j in range(COMMAND):
+        act[j] = queue[0, j]
+    for i in range(d - 1):
+        for j in range(COMMAND):
+            queue[i, j] = queue[i + 1, j]
+    last = d - 1
+    queue[last, 0], queue[last, 1], queue[last, 2] = 1.0 if on_plan else 0.0, a_x, a_y
+    queue[last, 3] = 1.0 if completing else 0.0
+    if on_plan:
+        for j in range(8):
+            queue[last, 4 + j] = kt[j]
+        for j in range(7):
+            queue[last, 12 + j], queue[last, 19 + j] = kax[j], kay[j]
+
+
+@row_function
+def executed_plan(act, ex, ey, evx, evy, kt, kx, kv, ky, kvy):
+    """An aborting command ``act``'s plan executed from the ego's actual state (``executed_motion``:
+    ``Command.plan_samples``, ``segment_states``): its knots into ``kt``, the states there into ``kx, kv, ky, kvy``."""
+    kt[0], kx[0], kv[0], ky[0], kvy[0] = act[4], ex, evx, ey, evy
+    for j in range(7):
+        kt[j + 1] = act[5 + j]
+        h = act[5 + j] - act[4 + j]
+        kx[j + 1], kv[j + 1] = advance_core(SCALAR, kx[j], kv[j], act[12 + j], h)
+        ay = act[19 + j]
+        ky[j + 1], kvy[j + 1] = ky[j] + kvy[j] * h + 0.5 * ay * h * h, kvy[j] + ay * h

@@ -53,14 +53,15 @@ FIXED = {
     "sensing_error": False,
     "actuation_delay_s": 0.0, "shield.actuation_delay_s": 0.0, "neighbours": False,
 }  # fmt: skip
-#: A value the loop implements only together with other settings at these values: ``(field, value)`` → ``{other
-#: field: its values}``. A :data:`FIXED` field's value named here runs compiled where the others are at their values
-#: (and is refused, naming the field, where they are not); a :data:`READ` field's value refuses where they are not.
-#: The world's side of a real-world feature runs compiled while the shield's side is off, until the shield's compiled
-#: period takes it (``shield/fast_step.COMPILED``, ``SITUATION_FIELDS``):
+#: Settings the loop implements away from their defaults only together with other settings at these values: field →
+#: ``{other field: its values}``. A :data:`FIXED` field's other values run compiled where the others are at their
+#: values (and are refused, naming the field, where they are not); a :data:`READ` field away from its default refuses
+#: where they are not. The world's side of a real-world feature runs compiled while the shield's side is off, until
+#: the shield's compiled period takes it (``shield/fast_step.COMPILED``, ``SITUATION_FIELDS``):
 WITH = {
-    ("own_lane", True): {"own_lane_connected": (0,)},  # L0 alone (a connected own lane's traffic: period by period)
-    ("sensing_error", True): {"shield.sensing": (False,)},  # the shield takes the measurements as exact
+    "own_lane": {"own_lane_connected": (0,)},  # L0 alone (a connected own lane's traffic: period by period)
+    "sensing_error": {"shield.sensing": (False,)},  # the shield takes the measurements as exact
+    "actuation_delay_s": {"shield.actuation_delay_s": (0.0,)},  # the shield decides as if its commands acted at once
 }
 #: These fields act only through another setting; while the fields named (or the nominal planner: ``"nominal"``)
 #: are at the loop's values they change nothing, so any value runs compiled (where the setting named is read, any
@@ -137,6 +138,9 @@ def reasons(batch, cfg, nominal, traffic, trace: bool, record_observations: bool
         # WaveHooks (the paper's traffic, its wishes as data) run on the compiled period; the loop's chunks and the
         # blame's rerun (engine.py) rebuild the closed loop with the default traffic
         out.append("a traffic model other than the paper's default")
+    if stepping and cfg.actuation_delay_s > 0.0:
+        out.append(f"config.actuation_delay_s={cfg.actuation_delay_s!r} in a compiled period stepped from Python (the "
+                   "envs read the shield's completion; the compiled loop runs the delay)")  # fmt: skip
     if len(batch) < FUSED_MIN_ROWS and not stepping:
         out.append(f"fewer than {FUSED_MIN_ROWS} scenarios")
     if type(nominal) is not ExpertPlanner and not stepping:
@@ -159,14 +163,15 @@ def config_reasons(cfg) -> list[str]:
         now = setting(cfg, name)
         if now in implemented(name):
             continue
-        needs = WITH.get((name, now))
+        needs = WITH.get(name)
         if needs is None:
             out.append(f"config.{name}={now!r} (compiled: {value!r})")
         elif any(setting(cfg, other) not in values for other, values in needs.items()):
             out.append(f"config.{name}={now!r} (compiled: {value!r}, or {now!r} with {_needs(needs)})")
-    for (name, value), needs in WITH.items():
-        if name not in FIXED and setting(cfg, name) == value:
-            out.extend(f"config.{other}={setting(cfg, other)!r} with {name}={value!r} (compiled: {values!r})"
+    for name, needs in WITH.items():
+        now = setting(cfg, name)
+        if name not in FIXED and now != setting(type(cfg)(), name):
+            out.extend(f"config.{other}={setting(cfg, other)!r} with {name}={now!r} (compiled: {values!r})"
                        for other, values in needs.items() if setting(cfg, other) not in values)  # fmt: skip
     return out
 
@@ -319,6 +324,7 @@ def rows_of(start):
     state (``_fast_rows.Rows``)."""
     from ..shield.fast_step import Packed
     from ._fast_rows import RB, RF, RI, Rows
+    from ._fast_world import COMMAND
 
     packed = Packed.of(start.shield)  # the shield's state as its compiled period holds it
     n, k = start.x.shape
@@ -331,9 +337,16 @@ def rows_of(start):
     else:
         rf[:, 11] = 0.0
     snap = np.zeros((n, k - 1))
-    return Rows(c(start.x), c(start.v), np.zeros((n, k)), np.full((n, k), np.inf), rf, np.zeros((n, len(RB)), bool),
+    rb = np.zeros((n, len(RB)), bool)
+    rb[:, 7] = start.completed
+    # the actuation delay's commands in flight: the idle ones the run starts with (InFlight.idle: cruise)
+    if start.in_flight is not None and any(cmd.rows.size or cmd.a_x.any() or cmd.a_y.any() or cmd.completing.any()
+                                           for cmd in start.in_flight.commands):  # fmt: skip
+        raise ValueError("rows_of: a run starts with idle commands in flight (InFlight.idle)")
+    queue = np.zeros((n, 0 if start.in_flight is None else len(start.in_flight.commands), COMMAND))
+    return Rows(c(start.x), c(start.v), np.zeros((n, k)), np.full((n, k), np.inf), rf, rb,
                 np.zeros((n, len(RI)), np.int64), c(packed.plan), c(packed.history), c(packed.count), c(packed.st),
-                c(packed.sk), snap, snap.copy(), snap.copy(), np.zeros(n, np.int64))  # fmt: skip
+                c(packed.sk), snap, snap.copy(), snap.copy(), np.zeros(n, np.int64), queue)  # fmt: skip
 
 
 def _slow(sim) -> bool:

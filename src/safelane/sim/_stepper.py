@@ -30,7 +30,7 @@ class StepState:
     v = property(lambda self: self.rows.v)
     acc = property(lambda self: self.rows.acc)
     t = property(lambda self: self.rows.rf[:, 4])
-    completed = property(lambda self: self.rows.sk[:, 3])
+    completed = property(lambda self: self.rows.rb[:, 7])
     collided = property(lambda self: self.rows.rb[:, 0])
     violated = property(lambda self: self.rows.rb[:, 1])
 
@@ -80,7 +80,7 @@ class Stepper:
         finish_kernel(self.prm_vec, self.batch, rows)
         return _state(dict(
             t_complete=rows.rf[:, 5], min_gap_f=rows.rf[:, 6], min_gap_l1=rows.rf[:, 7], min_lane_ratio=rows.rf[:, 8],
-            first_collaborative_s=rows.st[:, 1], breach_first_s=rows.st[:, 2], completed=rows.sk[:, 3],
+            first_collaborative_s=rows.st[:, 1], breach_first_s=rows.st[:, 2], completed=rows.rb[:, 7],
             collided=rows.rb[:, 0], violated=rows.rb[:, 1], leader_collided=rows.rb[:, 2],
             leader_violated=rows.rb[:, 3], aggressive=rows.sk[:, 2], counts=rows.ri[:, :3], n_invalid=rows.ri[:, 3],
             breach_flags=rows.sk[:, 5:10], initial_safe=self.initial_safe, slow_delay_s=rows.st[:, 7],
