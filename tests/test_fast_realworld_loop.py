@@ -154,3 +154,26 @@ def test_the_realistic_world_without_its_shield_sides_runs_compiled(monkeypatch)
     cfg = cfg.model_copy(update=dict(shield=cfg.shield.model_copy(update=dict(sensing=False, actuation_delay_s=0.0))))
     assert _fused.reasons(_mixed(1, 5.0, per_variant=20), cfg, ExpertPlanner(), None, False, False) == []
     assert any(r.startswith("config.actuation_delay_s=") for r in steps_compiled(_mixed(1, 5.0), cfg, None))
+
+
+def test_the_compiled_period_stepped_from_python_runs_the_own_lane_and_sensing(monkeypatch):
+    """A nominal planner the loop does not run (a subclass of the expert) steps the compiled period from Python
+    (``sim/_stepper.Stepper``, engine ``"compiled period"``): the own lane, sensing error and the delay there too, with
+    the period-by-period table (its final monitor view as measured: ``finish_kernel``). Not in the envs yet."""
+    mine = type("Mine", (ExpertPlanner,), {})()
+    cfg = SimConfig(**NEAR_L0, sensing_error=True, sensing_edge_share=0.2, shield_sensing=False, actuation_delay_s=0.1,
+                    shield_delay=False)  # fmt: skip
+    kwargs = dict(params=REALISTIC, nominal=mine, config=cfg)
+    batch = _mixed(3, 6.0, per_variant=30, seed=11)
+    for name in ("SAFELANE_NO_NUMBA", "SAFELANE_NO_FUSED"):
+        monkeypatch.delenv(name, raising=False)
+    stepped = simulate_batch(batch, seed=4, **kwargs)
+    assert stepped.engine == "compiled period", (stepped.engine, stepped.engine_reasons)
+    monkeypatch.setenv("SAFELANE_NO_FUSED", "1")
+    periods = simulate_batch(batch, seed=4, **kwargs)
+    assert periods.engine == "period by period"
+    assert stepped.table.equals(periods.table)
+    assert periods.table["own_lane_violation"].any()
+    monkeypatch.delenv("SAFELANE_NO_FUSED")
+    assert {r.split("=")[0] for r in steps_compiled(batch, cfg, None)} == {
+        "config.own_lane", "config.sensing_error", "config.actuation_delay_s"}

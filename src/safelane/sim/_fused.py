@@ -138,9 +138,6 @@ def reasons(batch, cfg, nominal, traffic, trace: bool, record_observations: bool
         # WaveHooks (the paper's traffic, its wishes as data) run on the compiled period; the loop's chunks and the
         # blame's rerun (engine.py) rebuild the closed loop with the default traffic
         out.append("a traffic model other than the paper's default")
-    if stepping and cfg.actuation_delay_s > 0.0:
-        out.append(f"config.actuation_delay_s={cfg.actuation_delay_s!r} in a compiled period stepped from Python (the "
-                   "envs read the shield's completion; the compiled loop runs the delay)")  # fmt: skip
     if len(batch) < FUSED_MIN_ROWS and not stepping:
         out.append(f"fewer than {FUSED_MIN_ROWS} scenarios")
     if type(nominal) is not ExpertPlanner and not stepping:

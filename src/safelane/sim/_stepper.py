@@ -9,7 +9,19 @@ import dataclasses
 
 import numpy as np
 
-from ._fused import BATCH_LAST, BATCH_SHARED, BY_ID, _non_finite, _own, _slow, _state, kernel_inputs, reasons, rows_of
+from ._fused import (
+    BATCH_LAST,
+    BATCH_SHARED,
+    BY_ID,
+    _non_finite,
+    _own,
+    _slow,
+    _state,
+    kernel_inputs,
+    reasons,
+    rows_of,
+    setting,
+)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -156,7 +168,17 @@ class Stepper:
             _non_finite(self.batch.scenario_id, bad, float(rows.rf[bad[0], 4]))
 
 
+#: The realistic world's settings the envs' compiled step (``envs/_fast.py``) does not take, though :class:`Stepper`
+#: runs them for ``simulate_batch`` (``tests/test_fast_realworld_loop.py``): the envs' step reads the shield's
+#: completion (the world's differs under an actuation delay) and has not been compared with the NumPy env with them.
+ENV_WORLD = ("own_lane", "sensing_error", "actuation_delay_s")
+
+
 def steps_compiled(batch, cfg, traffic) -> list[str]:
-    """Why :class:`Stepper` does not step this batch (empty: it does): :func:`reasons` without the batch size and the
-    planner (the proposals are given)."""
-    return reasons(batch, cfg, None, traffic, False, False, stepping=True)
+    """Why :class:`Stepper` does not step this batch in the envs (empty: it does): :func:`reasons` without the batch
+    size and the planner (the proposals are given), and :data:`ENV_WORLD` away from their defaults."""
+    out = reasons(batch, cfg, None, traffic, False, False, stepping=True)
+    default = type(cfg)()
+    out.extend(f"config.{name}={setting(cfg, name)!r} in the envs' compiled step (compiled: "
+               f"{setting(default, name)!r})" for name in ENV_WORLD if setting(cfg, name) != setting(default, name))
+    return out
