@@ -177,3 +177,39 @@ def test_the_compiled_period_stepped_from_python_runs_the_own_lane_and_sensing(m
     monkeypatch.delenv("SAFELANE_NO_FUSED")
     assert {r.split("=")[0] for r in steps_compiled(batch, cfg, None)} == {
         "config.own_lane", "config.sensing_error", "config.actuation_delay_s"}
+
+
+def test_rows_without_l0_a_world_key_and_chunks_give_the_period_by_period_table(monkeypatch):
+    """A batch that brings its own ``L0`` (none in every third row: ``+inf``) and the falsifier's key of the world's
+    draws (``ScenarioBatch.world_key``), run in chunks behind a progress bar: the period-by-period table."""
+    from dataclasses import replace
+
+    from safelane.sim.realworld import with_own_lane
+
+    cfg = SimConfig(**NEAR_L0, sensing_error=True, shield_sensing=False, actuation_delay_s=0.1, shield_delay=False)
+    batch = with_own_lane(_mixed(3, 5.0, per_variant=40, seed=12), 4, cfg, REALISTIC)
+    l0_x = batch.l0_x.copy()
+    l0_x[::3] = np.inf
+    batch = replace(batch, l0_x=l0_x, world_key=batch.scenario_id * 7 + 3)
+    for name in ("SAFELANE_NO_NUMBA", "SAFELANE_NO_FUSED"):
+        monkeypatch.delenv(name, raising=False)
+    monkeypatch.setattr(_fused, "PROGRESS_CHUNK", 70)
+    fused = simulate_batch(batch, seed=4, params=REALISTIC, config=cfg, progress=True)
+    assert fused.engine == "compiled loop", fused.engine_reasons
+    monkeypatch.setenv("SAFELANE_NO_FUSED", "1")
+    periods = simulate_batch(batch, seed=4, params=REALISTIC, config=cfg)
+    assert fused.table.equals(periods.table)
+    gap = periods.table["min_gap_own_lane_m"].to_numpy()
+    assert np.isnan(gap[::3]).all() and np.isfinite(gap[1::3]).all()
+    other_key = simulate_batch(replace(batch, world_key=None), seed=4, params=REALISTIC, config=cfg).table
+    assert not other_key.equals(periods.table)  # the key reaches the draws
+
+
+def test_a_batch_with_an_own_lane_chain_runs_period_by_period_and_says_why(monkeypatch):
+    from safelane.sim.realworld import with_own_lane
+
+    monkeypatch.delenv("SAFELANE_NO_FUSED", raising=False)
+    chained = with_own_lane(_mixed(1, 5.0, per_variant=20), 4, SimConfig(own_lane=True, own_lane_connected=1),
+                            REALISTIC)  # fmt: skip
+    why = _fused.reasons(chained, SimConfig(own_lane=True), ExpertPlanner(), None, False, False)
+    assert any("own_ahead_x" in r for r in why), why
