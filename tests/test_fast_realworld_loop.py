@@ -50,41 +50,73 @@ NEAR_L0 = dict(own_lane=True, l0_gap_min_m=6.0, l0_gap_max_m=30.0, l0_brake_wind
 
 CASES = {
     "own lane: L0, the shield's own lane on": (
-        lambda: _mixed(3, 5.0), dict(params=REALISTIC, config=SimConfig(**NEAR_L0)), "own"),
+        lambda: _mixed(3, 5.0),
+        dict(params=REALISTIC, config=SimConfig(**NEAR_L0)),
+        "own",
+    ),
     "own lane: L0, the shield ignores it": (
-        lambda: _mixed(3, 5.0, seed=1), dict(params=REALISTIC, config=SimConfig(**NEAR_L0, shield={"own_lane": False})),
-        "own"),
+        lambda: _mixed(3, 5.0, seed=1),
+        dict(params=REALISTIC, config=SimConfig(**NEAR_L0, shield={"own_lane": False})),
+        "own",
+    ),
     "own lane: L0 by the default distribution, slow assessment, reactive leaders": (
         lambda: _mixed(2, 7.0, seed=2),
-        dict(params=REALISTIC, config=SimConfig(own_lane=True, leader_rule="reactive", assessment="slow",
-                                                assess_delay_s=2.388, assess_miss=0.259)),
-        "own"),
+        dict(
+            params=REALISTIC,
+            config=SimConfig(
+                own_lane=True, leader_rule="reactive", assessment="slow", assess_delay_s=2.388, assess_miss=0.259
+            ),
+        ),
+        "own",
+    ),
     "sensing error, the shield takes the measurements as exact": (
         lambda: _mixed(3, 5.0, seed=3),
-        dict(params=REALISTIC, config=SimConfig(sensing_error=True, sense_sensed_pos_m=2.0, sense_sensed_speed_mps=1.0,
-                                                shield={"sensing": False})),
-        "sensing"),
+        dict(
+            params=REALISTIC,
+            config=SimConfig(
+                sensing_error=True, sense_sensed_pos_m=2.0, sense_sensed_speed_mps=1.0, shield={"sensing": False}
+            ),
+        ),
+        "sensing",
+    ),
     "sensing error with the edge share, N = 5": (
         lambda: _mixed(5, 6.0, seed=4),
-        dict(params=REALISTIC, config=SimConfig(sensing_error=True, sensing_edge_share=0.5,
-                                                shield={"sensing": False})),
-        "sensing"),
+        dict(params=REALISTIC, config=SimConfig(sensing_error=True, sensing_edge_share=0.5, shield={"sensing": False})),
+        "sensing",
+    ),
     "own lane and sensing error": (
         lambda: _mixed(3, 6.0, seed=5),
         dict(params=REALISTIC, config=SimConfig(**NEAR_L0, sensing_error=True, shield={"sensing": False})),
-        "both"),
+        "both",
+    ),
     "actuation delay 0.2 s (the shield's off: it decides as if its commands acted at once)": (
         lambda: _mixed(3, 5.0, seed=7),
-        dict(params=REALISTIC, config=SimConfig(actuation_delay_s=0.2, shield_delay=False)), "delay"),
+        dict(params=REALISTIC, config=SimConfig(actuation_delay_s=0.2, shield_delay=False)),
+        "delay",
+    ),
     "actuation delay 0.1 s, N = 1, a_N+1 = 9 (aborts on the held plan executed late)": (
-        lambda: _mixed(1, 9.0, seed=8), dict(config=SimConfig(actuation_delay_s=0.1, shield_delay=False)), "delay"),
+        lambda: _mixed(1, 9.0, seed=8),
+        dict(config=SimConfig(actuation_delay_s=0.1, shield_delay=False)),
+        "delay",
+    ),
     "the realistic preset's world (own lane, sensing error, delay 0.2 s; its shield's sensing and delay off)": (
         lambda: _mixed(3, 6.0, seed=9),
-        dict(params=REALISTIC,
-             config=SimConfig(**NEAR_L0, sensing_error=True, actuation_delay_s=0.2, shield_delay=False,
-                              shield_sensing=False, assessment="slow", assess_delay_s=2.388, assess_miss=0.259),
-             nominal=ExpertPlanner(k_p=0.728, k_v=0.023, omega=0.732, gap_fraction=0.441, brake_comfort=6.296)),
-        "all"),
+        dict(
+            params=REALISTIC,
+            config=SimConfig(
+                **NEAR_L0,
+                sensing_error=True,
+                actuation_delay_s=0.2,
+                shield_delay=False,
+                shield_sensing=False,
+                assessment="slow",
+                assess_delay_s=2.388,
+                assess_miss=0.259,
+            ),
+            nominal=ExpertPlanner(k_p=0.728, k_v=0.023, omega=0.732, gap_fraction=0.441, brake_comfort=6.296),
+        ),
+        "all",
+    ),
 }
 
 
@@ -106,8 +138,15 @@ def test_the_compiled_loop_runs_the_realistic_world_with_the_period_by_period_ta
     off = {"own": dict(own_lane=False), "delay": dict(actuation_delay_s=0.0)}.get(feature, dict(sensing_error=False))
     monkeypatch.setenv("SAFELANE_NO_FUSED", "1")
     without = simulate_batch(batch, seed=4, **{**kwargs, "config": cfg.model_copy(update=off)}).table
-    cols = ["n_proceed", "n_hesitate", "n_abort", "min_gap_follower_m", "completion_time_s", "collision",
-            "safety_violation"]
+    cols = [
+        "n_proceed",
+        "n_hesitate",
+        "n_abort",
+        "min_gap_follower_m",
+        "completion_time_s",
+        "collision",
+        "safety_violation",
+    ]
     changed = ~(without[cols].fillna(-1.0).to_numpy() == periods[cols].fillna(-1.0).to_numpy()).all(1)
     assert changed.sum() > len(batch) // 20, changed.sum()
     if feature == "delay":  # the aborts' plans executed a period or two late: the delay reaches the held plan's path
@@ -176,7 +215,10 @@ def test_the_compiled_period_stepped_from_python_runs_the_own_lane_and_sensing(m
     assert periods.table["own_lane_violation"].any()
     monkeypatch.delenv("SAFELANE_NO_FUSED")
     assert {r.split("=")[0] for r in steps_compiled(batch, cfg, None)} == {
-        "config.own_lane", "config.sensing_error", "config.actuation_delay_s"}
+        "config.own_lane",
+        "config.sensing_error",
+        "config.actuation_delay_s",
+    }
 
 
 def test_rows_without_l0_a_world_key_and_chunks_give_the_period_by_period_table(monkeypatch):
