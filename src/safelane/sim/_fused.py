@@ -7,8 +7,8 @@ its period, :class:`~._stepper.Stepper`, also with :class:`~.traffic.WaveHooks`:
 four variants and the RSS variants (their rule: ``shield/_fast_rules.py``), the settings of the default and paper
 presets (any assessment, the commit guard or the paper's completion rule, the monitor on or off, either leader rule,
 supervised), the realistic world's side of the real-world settings where the shield's side is one its period runs
-(the own lane's leader ``L0`` alone, sensing error with the shield's sensing off: :data:`WITH`) and an F that ignores
-the ego, without a trace or recorded observations
+(the own lane's leader ``L0`` alone, sensing error with the shield's sensing off, the actuation delay with the
+shield's delay off: :data:`WITH`) and an F that ignores the ego, without a trace or recorded observations
 (those, and other planners, run its period: :class:`~._stepper.Stepper`).
 Everything else — and everything with ``SAFELANE_NO_FUSED=1`` or without numba — runs period by period
 (:mod:`.step`), whose parts are compiled where they have kernels. Importing this module does not import numba.
