@@ -5,7 +5,9 @@ small per-scenario arrays — no per-period NumPy arrays, no Python between the 
 :meth:`~.step.ClosedLoop.step` for the settings it covers (:func:`._fused.covers` says which): observe, the expert
 planner, the chain analysis, **the shield** (:func:`safelane.shield.core.step`: the observed assessment, the
 assumption monitor, proceed / hesitate / abort with the commit guard, the held plan, the responsible follow after
-completion), the paper's traffic with the worst-case leader rule, the exact motion and the continuous-time checks.
+completion), the paper's traffic with the worst-case leader rule, the exact motion and the continuous-time checks
+— and the realistic world's side (``_fast_world.py``: the own lane's leader ``L0``, its motion and the ego's checks
+against it; the measurement noise of sensing error, the situation the shield sees).
 The shield's period is :func:`safelane.shield._fast_period.period_row` itself — the one glue of a period, the one
 ``Shield.step`` runs compiled — on one row whose situation, state and outputs are ``(1, .)`` arrays; the rest is
 built from the row functions of the part kernels (``_leader_row``, ``_follower_row``, ``_ego_row``,
@@ -42,10 +44,19 @@ from ._fast_checks import _ego_row, _lane_row
 from ._fast_general import _general_pair
 from ._fast_held import _motion_max
 from ._fast_rows import _load, _scratch, _store, _window
-from ._fast_traffic import _follower_row, _leader_row, _profile_row, _sample_lanes, _wave_follower, _wave_task
+from ._fast_traffic import (
+    _chain_row,
+    _follower_row,
+    _leader_row,
+    _profile_row,
+    _sample_lanes,
+    _wave_follower,
+    _wave_task,
+)
+from ._fast_world import _switched, executed_plan, measure_row, own_checks, own_motion, push_command
 from .behaviours import hold_speed, last_accel, link_decel, reactive_core, task_core, violation_accel
 from .checks import far_gap, lane_far_ratio, lane_near, lane_verdict, lateral_extent, near_pair, near_threshold
-from .kinematics import constant_segment, piece_acc, state_at
+from .kinematics import constant_segment, piece_acc
 
 _compile.register_rows()
 announce_compiles()
@@ -55,7 +66,7 @@ _INF = np.inf
 PRM = (
     "dt", "a_x_a", "a_x_d", "a_y_m", "y_safe", "p_m", "lane_width", "vehicle_length", "conflict", "overlap",
     "monitor_tol", "brake_start_s", "open_decel", "open_gap_m", "k_p", "k_v", "gap_fraction", "brake_comfort",
-    "omega2", "two_omega", "a_o_d", "reactive", "ignores_ego",
+    "omega2", "two_omega", "a_o_d", "reactive", "ignores_ego", "own_width", "shield_own", "sensing", "edge_share",
 )  # fmt: skip
 #: The batch's inputs of :func:`loop_kernel`, per scenario (:class:`~.step.ClosedLoop`'s arrays; ``promise``,
 #: ``chain_margin``: ``(N, B)``; ``uses``: ``(B, 3)`` the variant's flags).
@@ -64,23 +75,28 @@ LoopBatch = collections.namedtuple("LoopBatch", (
     "is_last", "acts", "v_desired", "promise_decel", "promise_accel", "decel_last", "gap0", "lane_valid", "lane_margin",
     "p_v", "scenario_id", "key", "rule",
     "profile_t", "profile_a", "task_wave", "task_period", "f_wave", "wave_lane_valid", "wave_lane_margin",
-    "lane_sample", "planner_kind", "planner_q",
+    "lane_sample", "l0_profile_t", "l0_profile_a", "world_key", "err_f", "err_chain", "err_own", "planner_kind",
+    "planner_q",
 ))  # fmt: skip
 #: ``LoopBatch``'s last fields: ``L(N+1)``'s profile ``profile_t``, ``profile_a`` ``(B, P)`` (``P = 0``: none, the
 #: sudden braking); :class:`~.traffic.WaveHooks` by scenario id (none: no rows) — ``task_wave`` ``(S, K, 5)`` (low,
 #: span, high, low level, phase), ``task_period`` ``(S,)``, ``f_wave`` ``(S, 4)`` (period, phase, high, low level),
 #: the lane-gap sample's pairs and margins ``(S, K−1)`` and its running minimum ``lane_sample`` ``(S,)`` (written;
-#: none: no rows); the nominal planner as data, ``planner_kind`` ``(B,)`` and ``planner_q`` ``(B, 7)``
-#: (:func:`~safelane.planners.adversarial.adversary_table`; no rows: the expert planner).
+#: none: no rows); the own lane's leader ``L0``'s profile ``l0_profile_t``, ``l0_profile_a`` ``(B, P0)`` (``P0 = 0``:
+#: no own lane); the key of the world's draws ``world_key`` ``(B,)`` (``ScenarioBatch.world_key``, else the scenario
+#: id) and the sensing-error bounds (``Situation.err_f`` ``(B, 2)``, ``err_chain`` ``(B, N + 1, 2)``, ``err_own``
+#: ``(B, K0, 2)``: position, speed; zeros where ``prm``'s ``sensing`` is off); the nominal planner as data,
+#: ``planner_kind`` ``(B,)`` and ``planner_q`` ``(B, 7)`` (:func:`~safelane.planners.adversarial.adversary_table`; no
+#: rows: the expert planner).
 #: What :func:`loop_kernel` writes: :data:`OUT_F`, :data:`OUT_B` per scenario, ``counts (B, 3)``, ``n_invalid``,
 #: ``breach_flags (B, 5)`` and ``bad_step`` (the first period whose state is not finite, ``-1`` if none).
 LoopOut = collections.namedtuple("LoopOut", ("f", "b", "counts", "n_invalid", "breach_flags", "bad_step"))
 #: Float outputs per scenario.
 OUT_F = ("t_complete", "min_gap_f", "min_gap_l1", "min_lane_ratio", "first_collaborative_s", "breach_first_s",
-         "slow_delay_s")  # fmt: skip
+         "slow_delay_s", "min_gap_l0", "l0_x", "l0_v")  # fmt: skip
 #: Bool outputs per scenario.
 OUT_B = ("completed", "collided", "violated", "leader_collided", "leader_violated", "aggressive", "slow_missed",
-         "slow_aggressive")  # fmt: skip
+         "slow_aggressive", "l0_collided", "l0_violated")  # fmt: skip
 
 
 @numba.njit(cache=True, nogil=True, error_model="numpy")
@@ -101,16 +117,29 @@ def step_kernel(prm, period_prm, batch, rows, proposal, behaviour, finite):
 
 
 @numba.njit(cache=True, nogil=True, error_model="numpy")
-def finish_kernel(prm, rows):
+def finish_kernel(prm, batch, rows):
     """The monitor's view of the last period of every row of ``rows`` (in place): what :func:`loop_kernel` does after
     a row's last period (``core.observe`` after the run: ``ClosedLoop.finish``)."""
-    now = np.empty((1, rows.x.shape[1]))
+    k = rows.x.shape[1]
+    now, chain_x, chain_v, no_own = np.empty((1, k)), np.empty((1, k - 1)), np.empty((1, k - 1)), np.empty((1, 0))
     for b in range(rows.x.shape[0]):
         if rows.rb[b, 4]:
-            for i in range(rows.x.shape[1]):
-                now[0, i] = rows.x[b, i]
+            _seen(prm, batch, b, rows.ri[b, 4], rows.x[b], rows.v[b], now, chain_x, chain_v, no_own)
             monitor_row(b, rows.rf[b, 4], prm[0], prm[10], now, rows.snap_x, rows.snap_v, rows.snap_b, rows.snap_nc,
                         rows.st, rows.sk)  # fmt: skip
+
+
+@row_function
+def _seen(prm, batch, b, step, x, v, now, chain_x, chain_v, no_own):
+    """The target lane's positions as the ego sees them at period ``step`` into ``now`` (row 0, F in slot 0): the
+    true ones, or measured (``prm``'s ``sensing``: ``realworld.measure``)."""
+    if prm[25] > 0.0:
+        now[0, 0] = measure_row(batch, b, step, prm[26], x, v, chain_x, chain_v, _INF, 0.0, no_own, no_own)[0]
+        for i in range(chain_x.shape[1]):
+            now[0, i + 1] = chain_x[0, i]
+    else:
+        for i in range(x.shape[0]):
+            now[0, i] = x[i]
 
 
 @numba.njit(nogil=True, error_model="numpy", _nrt=False)
@@ -124,7 +153,6 @@ def _loop_rows(n_steps, prm, batch, start, out, w):
     x2, v2, st, sk, px2, rf, rb, ri = w.x2, w.v2, w.st, w.sk, w.px2, w.rf, w.rb, w.ri
     snap_x, snap_v, snap_b, snap_nc = w.snap_x, w.snap_v, w.snap_b, w.snap_nc
     x, v = x2[0], v2[0]
-    k = x.shape[0]
     den = _window(w.times, dt)
     adversaries = batch.planner_kind.shape[0] > 0
     for b in range(start.x.shape[0]):
@@ -133,8 +161,7 @@ def _loop_rows(n_steps, prm, batch, start, out, w):
         for step in range(n_steps + 1):
             if step == n_steps:  # the monitor's view of the last period (core.observe after the run: finish)
                 if rb[0, 4]:
-                    for i in range(k):
-                        px2[0, i] = x[i]
+                    _seen(prm, batch, b, ri[0, 4], x, v, px2, w.chain_x, w.chain_v, w.own_promise)
                     monitor_row(0, rf[0, 4], dt, mon_tol, px2, snap_x, snap_v, snap_b, snap_nc, st, sk)
                 break
             # --- observe, the nominal planner: the expert (planners.base.ExpertPlanner) or an adversary as data ---
@@ -150,9 +177,11 @@ def _loop_rows(n_steps, prm, batch, start, out, w):
                 break
         out_f[b, 0], out_f[b, 1], out_f[b, 2], out_f[b, 3] = rf[0, 5], rf[0, 6], rf[0, 7], rf[0, 8]
         out_f[b, 4], out_f[b, 5], out_f[b, 6] = st[0, 1], st[0, 2], st[0, 7]
-        out_b[b, 0], out_b[b, 1], out_b[b, 2] = sk[0, 3], rb[0, 0], rb[0, 1]
+        out_f[b, 7], out_f[b, 8], out_f[b, 9] = rf[0, 9], rf[0, 10], rf[0, 11]
+        out_b[b, 0], out_b[b, 1], out_b[b, 2] = rb[0, 7], rb[0, 0], rb[0, 1]
         out_b[b, 3], out_b[b, 4], out_b[b, 5] = rb[0, 2], rb[0, 3], sk[0, 2]
         out_b[b, 6], out_b[b, 7] = sk[0, 10], sk[0, 11]
+        out_b[b, 8], out_b[b, 9] = rb[0, 5], rb[0, 6]
         counts[b, 0], counts[b, 1], counts[b, 2] = ri[0, 0], ri[0, 1], ri[0, 2]
         n_invalid[b] = ri[0, 3]
         for j in range(breach_flags.shape[1]):
@@ -175,24 +204,6 @@ def _draw(batch, b, step, slot, salt):
     """The closed loop's counter-based draw of row ``b`` (``rng.counter_uniform(seed, scenario id, step, slot, salt)``:
     promise violations, salts 7 and 8)."""
     return counter_uniform4(batch.key[0], batch.scenario_id[b], step, slot, salt)
-
-
-@row_function
-def _switched(x, v, f_acc, f_ts, f_xe, f_ve, i, t_sw, a2, dt, sw):
-    """Vehicle ``i`` (its first segment in ``f_*`` from ``constant_segment``) changing to ``a2`` at ``t_sw`` inside
-    the period: :meth:`~.kinematics.Fleet.switched`'s numbers (its stop time, end state) into ``f_ts``, ``f_xe``,
-    ``f_ve``, its knots (:meth:`~.kinematics.Fleet.motion`) into ``sw``; returns the second segment's ``|a|``."""
-    a1, t_stop = f_acc[i], f_ts[i]
-    ts1 = _min(t_stop, t_sw)
-    x_sw, v_run = state_at(SCALAR, x, v, a1, ts1)
-    v_sw = 0.0 if t_stop <= t_sw else _max(v_run, 0.0)  # stopped before the switch: exactly 0
-    acc2, ts2, x_end, v_end = constant_segment(SCALAR, x_sw, v_sw, a2, _max(dt - t_sw, 0.0))
-    f_ts[i], f_xe[i], f_ve[i] = ts1, x_end, v_end
-    sw.t[0], sw.t[1], sw.t[2], sw.t[3], sw.t[4] = 0.0, ts1, t_sw, t_sw + ts2, dt
-    sw.x[0], sw.x[1], sw.x[2], sw.x[3], sw.x[4] = x, x_sw, x_sw, x_end, x_end
-    sw.v[0], sw.v[1], sw.v[2], sw.v[3], sw.v[4] = v, v_sw, v_sw, v_end, v_end
-    sw.a[0], sw.a[1], sw.a[2], sw.a[3] = a1, 0.0, acc2, 0.0
-    return abs(acc2)
 
 
 @row_function
@@ -223,7 +234,7 @@ def _period(prm, batch, b, w, den, ax_n, ay_n):
     (x2, v2, f_acc2, f_ts2, f_xe2, f_ve2, acc, cap, general2, pp, sf, sb, chain_x, chain_v, own_x, own_v, own_promise,
      own_nc, history, count, st, sk, plan, snap_x, snap_v, snap_b, snap_nc, bounds_out, no_chain, of, ob, knots, px2,
      pv2, pb2, kn, kax, kay, scratch, lon_t, lon_x, lon_v, lon_a, lat_t, lat_x, lat_v, lat_a, o_t, o_x, o_v, o_a, lo,
-     hi, times, rf, rb, ri, sw) = w  # fmt: skip
+     hi, times, rf, rb, ri, sw, own, queue, act) = w  # fmt: skip
     x, v, f_acc, f_ts, f_xe, f_ve = x2[0], v2[0], f_acc2[0], f_ts2[0], f_xe2[0], f_ve2[0]
     general = general2[0]
     consts = (dt, p_m, a_lim, conflict, overlap, length, max_level)
@@ -235,12 +246,23 @@ def _period(prm, batch, b, w, den, ax_n, ay_n):
     ex, ey, evx, evy, t = rf[0, 0], rf[0, 1], rf[0, 2], rf[0, 3], rf[0, 4]
     gap_f, gap_l1 = rf[0, 6], rf[0, 7]
     # --- the shield (core.step): one period of shield/_fast_period.period_row ---
-    sf[0, 0], sf[0, 1], sf[0, 2], sf[0, 3], sf[0, 4], sf[0, 5] = ex, ey, evx, evy, x[0], v[0]
+    # the situation: the true states, or as measured (sensing error: realworld.measure); F's observed speed is its
+    # true one (ClosedLoop.step); the own lane's leader L0 where the shield keeps p_m to it (+inf: none)
+    l0x, l0v = rf[0, 10], rf[0, 11]
+    sensing = prm[25] > 0.0
+    own_x[0, 0], own_v[0, 0] = _INF, 0.0
+    if prm[24] > 0.0:
+        own_x[0, 0], own_v[0, 0] = l0x, l0v
+    fx_seen, fv_seen = x[0], v[0]
+    if sensing:
+        fx_seen, fv_seen = measure_row(batch, b, ri[0, 4], prm[26], x, v, chain_x, chain_v, l0x, l0v, own_x, own_v)
+    else:
+        for i in range(m):
+            chain_x[0, i], chain_v[0, i] = x[i + 1], v[i + 1]
+    sf[0, 0], sf[0, 1], sf[0, 2], sf[0, 3], sf[0, 4], sf[0, 5] = ex, ey, evx, evy, fx_seen, fv_seen
     sf[0, 6], sf[0, 7], sf[0, 8], sf[0, 9] = v[0], ax_n, ay_n, nc
-    for i in range(m):
-        chain_x[0, i], chain_v[0, i] = x[i + 1], v[i + 1]
     pp[0] = t
-    completed = sk[0, 3]
+    completed = rb[0, 7]  # the world's (with an actuation delay the command acting completes it, not the one issued)
     active = not completed
     behaviour = period_row(0, pp, times, den, sf, sb, batch.rule[b : b + 1], chain_x, chain_v, link_promise,
                            link_margin, own_x, own_v, own_promise, own_nc, history, count, st, sk, plan, rb[0, 4],
@@ -248,9 +270,9 @@ def _period(prm, batch, b, w, den, ax_n, ay_n):
                            kn)  # fmt: skip
     ax_cmd, ay_cmd = of[0, 0], of[0, 1]
     completing, invalid_active = ob[0, 0], ob[0, 1]
-    # The snapshot the next period's monitor compares with (the caller keeps it: fast_step.step).
+    # The snapshot the next period's monitor compares with (the caller keeps it: fast_step.step): the chain as seen.
     for i in range(m):
-        snap_x[0, i], snap_v[0, i], snap_b[0, i] = x[i + 1], v[i + 1], bounds[i + 1]
+        snap_x[0, i], snap_v[0, i], snap_b[0, i] = chain_x[0, i], chain_v[0, i], bounds[i + 1]
     snap_nc[0] = nc
     rb[0, 4] = True
     on_plan = ob[0, 4]  # the held plan's motion (an abort under the paper's rule; an RSS response is constant)
@@ -259,9 +281,22 @@ def _period(prm, batch, b, w, den, ax_n, ay_n):
             span = kt[j + 1] - kt[j]
             kax[j] = piece_acc(SCALAR, kv[j], kv[j + 1], span)
             kay[j] = piece_acc(SCALAR, kvy[j], kvy[j + 1], span)
+    if queue.shape[0] > 0:  # the actuation delay: the oldest command in flight acts, executed from the ego's state
+        push_command(queue, act, on_plan, ax_cmd, ay_cmd, completing, kt, kax, kay)
+        on_plan, ax_cmd, ay_cmd, completing = act[0] > 0.0, act[1], act[2], act[3] > 0.0
+        if on_plan:
+            executed_plan(act, ex, ey, evx, evy, kt, kx, kv, ky, kvy)
+            for j in range(7):
+                span = kt[j + 1] - kt[j]
+                kax[j] = piece_acc(SCALAR, kv[j], kv[j + 1], span)
+                kay[j] = piece_acc(SCALAR, kvy[j], kvy[j + 1], span)
     # --- traffic (behaviours: the leaders by their rule, F) ---
+    true_bounds = bounds  # the traffic's chain analysis is on the true states (ClosedLoop.chain)
+    if sensing:  # the shield's was on the measured ones
+        _chain_row(x2, v2, 0, link_promise, link_margin, 0, a_o, pv2)
+        true_bounds = pv2[0]
     for i in range(k):
-        cap[i] = _min(cap[i], bounds[i])
+        cap[i] = _min(cap[i], true_bounds[i])
     sw_t, sw_a = dt, 0.0  # L(N+1)'s profile: a switch inside the period at sw_t to sw_a (dt: none)
     if batch.profile_t.shape[1] > 0:
         a_last, sw_t, sw_a = _profile_row(batch.profile_t, batch.profile_a, b, t, dt)
@@ -395,6 +430,27 @@ def _period(prm, batch, b, w, den, ax_n, ay_n):
             l_hit, l_close, ratio = l_hit or pair_hit, l_close or pair_close, _min(ratio, pair_ratio)
         else:
             ratio = _min(ratio, lane_far_ratio(SCALAR, True, x[last] - x[c], f_xe[last] - f_xe[c], m))
+    # --- the own lane (ClosedLoop._own_lane): L0's profile motion, the ego's checks against it ---
+    if l0x < _INF:
+        n_o = own_motion(batch, b, own, t, dt, l0x, l0v)
+        if on_plan:
+            o_hit, o_close, o_low = own_checks(own, n_o, (kt, kx, kv, kax[:7]), (kt, ky, kvy, kay[:7]), prm[23],
+                                               length, p_m, scratch)  # fmt: skip
+        else:
+            lon_t[0], lon_t[1], lon_t[2] = 0.0, l_ts, dt
+            lon_x[0], lon_x[1], lon_x[2] = ex, l_xe, l_xe
+            lon_v[0], lon_v[1], lon_v[2] = evx, l_ve, l_ve
+            lon_a[0], lon_a[1] = l_acc, 0.0
+            lat_t[0], lat_t[1] = 0.0, dt
+            lat_x[0], lat_x[1] = ey, ey1
+            lat_v[0], lat_v[1] = evy, evy1
+            lat_a[0] = ay_cmd
+            o_hit, o_close, o_low = own_checks(own, n_o, (lon_t, lon_x, lon_v, lon_a), (lat_t, lat_x, lat_v, lat_a),
+                                               prm[23], length, p_m, scratch)  # fmt: skip
+        o_close = o_close and not completed
+        hit, close = hit or o_hit, close or o_close
+        rb[0, 5], rb[0, 6] = rb[0, 5] or o_hit, rb[0, 6] or o_close
+        rf[0, 9], rf[0, 10], rf[0, 11] = _min(rf[0, 9], o_low), own.xe[0], own.ve[0]
     # --- advance (ClosedLoop.check_and_advance) ---
     if on_plan:
         ex, evx, ey, evy = kx[7], kv[7], ky[7], kvy[7]
@@ -405,6 +461,7 @@ def _period(prm, batch, b, w, den, ax_n, ay_n):
     completing = completing and active
     if completing and not completed:
         rf[0, 5] = t + dt
+    rb[0, 7] = completed or completing
     rb[0, 0], rb[0, 1] = rb[0, 0] or hit, rb[0, 1] or close
     rb[0, 2], rb[0, 3] = rb[0, 2] or l_hit, rb[0, 3] or l_close
     rf[0, 6], rf[0, 7], rf[0, 8] = gap_f, gap_l1, _min(rf[0, 8], ratio)

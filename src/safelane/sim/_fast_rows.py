@@ -21,15 +21,21 @@ _INF = np.inf
 #: the target lane ``x``, ``v``, the last period's accelerations ``acc`` and the running minimum of the chain bounds
 #: ``cap`` ``(B, K)``; the running values ``rf`` (:data:`RF`), ``rb`` (:data:`RB`), ``ri`` (:data:`RI`); the
 #: shield's state as :func:`~safelane.shield._fast_period.period_row` holds it (``shield/fast_step.Packed``:
-#: ``plan``, ``history``, ``count``, ``st``, ``sk``) and the monitor's snapshot of the last period (``snap_*``).
+#: ``plan``, ``history``, ``count``, ``st``, ``sk``), the monitor's snapshot of the last period (``snap_*``) and the
+#: actuation delay's commands in flight, oldest first (``queue`` ``(B, D, _fast_world.COMMAND)``; ``D = 0``: none).
 Rows = collections.namedtuple("Rows", (
     "x", "v", "acc", "cap", "rf", "rb", "ri", "plan", "history", "count", "st", "sk", "snap_x", "snap_v", "snap_b",
-    "snap_nc",
+    "snap_nc", "queue",
 ))  # fmt: skip
-#: A row's running floats: the ego's state, the row's clock, the results' times and smallest gaps.
-RF = ("ego_x", "ego_y", "ego_vx", "ego_vy", "t", "t_complete", "min_gap_f", "min_gap_l1", "min_lane_ratio")
-#: A row's running flags (``has_last``: the monitor has a snapshot of a last period).
-RB = ("collided", "violated", "leader_collided", "leader_violated", "has_last")
+#: A row's running floats: the ego's state, the row's clock, the results' times and smallest gaps, and the own lane's
+#: leader ``L0``'s state (``l0_x = +inf``: none).
+RF = ("ego_x", "ego_y", "ego_vx", "ego_vy", "t", "t_complete", "min_gap_f", "min_gap_l1", "min_lane_ratio",
+      "min_gap_l0", "l0_x", "l0_v")  # fmt: skip
+#: A row's running flags (``has_last``: the monitor has a snapshot of a last period; the ego's collisions and
+#: ``p_m`` violations against ``L0``, also counted in ``collided``, ``violated``; the world's completion: the shield's
+#: but under an actuation delay, where the command acting completes the lane change).
+RB = ("collided", "violated", "leader_collided", "leader_violated", "has_last", "l0_collided", "l0_violated",
+      "completed")  # fmt: skip
 #: A row's counts: periods that proceeded, hesitated, aborted; invalid proposals; periods run (the draws' counter).
 RI = ("proceed", "hesitate", "abort", "invalid", "step")
 #: The scratch arrays of one row's period (:func:`_scratch`), by name.
@@ -38,7 +44,7 @@ Scratch = collections.namedtuple("Scratch", (
     "own_x", "own_v", "own_promise", "own_nc", "history", "count", "st", "sk", "plan", "snap_x", "snap_v", "snap_b",
     "snap_nc", "bounds_out", "no_chain", "of", "ob", "knots", "px2", "pv2", "pb2", "kn", "kax", "kay", "scratch",
     "lon_t", "lon_x", "lon_v", "lon_a", "lat_t", "lat_x", "lat_v", "lat_a", "o_t", "o_x", "o_v", "o_a", "lo", "hi",
-    "times", "rf", "rb", "ri", "sw",
+    "times", "rf", "rb", "ri", "sw", "own", "queue", "act",
 ))  # fmt: skip
 #: The scratch of a period in which ``L(N+1)``'s profile switches (``Scratch.sw``): the row's ``valid`` and lane
 #: pairs without that vehicle (the checks' rows skip it; ``_fast_loop._period`` checks its pairs on its two segments),
@@ -47,6 +53,11 @@ Scratch = collections.namedtuple("Scratch", (
 Switched = collections.namedtuple("Switched", (
     "valid", "lane_valid", "lane_margin", "t", "x", "v", "a", "lat_t", "lat_x", "lat_v", "lat_a",
 ))  # fmt: skip
+#: The scratch of the own lane's leader ``L0`` in a period (``Scratch.own``; ``sim/_fast_world.py``): its first
+#: segment as ``constant_segment`` gives it (``acc``, ``ts``, ``xe``, ``ve``: one entry each), its motion's knots
+#: (``t``, ``x``, ``v``, ``a``: 5, 5, 5, 4; 3 of them used where it does not switch) and the ego's lateral motion
+#: mirrored (``lat_*``: up to the held plan's 8 knots).
+Own = collections.namedtuple("Own", ("acc", "ts", "xe", "ve", "t", "x", "v", "a", "lat_t", "lat_x", "lat_v", "lat_a"))
 
 
 @numba.njit(cache=True, nogil=True, error_model="numpy")
@@ -71,6 +82,9 @@ def _scratch(rows, period_prm):
         np.empty((1, len(RF))), np.empty((1, len(RB)), np.bool_), np.empty((1, len(RI)), np.int64),
         Switched(np.empty((1, k), np.bool_), np.empty((1, m), np.bool_), np.empty((1, m)), np.empty(5), np.empty(5),
                  np.empty(5), np.empty(4), np.zeros(2), np.ones(2), np.zeros(2), np.zeros(1)),
+        Own(np.empty(1), np.empty(1), np.empty(1), np.empty(1), np.empty(5), np.empty(5), np.empty(5), np.empty(4),
+            np.empty(8), np.empty(8), np.empty(8), np.empty(7)),
+        np.empty((rows.queue.shape[1], rows.queue.shape[2])), np.empty(rows.queue.shape[2]),
     )  # fmt: skip
 
 
@@ -100,6 +114,9 @@ def _load(rows, b, batch, w):
     for j in range(snap_x.shape[1]):
         snap_x[0, j], snap_v[0, j], snap_b[0, j] = rows.snap_x[b, j], rows.snap_v[b, j], rows.snap_b[b, j]
     snap_nc[0] = rows.snap_nc[b]
+    for i in range(w.queue.shape[0]):
+        for j in range(w.queue.shape[1]):
+            w.queue[i, j] = rows.queue[b, i, j]
     sb[0, 0] = batch.f_connected[b]  # F trusted where the variant listens: connected (it declares itself collaborative)
     sb[0, 2], sb[0, 3], sb[0, 4] = batch.uses[b, 0], batch.uses[b, 1], batch.uses[b, 2]
     sb[0, 5] = batch.f_aggressive[b]  # F's true type (read by the 'truth' assessment only)
@@ -131,6 +148,9 @@ def _store(rows, b, w):
     for j in range(snap_x.shape[1]):
         rows.snap_x[b, j], rows.snap_v[b, j], rows.snap_b[b, j] = snap_x[0, j], snap_v[0, j], snap_b[0, j]
     rows.snap_nc[b] = snap_nc[0]
+    for i in range(w.queue.shape[0]):
+        for j in range(w.queue.shape[1]):
+            rows.queue[b, i, j] = w.queue[i, j]
 
 
 @row_function

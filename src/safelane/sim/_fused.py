@@ -7,7 +7,9 @@ any gains) or the adversarial planners (:func:`~safelane.planners.adversarial.ad
 profiles, with or without :class:`~.traffic.WaveHooks`: hooks as data), the paper's
 four variants and the RSS variants (their rule: ``shield/_fast_rules.py``), the settings of the default and paper
 presets (any assessment, the commit guard or the paper's completion rule, the monitor on or off, either leader rule,
-supervised, none of the real-world settings) and an F that ignores the ego, without a trace or recorded observations
+supervised), the realistic world's side of the real-world settings where the shield's side is one its period runs
+(the own lane's leader ``L0`` alone, sensing error with the shield's sensing off, the actuation delay with the
+shield's delay off: :data:`WITH`) and an F that ignores the ego, without a trace or recorded observations
 (those, and other planners, run its period: :class:`~._stepper.Stepper`).
 Everything else — and everything with ``SAFELANE_NO_FUSED=1`` or without numba — runs period by period
 (:mod:`.step`), whose parts are compiled where they have kernels. Importing this module does not import numba.
@@ -40,21 +42,32 @@ PROGRESS_CHUNK = 4096
 #: :func:`config_fields`). Every field is named in exactly one of the three tables, and :func:`reasons` refuses a
 #: config whose class has a field named in none (a new setting is never run compiled as if it were at its default:
 #: ``tests/test_fused_dispatch.py`` builds its cases from the field list).
-#: The loop reads these fields' values (any value runs compiled):
+#: The loop reads these fields' values (any value runs compiled, but as :data:`WITH` says):
 READ = frozenset({"horizon_s", "brake_start_s", "shield.assess_window", "shield.assess_threshold",
                   "follower_open_decel", "follower_open_gap_m", "shield.monitor", "leader_rule",
                   "shield.assess_delay_s", "shield.assess_miss", "shield.assessment",
-                  "follower_ignores_ego"})  # fmt: skip
+                  "follower_ignores_ego", "own_lane"})  # fmt: skip
 #: The loop implements these fields at this value (or these values) only; any other value runs period by period:
 FIXED = {
     "shield.completion": ("commit_guard", "paper_evasion"),
     "sensor_noise_std": 0.0,
     "shield.enabled": True, "v2x_loss": 0.0, "v2x_latency_periods": 0,
-    "own_lane": False, "sensing_error": False,
+    "sensing_error": False,
     "actuation_delay_s": 0.0, "shield.actuation_delay_s": 0.0, "neighbours": False,
 }  # fmt: skip
+#: Settings the loop implements away from their defaults only together with other settings at these values: field →
+#: ``{other field: its values}``. A :data:`FIXED` field's other values run compiled where the others are at their
+#: values (and are refused, naming the field, where they are not); a :data:`READ` field away from its default refuses
+#: where they are not. The world's side of a real-world feature runs compiled while the shield's side is off, until
+#: the shield's compiled period takes it (``shield/fast_step.COMPILED``, ``SITUATION_FIELDS``):
+WITH = {
+    "own_lane": {"own_lane_connected": (0,)},  # L0 alone (a connected own lane's traffic: period by period)
+    "sensing_error": {"shield.sensing": (False,)},  # the shield takes the measurements as exact
+    "actuation_delay_s": {"shield.actuation_delay_s": (0.0,)},  # the shield decides as if its commands acted at once
+}
 #: These fields act only through another setting; while the fields named (or the nominal planner: ``"nominal"``)
-#: are at the loop's values they change nothing, so any value runs compiled:
+#: are at the loop's values they change nothing, so any value runs compiled (where the setting named is read, any
+#: value of these runs compiled but as :data:`WITH` says):
 ONLY_WITH = {
     "v2x_max_age_s": ("v2x_loss", "v2x_latency_periods"),  # no message is ever late without the V2X emulation
     "l1_plan_steps": ("nominal",),  # L1's shared plan feeds the neural planners' features; the expert ignores it
@@ -131,14 +144,39 @@ def reasons(batch, cfg, nominal, traffic, trace: bool, record_observations: bool
     if not stepping and type(nominal) is not ExpertPlanner and adversary_table(nominal, len(batch)) is None:
         out.append(f"the nominal planner {type(nominal).__name__} (the loop runs ExpertPlanner and the adversarial "
                    "planners only)")  # fmt: skip
-    out.extend(f"config.{name}={setting(cfg, name)!r} (compiled: {value!r})" for name, value in FIXED.items()
-               if setting(cfg, name) not in implemented(name))  # fmt: skip
-    if batch.l0_x is not None:
-        out.append("own-lane leaders in the batch")
+    out.extend(config_reasons(cfg))
+    if batch.own_ahead_x is not None:
+        out.append("an own lane of several vehicles in the batch (ScenarioBatch.own_ahead_x; the loop runs L0 alone)")
+    if batch.l0_x is not None and batch.l0_profile_t is None:
+        out.append("own-lane leaders without a profile (ScenarioBatch.l0_profile_t)")
     other = uncompiled_rules(rule_rows(batch.variant, len(batch)))
     if other:
         out.append(f"variants decided by a rule the loop does not implement: {other}")
     return out
+
+
+def config_reasons(cfg) -> list[str]:
+    """Why the loop does not run this configuration (:data:`FIXED` and :data:`WITH`; empty: it runs it)."""
+    out = []
+    for name, value in FIXED.items():
+        now = setting(cfg, name)
+        if now in implemented(name):
+            continue
+        needs = WITH.get(name)
+        if needs is None:
+            out.append(f"config.{name}={now!r} (compiled: {value!r})")
+        elif any(setting(cfg, other) not in values for other, values in needs.items()):
+            out.append(f"config.{name}={now!r} (compiled: {value!r}, or {now!r} with {_needs(needs)})")
+    for name, needs in WITH.items():
+        now = setting(cfg, name)
+        if name not in FIXED and now != setting(type(cfg)(), name):
+            out.extend(f"config.{other}={setting(cfg, other)!r} with {name}={now!r} (compiled: {values!r})"
+                       for other, values in needs.items() if setting(cfg, other) not in values)  # fmt: skip
+    return out
+
+
+def _needs(needs: dict) -> str:
+    return ", ".join(f"{other} in {values!r}" for other, values in needs.items())
 
 
 def covers(batch, cfg, nominal, traffic, trace: bool, record_observations: bool) -> bool:
@@ -151,7 +189,7 @@ def run(sim, n_steps: int, progress: bool = False):
     batch; with ``progress``, in chunks of :data:`PROGRESS_CHUNK` scenarios behind a
     bar (the same table: the scenarios are independent)."""
     if not progress or len(sim.b) <= PROGRESS_CHUNK or not chunkable(sim):
-        return _state(run_chunk(sim, n_steps), _slow(sim))
+        return _state(run_chunk(sim, n_steps), _slow(sim), _own(sim))
     from .._progress import track
     from .step import ClosedLoop
 
@@ -159,7 +197,8 @@ def run(sim, n_steps: int, progress: bool = False):
     chunk = lambda rows: ClosedLoop(sim.b.take(rows), sim.seed, sim.prm, sim.cfg, sim.nominal)  # noqa: E731
     bar = track(parts, f"simulating {len(sim.b)} scenarios")
     done = [run_chunk(chunk(rows), n_steps) for rows in bar]
-    return _state({name: np.concatenate([fields[name] for fields in done]) for name in done[0]}, _slow(sim))
+    return _state({name: np.concatenate([fields[name] for fields in done]) for name in done[0]}, _slow(sim),
+                  _own(sim))  # fmt: skip
 
 
 def chunkable(sim) -> bool:
@@ -207,7 +246,8 @@ def kernel_inputs(sim, planner: bool = False):
         open_decel=cfg.follower_open_decel, open_gap_m=cfg.follower_open_gap_m, k_p=gains.k_p, k_v=gains.k_v,
         gap_fraction=gains.gap_fraction, brake_comfort=gains.brake_comfort, omega2=gains.omega**2,
         two_omega=2.0 * gains.omega, a_o_d=prm.others_decel, reactive=cfg.leader_rule == "reactive",
-        ignores_ego=cfg.follower_ignores_ego,
+        ignores_ego=cfg.follower_ignores_ego, own_width=prm.vehicle_width, shield_own=cfg.shield.own_lane,
+        sensing=sim.sensing is not None, edge_share=cfg.sensing_edge_share,
     )  # fmt: skip
     c = np.ascontiguousarray
     is_last, acts = traffic.roles
@@ -219,6 +259,7 @@ def kernel_inputs(sim, planner: bool = False):
         c(b.decel_last.astype(np.float64)), c(traffic.gap0), c(sim.lane_pairs[0]), c(sim.lane_pairs[1]),
         c(b.p_v.astype(np.float64)), c(b.scenario_id.astype(np.int64)), np.array([sim.seed % 2**64], np.uint64),
         rule_table(rule_rows(b.variant, len(b)), len(b), prm), *_profile(b), *_waves(traffic.hooks, b),
+        *_own_profile(b), c(_world_key(b).astype(np.int64)), *_sensing(sim),
         *_planner(nominal if planner else None, len(b)),
     )  # fmt: skip
     return np.array([float(values[name]) for name in PRM]), period_constants(prm, cfg.shield), batch
@@ -235,6 +276,35 @@ def _profile(b) -> tuple:
     if b.last_profile_t is None:
         return np.zeros((len(b), 0)), np.zeros((len(b), 0))
     return np.ascontiguousarray(b.last_profile_t, np.float64), np.ascontiguousarray(b.last_profile_a, np.float64)
+
+
+def _own_profile(b) -> tuple:
+    """``LoopBatch``'s ``l0_profile_t``, ``l0_profile_a``: the own lane's leader ``L0``'s profile (none: ``(B, 0)``)."""
+    if b.l0_x is None:
+        return np.zeros((len(b), 0)), np.zeros((len(b), 0))
+    return np.ascontiguousarray(b.l0_profile_t, np.float64), np.ascontiguousarray(b.l0_profile_a, np.float64)
+
+
+def _sensing(sim) -> tuple:
+    """``LoopBatch``'s ``err_f``, ``err_chain``, ``err_own``: the sensing-error bounds of the situation the shield
+    sees (``SensingBounds.apply``: constant over a run, by connectivity; zeros without sensing error)."""
+    b = sim.b
+    n, k = b.x.shape
+    k0 = 0 if sim.own is None else sim.own.slots
+    if sim.sensing is None:
+        return np.zeros((n, 2)), np.zeros((n, k - 1, 2)), np.zeros((n, k0, 2))
+    from .own_chain import start as own_start
+
+    ego = (b.ego_x, b.ego_y, b.ego_vx, b.ego_vy)
+    seen = sim.sensing.apply(sim.situation(0.0, ego, b.x, b.v, None, b.v[:, 0],
+                                           None if sim.own is None else own_start(b)))  # fmt: skip
+    c = lambda a: np.ascontiguousarray(a, np.float64)  # noqa: E731
+    return c(seen.err_f), c(seen.err_chain), c(np.zeros((n, 0, 2)) if seen.err_own is None else seen.err_own)
+
+
+def _world_key(b) -> np.ndarray:
+    """The key of the world's draws (``realworld._key``): ``world_key`` where set, else the scenario id."""
+    return b.scenario_id if b.world_key is None else b.world_key
 
 
 def _waves(hooks, b) -> tuple:
@@ -270,6 +340,7 @@ def rows_of(start):
     state (``_fast_rows.Rows``)."""
     from ..shield.fast_step import Packed
     from ._fast_rows import RB, RF, RI, Rows
+    from ._fast_world import COMMAND
 
     packed = Packed.of(start.shield)  # the shield's state as its compiled period holds it
     n, k = start.x.shape
@@ -277,14 +348,29 @@ def rows_of(start):
     rf = np.empty((n, len(RF)))
     rf[:, :4] = np.stack(start.ego, 1)
     rf[:, 4], rf[:, 5], rf[:, 6:] = start.t, np.nan, np.inf
+    if start.l0 is not None:  # the own lane's leader L0 (one slot: _fused.reasons)
+        rf[:, 10], rf[:, 11] = start.l0[0][:, 0], start.l0[1][:, 0]
+    else:
+        rf[:, 11] = 0.0
     snap = np.zeros((n, k - 1))
-    return Rows(c(start.x), c(start.v), np.zeros((n, k)), np.full((n, k), np.inf), rf, np.zeros((n, len(RB)), bool),
+    rb = np.zeros((n, len(RB)), bool)
+    rb[:, 7] = start.completed
+    # the actuation delay's commands in flight: the idle ones the run starts with (InFlight.idle: cruise)
+    if start.in_flight is not None and any(cmd.rows.size or cmd.a_x.any() or cmd.a_y.any() or cmd.completing.any()
+                                           for cmd in start.in_flight.commands):  # fmt: skip
+        raise ValueError("rows_of: a run starts with idle commands in flight (InFlight.idle)")
+    queue = np.zeros((n, 0 if start.in_flight is None else len(start.in_flight.commands), COMMAND))
+    return Rows(c(start.x), c(start.v), np.zeros((n, k)), np.full((n, k), np.inf), rf, rb,
                 np.zeros((n, len(RI)), np.int64), c(packed.plan), c(packed.history), c(packed.count), c(packed.st),
-                c(packed.sk), snap, snap.copy(), snap.copy(), np.zeros(n, np.int64))  # fmt: skip
+                c(packed.sk), snap, snap.copy(), snap.copy(), np.zeros(n, np.int64), queue)  # fmt: skip
 
 
 def _slow(sim) -> bool:
     return sim.cfg.shield.assessment == "slow"
+
+
+def _own(sim) -> bool:
+    return sim.own is not None
 
 
 def _non_finite(scenario_id: np.ndarray, rows: np.ndarray, t: float):
@@ -295,13 +381,18 @@ def _non_finite(scenario_id: np.ndarray, rows: np.ndarray, t: float):
     )
 
 
-def _state(f: dict, slow: bool):
+def _state(f: dict, slow: bool, own: bool = False):
     """The fields :func:`~.results.results_table` reads (a :class:`~.step.SimState`'s), from :func:`run_chunk`'s
-    arrays; ``slow``: the belief is the 'slow' assessment's (``policies.SlowState``, which derives what it reports)."""
+    arrays; ``slow``: the belief is the 'slow' assessment's (``policies.SlowState``, which derives what it reports);
+    ``own``: with the own lane's leader ``L0`` (its columns)."""
     belief = SimpleNamespace(aggressive=f["aggressive"], first_collaborative_s=f["first_collaborative_s"])
     if slow:
         belief = SlowState(belief, f["slow_delay_s"], f["slow_missed"], f["slow_aggressive"])
     breach = Breach(flags=f["breach_flags"], first_s=f["breach_first_s"])
     names = ("completed", "collided", "violated", "leader_collided", "leader_violated", "t_complete", "min_gap_f",
              "min_gap_l1", "min_lane_ratio", "counts", "n_invalid", "initial_safe")  # fmt: skip
-    return SimpleNamespace(**{name: f[name] for name in names}, belief=belief, breach=breach, l0=None)
+    if not own:
+        return SimpleNamespace(**{name: f[name] for name in names}, belief=belief, breach=breach, l0=None)
+    return SimpleNamespace(**{name: f[name] for name in names}, belief=belief, breach=breach,
+                           l0=(f["l0_x"][:, None], f["l0_v"][:, None]), l0_collided=f["l0_collided"],
+                           l0_violated=f["l0_violated"], min_gap_l0=f["min_gap_l0"])  # fmt: skip

@@ -15,11 +15,13 @@ from ._fused import (
     BY_ID,
     LOOP_ONLY,
     _non_finite,
+    _own,
     _slow,
     _state,
     kernel_inputs,
     reasons,
     rows_of,
+    setting,
 )
 
 
@@ -41,10 +43,14 @@ class StepState:
     v = property(lambda self: self.rows.v)
     acc = property(lambda self: self.rows.acc)
     t = property(lambda self: self.rows.rf[:, 4])
-    completed = property(lambda self: self.rows.sk[:, 3])
+    completed = property(lambda self: self.rows.rb[:, 7])
     collided = property(lambda self: self.rows.rb[:, 0])
     violated = property(lambda self: self.rows.rb[:, 1])
-    l0 = None
+
+    @property
+    def l0(self):
+        rf = self.rows.rf
+        return (rf[:, 10:11], rf[:, 11:12]) if np.isfinite(rf[:, 10]).any() else None
 
 
 class Stepper:
@@ -84,15 +90,16 @@ class Stepper:
 
         self._whole("finish")
         rows = self.rows_after(s)
-        finish_kernel(self.prm_vec, rows)
+        finish_kernel(self.prm_vec, self.batch, rows)
         return _state(dict(
             t_complete=rows.rf[:, 5], min_gap_f=rows.rf[:, 6], min_gap_l1=rows.rf[:, 7], min_lane_ratio=rows.rf[:, 8],
-            first_collaborative_s=rows.st[:, 1], breach_first_s=rows.st[:, 2], completed=rows.sk[:, 3],
+            first_collaborative_s=rows.st[:, 1], breach_first_s=rows.st[:, 2], completed=rows.rb[:, 7],
             collided=rows.rb[:, 0], violated=rows.rb[:, 1], leader_collided=rows.rb[:, 2],
             leader_violated=rows.rb[:, 3], aggressive=rows.sk[:, 2], counts=rows.ri[:, :3], n_invalid=rows.ri[:, 3],
             breach_flags=rows.sk[:, 5:10], initial_safe=self.initial_safe, slow_delay_s=rows.st[:, 7],
-            slow_missed=rows.sk[:, 10], slow_aggressive=rows.sk[:, 11],
-        ), _slow(self.sim))  # fmt: skip
+            slow_missed=rows.sk[:, 10], slow_aggressive=rows.sk[:, 11], min_gap_l0=rows.rf[:, 9], l0_x=rows.rf[:, 10],
+            l0_v=rows.rf[:, 11], l0_collided=rows.rb[:, 5], l0_violated=rows.rb[:, 6],
+        ), _slow(self.sim), _own(self.sim))  # fmt: skip
 
     def step(self, s: StepState):
         """:meth:`~.step.ClosedLoop.step`: the nominal planner's proposals on this state's observation, one period."""
@@ -129,7 +136,9 @@ class Stepper:
             raise ValueError("Stepper.splice: the part has other settings, another seed or another number of vehicle "
                              "slots than this batch")  # fmt: skip
         if any(getattr(b, name).shape[0] for name in BY_ID for b in (self.batch, part.batch)) or (
-                part.batch.profile_t.shape[1] != self.batch.profile_t.shape[1]):  # fmt: skip
+                part.batch.profile_t.shape[1] != self.batch.profile_t.shape[1]
+                or part.batch.l0_profile_t.shape[1] != self.batch.l0_profile_t.shape[1]
+                or part.batch.err_own.shape[1] != self.batch.err_own.shape[1]):  # fmt: skip
             raise ValueError("Stepper.splice: traffic hooks as data (WaveHooks, by scenario id) or L(N+1) profiles of "
                              "another length: such batches are not spliced")  # fmt: skip
         if not self.spliced:  # (kernel_inputs may hand over the ClosedLoop's own arrays: from now on, ours)
@@ -160,7 +169,17 @@ class Stepper:
             _non_finite(self.batch.scenario_id, bad, float(rows.rf[bad[0], 4]))
 
 
+#: The realistic world's settings the envs' compiled step (``envs/_fast.py``) does not take, though :class:`Stepper`
+#: runs them for ``simulate_batch`` (``tests/test_fast_realworld_loop.py``): the envs' step reads the shield's
+#: completion (the world's differs under an actuation delay) and has not been compared with the NumPy env with them.
+ENV_WORLD = ("own_lane", "sensing_error", "actuation_delay_s")
+
+
 def steps_compiled(batch, cfg, traffic) -> list[str]:
-    """Why :class:`Stepper` does not step this batch (empty: it does): :func:`reasons` without the batch size and the
-    planner (the proposals are given)."""
-    return reasons(batch, cfg, None, traffic, False, False, stepping=True)
+    """Why :class:`Stepper` does not step this batch in the envs (empty: it does): :func:`reasons` without the batch
+    size and the planner (the proposals are given), and :data:`ENV_WORLD` away from their defaults."""
+    out = reasons(batch, cfg, None, traffic, False, False, stepping=True)
+    default = type(cfg)()
+    out.extend(f"config.{name}={setting(cfg, name)!r} in the envs' compiled step (compiled: "
+               f"{setting(default, name)!r})" for name in ENV_WORLD if setting(cfg, name) != setting(default, name))
+    return out

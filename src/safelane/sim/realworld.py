@@ -20,14 +20,19 @@ import dataclasses
 import numpy as np
 
 from ..params import Params
+from ..safety._backend import ARRAY, jitable
 from ..shield.command import Command
 from ..shield.situation import SensingBounds, Situation
-from ..tolerances import DIST_TOL_M
+from .checks import ego_verdict
 from .kinematics import Motion, crossing_knots, windowed_gap_extrema
 from .rng import counter_uniform
 
 #: Counter slots of the draws made here (kept apart from the other per-step draws).
 _SLOT_L0, _SLOT_NOISE = 7001, 7100
+#: The measurement draws' slots (:func:`measure`): F's, then the chain's from ``+ 2`` (its first
+#: :data:`CHAIN_SLOTS` vehicles; the ones beyond draw with one more counter, 1), the own lane's from ``+ 64``; the
+#: counter added for the edge share's second draw.
+SLOT_F, SLOT_CHAIN, SLOT_OWN, CHAIN_SLOTS, EDGE_COUNTER = _SLOT_NOISE, _SLOT_NOISE + 2, _SLOT_NOISE + 64, 31, 9
 
 
 def with_own_lane(batch, seed: int, cfg, prm: Params):
@@ -88,8 +93,7 @@ def measure(seed: int, batch, step: int, s: Situation, bounds: SensingBounds, ed
         u = counter_uniform(seed, sid, step, *counters)
         if edge_share <= 0.0:
             return u
-        w = counter_uniform(seed, sid, step, *counters, 9)
-        return np.where(w < edge_share, np.round(u), u)
+        return edge_draw(ARRAY, u, counter_uniform(seed, sid, step, *counters, EDGE_COUNTER), edge_share)
 
     def noisy(x, v, err, slot0, own_slots=None):
         k = np.arange(x.shape[1])[None, :]
@@ -98,16 +102,29 @@ def measure(seed: int, batch, step: int, s: Situation, bounds: SensingBounds, ed
         if own_slots is not None and x.shape[1] > own_slots:  # columns that would reach the own lane's slots
             far = k[:, own_slots:]  # draw on a counter of their own (one more element): nothing else uses it
             ux[:, own_slots:], uv[:, own_slots:] = draw(slot0 + 2 * far, 1), draw(slot0 + 2 * far + 1, 1)
-        return x + err[..., 0] * (2.0 * ux - 1.0), np.maximum(v + err[..., 1] * (2.0 * uv - 1.0), 0.0)
+        return measured(ARRAY, x, v, err[..., 0], err[..., 1], ux, uv)
 
-    fx, fv = noisy(s.f_x[:, None], s.f_v[:, None], s.err_f[:, None, :], _SLOT_NOISE)
+    fx, fv = noisy(s.f_x[:, None], s.f_v[:, None], s.err_f[:, None, :], SLOT_F)
     # The chain's first 31 vehicles take the slots _SLOT_NOISE + 2 .. + 63, the own lane's from _SLOT_NOISE + 64.
-    cx, cv = noisy(s.chain_x, s.chain_v, s.err_chain, _SLOT_NOISE + 2, own_slots=31)
+    cx, cv = noisy(s.chain_x, s.chain_v, s.err_chain, SLOT_CHAIN, own_slots=CHAIN_SLOTS)
     out = dict(f_x=fx[:, 0], f_v=fv[:, 0], chain_x=cx, chain_v=cv)
     if s.own_x is not None:
-        ox, ov = noisy(s.own_x, s.own_v, s.err_own, _SLOT_NOISE + 64)
+        ox, ov = noisy(s.own_x, s.own_v, s.err_own, SLOT_OWN)
         out.update(own_x=np.where(np.isfinite(s.own_x), ox, np.inf), own_v=np.where(np.isfinite(s.own_x), ov, 0.0))
     return dataclasses.replace(s, **out)
+
+
+def edge_draw(xp, u, w, edge_share):
+    """A measurement draw ``u`` in ``[0, 1)`` put at either end of its bound where the second draw ``w`` falls below
+    ``edge_share`` (``np.round(u)``: 0 up to 0.5 included, half to even, else 1). Backend-generic (the compiled
+    closed loop's rows too: ``sim/_fast_world.py``)."""
+    return xp.where(w < edge_share, xp.where(u > 0.5, 1.0, 0.0), u)
+
+
+def measured(xp, x, v, err_x, err_v, ux, uv):
+    """A vehicle's measured ``(x, v)`` from its true state, its error bounds and its two draws in ``[0, 1)``: off by
+    ``err (2u − 1)``, the speed kept ``>= 0``. Backend-generic."""
+    return x + err_x * (2.0 * ux - 1.0), xp.maximum(v + err_v * (2.0 * uv - 1.0), 0.0)
 
 
 def executed_motion(cmd: Command, ego, dt: float):
@@ -145,10 +162,14 @@ def own_lane_checks(prm: Params, lon: Motion, lat: Motion, plan, l0: Motion, pre
         knots = crossing_knots(neg, -level)
         g_lo, g_hi = windowed_gap_extrema(m_lon, _take(l0, rows), neg, knots, -level)
         lo[rows], hi[rows] = g_lo, g_hi
-    collided = present & (lo < prm.vehicle_length) & (hi > -prm.vehicle_length)
-    violated = present & ~completed & (lo < prm.p_m - DIST_TOL_M) & (hi > -prm.p_m + DIST_TOL_M)  # as the target lane's
-    return collided, violated, lo
+    # as the target lane's verdict, the one window (y < w_v) for both: footprints overlap, p_m broken
+    hit, close = ego_verdict(ARRAY, lo, hi, lo, hi, prm.vehicle_length, prm.p_m)
+    return present & hit, present & ~completed & close, lo
 
 
 def _take(m: Motion, rows) -> Motion:
     return Motion(t=m.t[rows], x=m.x[rows], v=m.v[rows], acc=m.acc[rows])
+
+
+# The measurement's closed forms, compiled into the closed loop's rows (sim/_fast_world.py).
+jitable(edge_draw, measured)
