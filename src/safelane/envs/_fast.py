@@ -11,6 +11,14 @@ for ``l1_plan_steps`` periods (where ``ClosedLoop.shares_plan``) and
 in the same order, because a compiled row cannot call NumPy's cumsum on a ``(B, H)`` plan it never builds. The
 horizons come from :func:`~safelane.planners.features.plan_steps`, the rows from ``shares_plan``, so only the running
 sum is written twice. ``tests/test_env_compiled.py`` compares every output with the NumPy env's, bit for bit.
+
+In the realistic world (own lane, sensing error, actuation delay) the agent gets what the NumPy env gives it from
+:class:`~safelane.sim.step.SimState`: the world's flags — ``collided`` and ``violated`` count the ego's collisions
+and ``p_m`` violations against the own lane's leader ``L0`` (``ClosedLoop._own_lane``; ``rb``'s columns 0 and 1
+include ``l0_collided``, ``l0_violated``), and the completion is the world's (``rb[:, 7]``, ``SimState.completed``:
+under an actuation delay the command acting completes the lane change, not the one the shield issues, whose flag
+the shield keeps apart) — and the observation of the true states (``ClosedLoop.observe`` reads the state, never the
+measured situation; the feature map has no ``L0`` column). ``tests/test_env_realworld.py`` compares them.
 """
 
 from __future__ import annotations
@@ -56,11 +64,11 @@ def _env_rows(prm, batch, rows, proposal, env, view, steps, obs, outcome, behavi
     w_pro, w_suc, w_col, w_com, w_tim, w_cos, w_int = env[3], env[4], env[5], env[6], env[7], env[8], env[9]
     shares_plan, f_connected, plan_steps, sums = view
     den = _window(w.times, prm[0])
-    x, v, rf, rb, sk = w.x2[0], w.v2[0], w.rf, w.rb, w.sk
+    x, v, rf, rb = w.x2[0], w.v2[0], w.rf, w.rb
     for b in range(rows.x.shape[0]):
         _load(rows, b, batch, w)
         vx0, y0, vy0 = rf[0, 2], rf[0, 1], rf[0, 3]
-        c0, v0, d0 = 1.0 if rb[0, 0] else 0.0, 1.0 if rb[0, 1] else 0.0, 1.0 if sk[0, 3] else 0.0
+        c0, v0, d0 = 1.0 if rb[0, 0] else 0.0, 1.0 if rb[0, 1] else 0.0, 1.0 if rb[0, 7] else 0.0
         code, finite[b] = _period(prm, batch, b, w, den, proposal[b, 0], proposal[b, 1])
         behaviour[b] = code
         _store(rows, b, w)
@@ -81,7 +89,7 @@ def _env_rows(prm, batch, rows, proposal, env, view, steps, obs, outcome, behavi
         # --- what the agent gets (outcome_core) ---
         intervened = 1.0 if (code == HESITATE or code == ABORT) else 0.0
         at_horizon = 1.0 if steps[b] >= max_steps else 0.0
-        c1, v1, d1 = 1.0 if rb[0, 0] else 0.0, 1.0 if rb[0, 1] else 0.0, 1.0 if sk[0, 3] else 0.0
+        c1, v1, d1 = 1.0 if rb[0, 0] else 0.0, 1.0 if rb[0, 1] else 0.0, 1.0 if rb[0, 7] else 0.0
         out = outcome_core(SCALAR, dt, y_boundary, w_pro, w_suc, w_col, w_com, w_tim, w_cos, w_int, vx0, y0, vy0, c0,
                            v0, d0, evx, ey, evy, c1, v1, d1, at_horizon, intervened)  # fmt: skip
         for j in range(8):
