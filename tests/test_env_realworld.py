@@ -140,3 +140,35 @@ def test_vector_env_sub_envs_are_numpy_single_envs_in_the_realistic_world(n, ste
         assert_same(rows[i], single)
     assert resets >= n  # later episodes (spliced rows) are compared too
     assert l0_events  # L0 was met
+
+
+@pytest.mark.parametrize("cfg", [NEAR_L0, DELAY, dict(actuation_delay_s=0.1)])
+def test_vector_env_refuses_l0_and_the_delay_period_by_period(cfg, monkeypatch):
+    """Period by period the sub-envs share one clock and restarted rows are overwritten in the state: L0's braking
+    instant and the commands in flight would be another episode's. The vector env refuses them there, naming why
+    (``SAFELANE_NO_FUSED=1``; the shield's own delay, which follows the world's by default, is not compiled)."""
+    if cfg.get("actuation_delay_s") and "shield_delay" not in cfg:  # the shield's delay: no compiled step at all
+        with pytest.raises(ValueError, match=r"shield\.actuation_delay_s=0\.1"):
+            LaneChangeVectorEnv(4, sim_config=cfg)
+        return
+    LaneChangeVectorEnv(4, sim_config=cfg)
+    monkeypatch.setenv("SAFELANE_NO_FUSED", "1")
+    with pytest.raises(ValueError, match=r"compiled period only.*SAFELANE_NO_FUSED=1"):
+        LaneChangeVectorEnv(4, sim_config=cfg)
+    LaneChangeVectorEnv(4, sim_config=SENSING)  # (sensing error: the draws keyed by the shared clock's step)
+
+
+def test_a_part_with_another_l0_profile_length_is_not_spliced():
+    """The spliced rows' ``L0`` profiles, world keys and sensing bounds are theirs (the vector test above); a part
+    whose ``L0`` profile has another number of knots is refused, naming it."""
+    from dataclasses import replace
+
+    venv = LaneChangeVectorEnv(4, **dict(KW, sim_config=dict(NEAR_L0, **SENSING)))
+    venv.reset(seed=1)
+    task = venv.task
+    fresh = task.sampler.draw_many([np.random.default_rng(9)])
+    knots = np.array([[0.0, 1.0, 2.0]])
+    fresh = replace(fresh, l0_x=fresh.ego_x + 20.0, l0_v=fresh.ego_vx, l0_profile_t=knots, l0_profile_a=-knots)
+    part = Stepper(ClosedLoop(fresh, task.seed, task.params, task.config, task.planner))
+    with pytest.raises(ValueError, match="L0's profiles"):
+        task.loop.splice(np.array([0]), part)

@@ -18,6 +18,7 @@ from typing import Any, ClassVar
 
 import numpy as np
 
+from ..sim._stepper import steps_compiled
 from ._gym import require_gymnasium
 from .core import BEHAVIOUR_NAMES, check_action
 from .env import RESET_INFO, make_task, spaces_of
@@ -35,7 +36,8 @@ class LaneChangeVectorEnv(VectorEnv):
     ``info`` holds one array per key of the single env's info (``behaviour`` as an array of names; ``behaviour_code``
     as the supervisor's codes 0/1/2), each with its ``_key`` mask. Not supported here (the single env supports them):
     ``SimConfig.brake_start_s > 0`` and the V2X emulation (``v2x_loss``, ``v2x_latency_periods``), which read the
-    absolute clock the sub-envs share.
+    absolute clock the sub-envs share; the own lane's ``L0`` and the actuation delay only where the compiled period
+    steps them (each sub-env its own clock and commands in flight), never period by period in NumPy.
     """
 
     metadata: ClassVar[dict[str, Any]] = {"autoreset_mode": AutoresetMode.SAME_STEP, "render_modes": []}
@@ -50,6 +52,17 @@ class LaneChangeVectorEnv(VectorEnv):
                 "LaneChangeVectorEnv needs sim_config.brake_start_s = 0 and perfect V2X (v2x_loss = 0, "
                 "v2x_latency_periods = 0): its sub-envs share one clock; use LaneChangeEnv for those settings"
             )
+        if cfg.own_lane or cfg.actuation_delay_s > 0.0:
+            # Period by period the sub-envs share one clock and restarted rows are overwritten in the state: L0's
+            # braking instant is on the episode's clock, and the commands in flight keep their aborting rows' plans.
+            # The compiled period keeps each row's clock and queue (Stepper.splice): there they run.
+            why = steps_compiled(self.task.sampler.draw_many([np.random.default_rng(0)]), cfg, self.task.traffic)
+            if why:
+                raise ValueError(
+                    "LaneChangeVectorEnv runs sim_config.own_lane and actuation_delay_s > 0 on the compiled period "
+                    f"only (each sub-env its own clock and commands in flight), which does not step these settings: "
+                    f"{'; '.join(why)}; use LaneChangeEnv for them"
+                )
         self.num_envs = int(num_envs)
         self.single_observation_space, self.single_action_space = spaces_of(self.task)
         self.observation_space = batch_space(self.single_observation_space, self.num_envs)

@@ -126,7 +126,8 @@ class Stepper:
     def splice(self, rows: np.ndarray, part: Stepper) -> None:
         """Rows ``rows`` of the batch become ``part``'s rows, in place: ``part`` steps ``len(rows)`` other scenarios
         (same settings and seed) and its kernel inputs replace those rows' (:func:`kernel_inputs` per row, so the
-        rows' inputs are what a :class:`Stepper` over the spliced batch would hold); the envs' resets, which would
+        rows' inputs are what a :class:`Stepper` over the spliced batch would hold: ``L0``'s profile, the world's key
+        and the sensing bounds are the row's own, like the rest); the envs' resets, which would
         otherwise rebuild the whole batch's inputs for a few rows. ``sim`` then describes the batch before the
         splice: :meth:`observe`, :meth:`step` and :meth:`finish`, which read it, refuse (the envs step with
         :meth:`step_with` and the kernels; :meth:`check_finite` reads the spliced scenario ids)."""
@@ -139,8 +140,9 @@ class Stepper:
                 part.batch.profile_t.shape[1] != self.batch.profile_t.shape[1]
                 or part.batch.l0_profile_t.shape[1] != self.batch.l0_profile_t.shape[1]
                 or part.batch.err_own.shape[1] != self.batch.err_own.shape[1]):  # fmt: skip
-            raise ValueError("Stepper.splice: traffic hooks as data (WaveHooks, by scenario id) or L(N+1) profiles of "
-                             "another length: such batches are not spliced")  # fmt: skip
+            raise ValueError("Stepper.splice: traffic hooks as data (WaveHooks, by scenario id), or L(N+1)'s or L0's "
+                             "profiles or the own lane's sensing bounds of another length: such batches are not "
+                             "spliced")  # fmt: skip
         if not self.spliced:  # (kernel_inputs may hand over the ClosedLoop's own arrays: from now on, ours)
             self.batch = type(self.batch)(*[a.copy() for a in self.batch])
         for name, into, new in zip(self.batch._fields, self.batch, part.batch, strict=True):
