@@ -13,7 +13,14 @@ The scenario distribution is the environment's default (``CV_all``, N = 3, ``a_x
 time is the best of ``--repeat`` runs of ``--steps`` steps after ``--warmup`` steps, on the wall clock and in CPU
 time of this process (on a busy machine the wall clock also counts the time other processes held the core).
 Targets: vector >= 1,000,000 env-steps/s at 1,024 sub-envs, single >= 10,000 steps/s. Run with
-``python benchmarks/bench_env.py [--envs 1024] [--quick]``; it prints, never asserts.
+``python benchmarks/bench_env.py [--envs 1024] [--quick] [--world]``; it prints, never asserts.
+
+``--world``: the realistic world's side (:data:`WORLD`: the own lane's leader ``L0``, sensing error, an actuation
+delay of 0.2 s; the shield's sensing and delay off, as the compiled period runs them). The vector env refuses
+``L0`` and the delay period by period (its sub-envs share one clock there, so a restarted row would run another
+episode); its NumPy row here is the same env built on the compiled path and switched to the NumPy path before its
+first reset (:func:`time_vector`): the work per step is the NumPy path's, its episodes after a reset are not the
+single env's.
 """
 
 from __future__ import annotations
@@ -31,6 +38,8 @@ from safelane.envs import LaneChangeVectorEnv
 
 TARGET_VECTOR = 1_000_000  # env-steps/s at 1,024 sub-envs
 TARGET_SINGLE = 10_000  # steps/s of one env
+#: ``--world``'s settings (``sim_config``).
+WORLD = dict(own_lane=True, sensing_error=True, shield_sensing=False, actuation_delay_s=0.2, shield_delay=False)
 
 
 def expert_actions(obs: np.ndarray, rng: np.random.Generator, prm: Params) -> np.ndarray:
@@ -47,12 +56,18 @@ def random_actions(obs: np.ndarray, rng: np.random.Generator, prm: Params) -> np
     return np.stack([rng.uniform(-prm.a_x_d, prm.a_x_a, n), rng.uniform(-prm.a_y_m, prm.a_y_m, n)], 1)
 
 
-def time_vector(policy, envs: int, steps: int, warmup: int, repeat: int, prm: Params):
+def time_vector(policy, envs: int, steps: int, warmup: int, repeat: int, prm: Params, **kwargs):
     best, best_cpu, episodes = np.inf, np.inf, 0
     for r in range(repeat):
-        venv = LaneChangeVectorEnv(envs)
+        numpy_path = os.environ.get("SAFELANE_NO_FUSED") == "1"
+        if numpy_path and kwargs:  # built on the compiled path, stepped on the NumPy one (see the module docstring)
+            os.environ["SAFELANE_NO_FUSED"] = "0"
+        venv = LaneChangeVectorEnv(envs, **kwargs)
+        os.environ["SAFELANE_NO_FUSED"] = "1" if numpy_path else "0"
         rng = np.random.default_rng(r)
         obs, _ = venv.reset(seed=r)
+        if (type(venv.task.loop).__name__ == "ClosedLoop") != numpy_path:
+            raise RuntimeError(f"the vector env stepped on {type(venv.task.loop).__name__}, not the path asked for")
         for _ in range(warmup):
             obs, *_ = venv.step(policy(obs, rng, prm))
         done = 0
@@ -67,10 +82,10 @@ def time_vector(policy, envs: int, steps: int, warmup: int, repeat: int, prm: Pa
     return envs * steps / best, envs * steps / best_cpu, episodes
 
 
-def time_single(policy, steps: int, prm: Params):
+def time_single(policy, steps: int, prm: Params, **kwargs):
     """Steps/s of one env: the time inside ``env.step`` and ``env.reset`` only (the policy's own time left out),
     on the wall clock around each call and in CPU time of the whole loop minus the policy's share of the wall."""
-    env = gym.make("safelane/LaneChange-v0")
+    env = gym.make("safelane/LaneChange-v0", **kwargs)
     rng = np.random.default_rng(0)
     obs, _ = env.reset(seed=0)
     for _ in range(20):  # (compiles on first use)
@@ -98,12 +113,15 @@ def main(argv=None) -> None:
     ap.add_argument("--repeat", type=int, default=3, help="vector runs (the best counts)")
     ap.add_argument("--single-steps", type=int, default=5000, help="timed steps of the single env (NumPy: a tenth)")
     ap.add_argument("--quick", action="store_true", help="128 envs, 20 steps, 1 run, 500 single steps (a smoke run)")
+    ap.add_argument("--world", action="store_true", help="the realistic world's side (WORLD: L0, sensing error, delay)")
     args = ap.parse_args(argv)
     if args.quick:
         args.envs, args.steps, args.warmup, args.repeat, args.single_steps = 128, 20, 5, 1, 500
     prm = Params()
+    kwargs = dict(sim_config=WORLD) if args.world else {}
     print(
-        f"bench_env: safelane/LaneChange-v0 defaults (CV_all, N = 3, decel U[2, 6], shield on); vector: {args.envs} "
+        f"bench_env: safelane/LaneChange-v0 defaults (CV_all, N = 3, decel U[2, 6], shield on)"
+        f"{f', sim_config={WORLD}' if args.world else ''}; vector: {args.envs} "
         f"sub-envs, {args.steps} steps after {args.warmup} (best of {args.repeat}); single: gymnasium.make, "
         f"{args.single_steps} steps"
     )
@@ -118,8 +136,8 @@ def main(argv=None) -> None:
             scale = 1 if flag == "0" else 10
             for name, policy in (("expert", expert_actions), ("random", random_actions)):
                 vec, vec_cpu, episodes = time_vector(policy, args.envs, max(2, args.steps // scale), args.warmup,
-                                                     args.repeat, prm)  # fmt: skip
-                one, one_cpu = time_single(policy, max(50, args.single_steps // scale), prm)
+                                                     args.repeat, prm, **kwargs)  # fmt: skip
+                one, one_cpu = time_single(policy, max(50, args.single_steps // scale), prm, **kwargs)
                 rows[path, name] = vec_cpu, one_cpu
                 print(f"{path:<9} {name:<8} {vec:>10,.0f} ({vec_cpu:>9,.0f}) {episodes:>9} {one:>8,.0f} "
                       f"({one_cpu:>8,.0f})")  # fmt: skip
