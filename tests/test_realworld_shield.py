@@ -417,3 +417,33 @@ def test_in_flight_checks_l1_and_f_only_where_the_drift_reaches_the_conflict_zon
     reaches = np.maximum(y0, y0 + vy * delay) > prm.y_safe
     np.testing.assert_array_equal(got, ~reaches)
     assert reaches.any() and (~reaches).any()
+
+
+def _worst_by_hand(x, v, acc, horizon):
+    """Constant acceleration ``acc`` for ``horizon``, stopping at rest (never reversing), one vehicle at a time."""
+    out = []
+    for x0, v0, a in zip(x, v, acc, strict=True):
+        t = horizon if a >= 0.0 or v0 + a * horizon >= 0.0 else v0 / -a
+        out.append((x0 + v0 * t + 0.5 * a * t * t, max(v0 + a * t, 0.0)))
+    return np.array(out).T
+
+
+def test_the_delayed_frame_carries_l1_and_f_along_their_worst_cases():
+    """``realworld.carried_others`` (the frame of a decision under an actuation delay): L1 brakes at its worst-case
+    deceleration, F accelerates at ``a_x_a`` where it is taken for aggressive and brakes at ``a_x_d`` elsewhere; both
+    stop at rest — against the kinematics written out by hand."""
+    from safelane.safety._backend import ARRAY
+    from safelane.shield.realworld import carried_others
+
+    prm = Params()
+    rng = np.random.default_rng(8)
+    n, delay = 400, 0.3
+    l1_x, l1_v, l1_decel = rng.uniform(10, 60, n), rng.uniform(0, 3, n), rng.uniform(2, 9, n)
+    f_x, f_v = rng.uniform(-60, -5, n), rng.uniform(0, 3, n)
+    aggressive = rng.random(n) < 0.5
+    got = carried_others(ARRAY, l1_x, l1_v, l1_decel, f_x, f_v, aggressive, prm.a_x_a, prm.a_x_d, delay)
+    want_l1 = _worst_by_hand(l1_x, l1_v, -l1_decel, delay)
+    want_f = _worst_by_hand(f_x, f_v, np.where(aggressive, prm.a_x_a, -prm.a_x_d), delay)
+    np.testing.assert_allclose(np.array(got[:2]), want_l1, rtol=1e-12, atol=1e-12)
+    np.testing.assert_allclose(np.array(got[2:]), want_f, rtol=1e-12, atol=1e-12)
+    assert (want_f[1][~aggressive] == 0.0).any() and (want_l1[1] == 0.0).any()  # some stop inside the delay
