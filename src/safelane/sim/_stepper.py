@@ -90,7 +90,7 @@ class Stepper:
 
         self._whole("finish")
         rows = self.rows_after(s)
-        finish_kernel(self.prm_vec, self.batch, rows)
+        finish_kernel(self.prm_vec, self.period_prm, self.batch, rows)
         return _state(dict(
             t_complete=rows.rf[:, 5], min_gap_f=rows.rf[:, 6], min_gap_l1=rows.rf[:, 7], min_lane_ratio=rows.rf[:, 8],
             first_collaborative_s=rows.st[:, 1], breach_first_s=rows.st[:, 2], completed=rows.rb[:, 7],
