@@ -7,9 +7,9 @@ any gains) or the adversarial planners (:func:`~safelane.planners.adversarial.ad
 profiles, with or without :class:`~.traffic.WaveHooks`: hooks as data), the paper's
 four variants and the RSS variants (their rule: ``shield/_fast_rules.py``), the settings of the default and paper
 presets (any assessment, the commit guard or the paper's completion rule, the monitor on or off, either leader rule,
-supervised), the realistic world's side of the real-world settings where the shield's side is one its period runs
-(the own lane's leader ``L0`` alone, sensing error with the shield's sensing off, the actuation delay with the
-shield's delay off: :data:`WITH`) and an F that ignores the ego, without a trace or recorded observations
+supervised), the realistic world (the ``realistic`` preset: the own lane's leader ``L0`` alone, sensing error with the
+shield's sensing on or off, the actuation delay with the shield's delay off or the world's: :data:`WITH`) and an F
+that ignores the ego, without a trace or recorded observations
 (those, and other planners, run its period: :class:`~._stepper.Stepper`).
 Everything else — and everything with ``SAFELANE_NO_FUSED=1`` or without numba — runs period by period
 (:mod:`.step`), whose parts are compiled where they have kernels. Importing this module does not import numba.
