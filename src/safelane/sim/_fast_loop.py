@@ -30,6 +30,8 @@ import collections
 
 import numba
 import numpy as np
+from numba.core import types
+from numba.extending import overload
 
 from .._splitmix import counter_uniform4
 from ..planners._fast_adversary import adversary_row
@@ -105,27 +107,30 @@ OUT_B = ("completed", "collided", "violated", "leader_collided", "leader_violate
 
 
 @numba.njit(cache=True, nogil=True, error_model="numpy")
-def loop_kernel(n_steps, prm, period_prm, batch, start, out):
+def loop_kernel(n_steps, prm, period_prm, batch, start, out, sense):
     """Run every scenario of ``batch`` (:class:`LoopBatch`) from its row of ``start`` (:data:`~._fast_rows.Rows`)
     through ``n_steps`` periods of its nominal planner (the expert, or ``batch``'s adversaries) and the final
     observation (see the module docstring), into ``out`` (:class:`LoopOut`); ``prm``: :data:`PRM`'s values,
-    ``period_prm``: the shield's (``shield/_fast_period.PRM``)."""
-    _loop_rows(n_steps, prm, batch, start, out, _scratch(start, period_prm))
+    ``period_prm``: the shield's (``shield/_fast_period.PRM``); ``sense``: the scratch of the shield's sensing box
+    (``_fused.sense_scratch``), ``None`` where it is off (compiled without it)."""
+    _loop_rows(n_steps, prm, batch, start, out, _scratch(start, period_prm, sense))
 
 
 @numba.njit(cache=True, nogil=True, error_model="numpy")
-def step_kernel(prm, period_prm, batch, rows, proposal, behaviour, finite):
+def step_kernel(prm, period_prm, batch, rows, proposal, behaviour, finite, sense):
     """One period of every row of ``rows`` (:data:`~._fast_rows.Rows`, updated in place) with the nominal proposals
     ``proposal`` ``(B, 2)`` (the envs' actions) instead of the expert planner: each row's behaviour code into
-    ``behaviour``, and ``finite[b]`` false where the row's state stopped being finite."""
-    _step_rows(prm, batch, rows, proposal, behaviour, finite, _scratch(rows, period_prm))
+    ``behaviour``, and ``finite[b]`` false where the row's state stopped being finite; ``sense``: as
+    :func:`loop_kernel`'s."""
+    _step_rows(prm, batch, rows, proposal, behaviour, finite, _scratch(rows, period_prm, sense))
 
 
 @numba.njit(cache=True, nogil=True, error_model="numpy")
-def finish_kernel(prm, period_prm, batch, rows):
+def finish_kernel(prm, period_prm, batch, rows, sense):
     """The monitor's view of the last period of every row of ``rows`` (in place): what :func:`loop_kernel` does after
-    a row's last period (``core.observe`` after the run: ``ClosedLoop.finish``)."""
-    _finish_rows(prm, batch, rows, _scratch(rows, period_prm))
+    a row's last period (``core.observe`` after the run: ``ClosedLoop.finish``); ``sense``: as
+    :func:`loop_kernel`'s."""
+    _finish_rows(prm, batch, rows, _scratch(rows, period_prm, sense))
 
 
 @numba.njit(nogil=True, error_model="numpy", _nrt=False)
@@ -167,13 +172,25 @@ def _seen(prm, batch, b, w):
                 w.snap_v, w.snap_b, w.snap_nc, w.st, w.sk, _sense(prm, batch, b, w.sense, True))  # fmt: skip
 
 
-@row_function
 def _sense(prm, batch, b, a, has_last):
     """``period_row``'s ``sense`` tuple (``_fast_period.SENSE``) for row ``b`` on the scratch ``a``
     (``_fast_rows.Sense``), as ``shield/fast_step.sense_arrays`` builds it: with the shield's sensing on, the row's
     bounds (the own lane's where the shield keeps ``p_m`` to ``L0``, zeros else), every mode on but the own lane's
     where none is analysed, the held anchor where the monitor has a last period (``has_last``), and a new one made;
-    off, no box and no anchors (``period_row`` then runs as without ``sense``)."""
+    off (``a`` is ``None``), ``None``: ``period_row`` compiled without them (an overload: a branch on ``a is None``
+    would type the result as optional, which ``period_row`` cannot index)."""
+    raise NotImplementedError("compiled only (numba)")
+
+
+@overload(_sense, inline="always", jit_options=dict(_nrt=False, error_model="numpy", nogil=True))
+def _sense_typed(prm, batch, b, a, has_last):
+    if isinstance(a, types.NoneType):
+        return lambda prm, batch, b, a, has_last: None
+    return _sense_row
+
+
+def _sense_row(prm, batch, b, a, has_last):
+    """:func:`_sense` with the box's scratch ``a``."""
     boxed = prm[_SHIELD_SENSING] > 0.0
     a.modes[0], a.modes[1], a.modes[2] = boxed, boxed, prm[_OWN_ANALYSED] > 0.0
     err_own = a.err_own0[0:1]
@@ -184,6 +201,23 @@ def _sense(prm, batch, b, a, has_last):
     return (batch.err_f[b : b + 1], batch.err_chain[b : b + 1], err_own, a.modes, a.corner_x, a.corner_v,
             a.anc_f[:held], a.anc_x[:held], a.anc_v[:held], a.anc_b[:held], a.anc_nc[:held], a.new_f[:made],
             a.new_x[:made], a.new_v[:made], a.new_b[:made], a.new_nc[:made])  # fmt: skip
+
+
+@row_function
+def _held(a, chain_x, chain_v):
+    """After ``period_row``, with the shield's sensing on (the scratch ``a``; ``None``: off): the anchor made becomes
+    the held one, and the snapshot is the chain at the analysis' corner (``fast_step.step``'s ``out.snapshot``);
+    returns the snapshot's chain (``chain_x``, ``chain_v`` as seen, off)."""
+    if a is None:
+        return chain_x, chain_v
+    if not a.modes[0]:
+        return chain_x, chain_v
+    for j in range(a.anc_f.shape[1]):
+        a.anc_f[0, j] = a.new_f[0, j]
+    for i in range(a.anc_x.shape[1]):
+        a.anc_x[0, i], a.anc_v[0, i], a.anc_b[0, i] = a.new_x[0, i], a.new_v[0, i], a.new_b[0, i]
+    a.anc_nc[0] = a.new_nc[0]
+    return a.corner_x, a.corner_v
 
 
 @numba.njit(nogil=True, error_model="numpy", _nrt=False)
@@ -315,14 +349,7 @@ def _period(prm, batch, b, w, den, ax_n, ay_n):
     completing, invalid_active = ob[0, 0], ob[0, 1]
     # The snapshot the next period's monitor compares with (the caller keeps it: fast_step.step): the chain as seen,
     # at the analysis' corner with the shield's sensing on; the anchor made becomes the held one.
-    seen_x, seen_v = chain_x, chain_v
-    if sn.modes[0]:
-        seen_x, seen_v = sn.corner_x, sn.corner_v
-        for j in range(sn.anc_f.shape[1]):
-            sn.anc_f[0, j] = sn.new_f[0, j]
-        for i in range(m):
-            sn.anc_x[0, i], sn.anc_v[0, i], sn.anc_b[0, i] = sn.new_x[0, i], sn.new_v[0, i], sn.new_b[0, i]
-        sn.anc_nc[0] = sn.new_nc[0]
+    seen_x, seen_v = _held(sn, chain_x, chain_v)
     for i in range(m):
         snap_x[0, i], snap_v[0, i], snap_b[0, i] = seen_x[0, i], seen_v[0, i], bounds[i + 1]
     snap_nc[0] = nc

@@ -49,7 +49,8 @@ Scratch = collections.namedtuple("Scratch", (
     "lon_t", "lon_x", "lon_v", "lon_a", "lat_t", "lat_x", "lat_v", "lat_a", "o_t", "o_x", "o_v", "o_a", "lo", "hi",
     "times", "rf", "rb", "ri", "sw", "own", "queue", "act", "sense",
 ))  # fmt: skip
-#: The scratch of the shield's sensing box in a period (``Scratch.sense``; ``_fast_loop._sense`` builds
+#: The scratch of the shield's sensing box in a period (``Scratch.sense``, ``None`` with its sensing off;
+#: ``_fast_loop._sense`` builds
 #: ``period_row``'s ``sense`` tuple from it, :data:`~safelane.shield._fast_period.SENSE`): its modes, zero bounds for
 #: an own lane not analysed (``err_own0`` ``(1, 1, 2)``), the chain at the analysis' corner (``corner_x``,
 #: ``corner_v``), the held anchor (``anc_*``, the row's) and the new one (``new_*``), each ``(1, .)``.
@@ -72,9 +73,11 @@ Own = collections.namedtuple("Own", ("acc", "ts", "xe", "ve", "t", "x", "v", "a"
 
 
 @numba.njit(cache=True, nogil=True, error_model="numpy")
-def _scratch(rows, period_prm):
+def _scratch(rows, period_prm, sense):
     """The scratch arrays of one row's period, allocated once per call of a kernel: the rows then run without
-    reference counting (every array a period touches would otherwise cost atomic increments and decrements)."""
+    reference counting (every array a period touches would otherwise cost atomic increments and decrements).
+    ``sense``: the sensing box's scratch (:data:`Sense`, ``_fused.sense_scratch``), or ``None`` where the shield's
+    sensing is off (the kernel is then compiled without the box, ``period_row``'s ``sense=None``: nothing to pay)."""
     k = rows.x.shape[1]
     m = k - 1
     window = rows.history.shape[1]
@@ -96,10 +99,7 @@ def _scratch(rows, period_prm):
         Own(np.empty(1), np.empty(1), np.empty(1), np.empty(1), np.empty(5), np.empty(5), np.empty(5), np.empty(4),
             np.empty(8), np.empty(8), np.empty(8), np.empty(7)),
         np.empty((rows.queue.shape[1], rows.queue.shape[2])), np.empty(rows.queue.shape[2]),
-        Sense(np.zeros(3, np.bool_), np.zeros((1, 1, 2)), np.empty((1, m)), np.empty((1, m)),
-              np.empty((1, rows.anc_f.shape[1])), np.empty((1, m)), np.empty((1, m)), np.empty((1, m)),
-              np.zeros(1, np.int64), np.empty((1, rows.anc_f.shape[1])), np.empty((1, m)), np.empty((1, m)),
-              np.empty((1, m)), np.zeros(1, np.int64)),
+        sense,
     )  # fmt: skip
 
 
@@ -132,12 +132,7 @@ def _load(rows, b, batch, w):
     for i in range(w.queue.shape[0]):
         for j in range(w.queue.shape[1]):
             w.queue[i, j] = rows.queue[b, i, j]
-    a = w.sense
-    for j in range(a.anc_f.shape[1]):
-        a.anc_f[0, j] = rows.anc_f[b, j]
-    for j in range(a.anc_x.shape[1]):
-        a.anc_x[0, j], a.anc_v[0, j], a.anc_b[0, j] = rows.anc_x[b, j], rows.anc_v[b, j], rows.anc_b[b, j]
-    a.anc_nc[0] = rows.anc_nc[b]
+    _load_anchor(rows, b, w.sense)
     sb[0, 0] = batch.f_connected[b]  # F trusted where the variant listens: connected (it declares itself collaborative)
     sb[0, 2], sb[0, 3], sb[0, 4] = batch.uses[b, 0], batch.uses[b, 1], batch.uses[b, 2]
     sb[0, 5] = batch.f_aggressive[b]  # F's true type (read by the 'truth' assessment only)
@@ -172,7 +167,26 @@ def _store(rows, b, w):
     for i in range(w.queue.shape[0]):
         for j in range(w.queue.shape[1]):
             rows.queue[b, i, j] = w.queue[i, j]
-    a = w.sense
+    _store_anchor(rows, b, w.sense)
+
+
+@row_function
+def _load_anchor(rows, b, a):
+    """Row ``b``'s held anchor into the scratch ``a`` (:data:`Sense`; ``None``: nothing to load)."""
+    if a is None:
+        return
+    for j in range(a.anc_f.shape[1]):
+        a.anc_f[0, j] = rows.anc_f[b, j]
+    for j in range(a.anc_x.shape[1]):
+        a.anc_x[0, j], a.anc_v[0, j], a.anc_b[0, j] = rows.anc_x[b, j], rows.anc_v[b, j], rows.anc_b[b, j]
+    a.anc_nc[0] = rows.anc_nc[b]
+
+
+@row_function
+def _store_anchor(rows, b, a):
+    """:func:`_load_anchor`'s inverse."""
+    if a is None:
+        return
     for j in range(a.anc_f.shape[1]):
         rows.anc_f[b, j] = a.anc_f[0, j]
     for j in range(a.anc_x.shape[1]):

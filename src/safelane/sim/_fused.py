@@ -227,7 +227,8 @@ def run_chunk(sim, n_steps: int) -> dict:
     counts, n_invalid = np.empty((n, 3), np.int64), np.empty(n, np.int64)
     flags, bad = np.empty((n, len(BREACH_KINDS)), np.bool_), np.empty(n, np.int64)
     loop_kernel(n_steps, prm_vec, period_prm, batch, rows_of(start), LoopOut(out_f, out_b, counts, n_invalid, flags,
-                                                                              bad))  # fmt: skip
+                                                                              bad),
+                sense_scratch(prm_vec, batch.x.shape[1]))  # fmt: skip
     if (bad >= 0).any():
         step = int(bad[bad >= 0].min())
         _non_finite(sim.b.scenario_id, np.flatnonzero(bad == step), (step + 1) * sim.prm.dt)
@@ -272,6 +273,22 @@ def kernel_inputs(sim, planner: bool = False):
         *_planner(nominal if planner else None, len(b)),
     )  # fmt: skip
     return np.array([float(values[name]) for name in PRM]), period_constants(prm, cfg.shield), batch
+
+
+def sense_scratch(prm_vec: np.ndarray, slots: int):
+    """The kernels' ``sense`` argument for the loop's parameter vector and ``slots`` target-lane vehicles: the scratch
+    of the shield's sensing box (``_fast_rows.Sense``) where it is on, else ``None`` (the kernels are then compiled
+    without it: nothing to pay for it)."""
+    from ..shield._fast_period import ANCHOR_F
+    from ._fast_loop import PRM
+    from ._fast_rows import Sense
+
+    if prm_vec[PRM.index("shield_sensing")] <= 0.0:
+        return None
+    m, f = slots - 1, len(ANCHOR_F)
+    return Sense(np.zeros(3, bool), np.zeros((1, 1, 2)), np.empty((1, m)), np.empty((1, m)), np.empty((1, f)),
+                 np.empty((1, m)), np.empty((1, m)), np.empty((1, m)), np.zeros(1, np.int64), np.empty((1, f)),
+                 np.empty((1, m)), np.empty((1, m)), np.empty((1, m)), np.zeros(1, np.int64))  # fmt: skip
 
 
 def _planner(nominal, n: int) -> tuple:
