@@ -156,8 +156,9 @@ def test_the_fused_loop_covers_the_default_settings_from_its_threshold_on(monkey
 
 UNCOVERED = {
     "a connected own lane": dict(cfg=SimConfig(own_lane=True, own_lane_connected=1)),
-    "sensing errors the shield takes into account": dict(cfg=SimConfig(sensing_error=True)),
-    "actuation delay": dict(cfg=SimConfig(actuation_delay_s=0.1)),
+    "a shield's actuation delay other than the world's": dict(
+        cfg=SimConfig(actuation_delay_s=0.2, shield={"actuation_delay_s": 0.1})
+    ),
     "V2X loss": dict(cfg=SimConfig(v2x_loss=0.1)),
     "V2X latency": dict(cfg=SimConfig(v2x_latency_periods=1)),
     "sensor noise": dict(cfg=SimConfig(sensor_noise_std=0.1)),

@@ -4,7 +4,8 @@ column for column and bit for bit, with the own lane's leader ``L0`` (its profil
 against it, the shield's own lane on and off), with sensing error (the measurement draws, with and without the edge
 share; the shield's sensing off: it takes the measurements as exact) and both together — each on a batch where the
 feature changes the outcome, so that the comparison can fail. And the dispatch: what the loop does not run yet (a
-connected own lane, the shield's sensing and delay) runs period by period, saying why."""
+connected own lane, a shield's delay other than the world's) runs period by period, saying why. The shield's sensing
+and delay in the loop: ``tests/test_fast_realistic_loop.py``."""
 
 from __future__ import annotations
 
@@ -168,9 +169,10 @@ def test_the_numpy_path_gives_the_same_table_with_the_own_lane_and_sensing(monke
 
 REFUSED = {
     "a connected own lane": (SimConfig(own_lane=True, own_lane_connected=1), "config.own_lane_connected=1"),
-    "the shield's sensing": (SimConfig(sensing_error=True), "config.sensing_error=True"),
-    "the shield's actuation delay": (SimConfig(actuation_delay_s=0.2), "config.shield.actuation_delay_s=0.2"),
-    "the realistic preset": (load_preset("realistic").sim, "config.shield.actuation_delay_s="),
+    "the shield's delay other than the world's": (
+        SimConfig(actuation_delay_s=0.2, shield={"actuation_delay_s": 0.1}),
+        "config.shield.actuation_delay_s=0.1",
+    ),
 }
 
 

@@ -55,7 +55,7 @@ def env_step_kernel(prm, period_prm, batch, rows, proposal, env, view, steps, ob
     periods each feature's horizon covers, and a scratch array; ``steps``: each row's periods so far, this one
     included."""
     _env_rows(prm, batch, rows, proposal, env, view, steps, obs, outcome, behaviour, finite,
-              _scratch(rows, period_prm))  # fmt: skip
+              _scratch(rows, period_prm, None))  # fmt: skip
 
 
 @numba.njit(nogil=True, error_model="numpy", _nrt=False)

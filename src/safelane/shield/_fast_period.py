@@ -335,6 +335,21 @@ def _anchor_remember(sense, b, t, a_a, nc, bounds, fx, fv, l0x, l0v, l0_decel, s
 
 
 @row_function
+def observe_row(b, t, dt, mon_tol, chain_x, chain_v, own_x, own_v, fx, fv, x2, snap_x, snap_v, snap_bounds, snap_nc,
+                st, sk, sense=None):  # fmt: skip
+    """:func:`~.core.observe` of row ``b``: the monitor's view of the last period without deciding (after a run's
+    last period) — the observation (the chain ``chain_x``, ``chain_v``, F's ``(fx, fv)``, L0 in ``own_x``,
+    ``own_v``) at the sensing box's observed corner into ``x2`` (F in slot 0; as seen without a box), the
+    comparison with the held anchor, then the period's (:func:`monitor_row`), as :func:`period_row` compares."""
+    x2[0, 0] = fx
+    for i in range(chain_x.shape[1]):
+        x2[0, i + 1] = chain_x[b, i]
+    l0x_o = _corners(sense, b, chain_x, chain_v, own_x, own_v, fx, fv, x2)[8]
+    _anchor_check(sense, b, t, mon_tol, x2, l0x_o, st, sk)
+    monitor_row(b, t, dt, mon_tol, x2, snap_x, snap_v, snap_bounds, snap_nc, st, sk)
+
+
+@row_function
 def period_row(b, prm, times, den, sf, sb, rule, chain_x, chain_v, link_promise, link_margin, own_x, own_v,
                own_promise, own_nc, history, count, st, sk, plan, has_last, snap_x, snap_v, snap_bounds, snap_nc,
                bounds, given_unsafe, of, ob, knots, x2, v2, b2, kn, sense=None):  # fmt: skip
@@ -551,15 +566,27 @@ def carried_ego(b, dt, segs, q_knots, q_seg, q_acc, q_flag, ex, ey, evx, evy):
     """:meth:`~.command.InFlight.carry` of row ``b``: the ego ``(x, y, vx, vy)`` once the commands in flight have
     acted (the queue ``q_*``, oldest first, as :class:`.fast_step.Packed` holds it), segment by segment
     (:func:`~.command.segment_core`) as :meth:`~.command.Command.piece` lays a command out: ``segs[c]`` segments for
-    command ``c`` (its knots less one where some row aborts, else 1); an aborting row follows its knots, another
-    row its constant command for ``dt``, then segments of length 0."""
+    command ``c`` (its knots less one where some row aborts, else 1), each by :func:`carried_command`."""
     for c in range(q_knots.shape[1]):
-        for k in range(segs[c]):
-            if q_flag[b, c, 1]:
-                h, a_x, a_y = q_knots[b, c, k + 1] - q_knots[b, c, k], q_seg[b, c, 0, k], q_seg[b, c, 1, k]
-            else:
-                h, a_x, a_y = dt if k == 0 else 0.0, q_acc[b, c, 0], q_acc[b, c, 1]
-            ex, ey, evx, evy = segment_core(SCALAR, ex, ey, evx, evy, h, a_x, a_y)
+        ex, ey, evx, evy = carried_command(dt, segs[c], q_flag[b, c, 1], q_knots[b, c], q_seg[b, c, 0],
+                                           q_seg[b, c, 1], q_acc[b, c, 0], q_acc[b, c, 1], ex, ey, evx,
+                                           evy)  # fmt: skip
+    return ex, ey, evx, evy
+
+
+@row_function
+def carried_command(dt, segs, aborts, knots, ax_seg, ay_seg, a_x, a_y, ex, ey, evx, evy):
+    """:meth:`~.command.Command.carry` of one row's command: the ego ``(x, y, vx, vy)`` after ``segs`` segments
+    (:func:`~.command.segment_core`) — an aborting row (``aborts``) follows its ``knots`` with their segments'
+    accelerations ``ax_seg``, ``ay_seg``, another row its constant command ``(a_x, a_y)`` for ``dt``, then segments
+    of length 0 (which leave the state's bits as they are). :func:`carried_ego` (the queue as :class:`.fast_step.Packed`
+    holds it) and the compiled closed loop (its queue, ``sim/_fast_world.carried_queue``) call it."""
+    for k in range(segs):
+        if aborts:
+            h, ax, ay = knots[k + 1] - knots[k], ax_seg[k], ay_seg[k]
+        else:
+            h, ax, ay = dt if k == 0 else 0.0, a_x, a_y
+        ex, ey, evx, evy = segment_core(SCALAR, ex, ey, evx, evy, h, ax, ay)
     return ex, ey, evx, evy
 
 

@@ -30,6 +30,8 @@ import collections
 
 import numba
 import numpy as np
+from numba.core import types
+from numba.extending import overload
 
 from .._splitmix import counter_uniform4
 from ..planners._fast_adversary import adversary_row
@@ -37,7 +39,7 @@ from ..planners.base import ExpertGains, expert_accel
 from ..safety import _compile
 from ..safety._backend import SCALAR, Limits
 from ..safety._fast_base import _max, _min, announce_compiles, row_function
-from ..shield._fast_period import monitor_row, period_row
+from ..shield._fast_period import _PRM_DELAY, _SF_CARRIED, observe_row, period_row
 from ..shield.decide import ABORT, HESITATE, PROCEED
 from ..tolerances import DIST_TOL_M
 from ._fast_checks import _ego_row, _lane_row
@@ -53,7 +55,7 @@ from ._fast_traffic import (
     _wave_follower,
     _wave_task,
 )
-from ._fast_world import _switched, executed_plan, measure_row, own_checks, own_motion, push_command
+from ._fast_world import _switched, carried_queue, executed_plan, measure_row, own_checks, own_motion, push_command
 from .behaviours import hold_speed, last_accel, link_decel, reactive_core, task_core, violation_accel
 from .checks import far_gap, lane_far_ratio, lane_near, lane_verdict, lateral_extent, near_pair, near_threshold
 from .kinematics import constant_segment, piece_acc
@@ -67,7 +69,12 @@ PRM = (
     "dt", "a_x_a", "a_x_d", "a_y_m", "y_safe", "p_m", "lane_width", "vehicle_length", "conflict", "overlap",
     "monitor_tol", "brake_start_s", "open_decel", "open_gap_m", "k_p", "k_v", "gap_fraction", "brake_comfort",
     "omega2", "two_omega", "a_o_d", "reactive", "ignores_ego", "own_width", "shield_own", "sensing", "edge_share",
+    "shield_sensing", "own_analysed",
 )  # fmt: skip
+#: ``PRM``'s entries of the shield's sensing: its box on (``ShieldConfig.sensing`` with sensing error: the stages'
+#: ``observe`` takes the measurements' bounds), and the own lane analysed in it (``ShieldConfig.own_lane`` and some
+#: row with an own-lane leader: ``stages.own_leader``, the box's third mode).
+_SHIELD_SENSING, _OWN_ANALYSED = PRM.index("shield_sensing"), PRM.index("own_analysed")
 #: The batch's inputs of :func:`loop_kernel`, per scenario (:class:`~.step.ClosedLoop`'s arrays; ``promise``,
 #: ``chain_margin``: ``(N, B)``; ``uses``: ``(B, 3)`` the variant's flags).
 LoopBatch = collections.namedtuple("LoopBatch", (
@@ -100,58 +107,128 @@ OUT_B = ("completed", "collided", "violated", "leader_collided", "leader_violate
 
 
 @numba.njit(cache=True, nogil=True, error_model="numpy")
-def loop_kernel(n_steps, prm, period_prm, batch, start, out):
+def loop_kernel(n_steps, prm, period_prm, batch, start, out, sense):
     """Run every scenario of ``batch`` (:class:`LoopBatch`) from its row of ``start`` (:data:`~._fast_rows.Rows`)
     through ``n_steps`` periods of its nominal planner (the expert, or ``batch``'s adversaries) and the final
     observation (see the module docstring), into ``out`` (:class:`LoopOut`); ``prm``: :data:`PRM`'s values,
-    ``period_prm``: the shield's (``shield/_fast_period.PRM``)."""
-    _loop_rows(n_steps, prm, batch, start, out, _scratch(start, period_prm))
+    ``period_prm``: the shield's (``shield/_fast_period.PRM``); ``sense``: the scratch of the shield's sensing box
+    (``_fused.sense_scratch``), ``None`` where it is off (compiled without it)."""
+    _loop_rows(n_steps, prm, batch, start, out, _scratch(start, period_prm, sense))
 
 
 @numba.njit(cache=True, nogil=True, error_model="numpy")
-def step_kernel(prm, period_prm, batch, rows, proposal, behaviour, finite):
+def step_kernel(prm, period_prm, batch, rows, proposal, behaviour, finite, sense):
     """One period of every row of ``rows`` (:data:`~._fast_rows.Rows`, updated in place) with the nominal proposals
     ``proposal`` ``(B, 2)`` (the envs' actions) instead of the expert planner: each row's behaviour code into
-    ``behaviour``, and ``finite[b]`` false where the row's state stopped being finite."""
-    _step_rows(prm, batch, rows, proposal, behaviour, finite, _scratch(rows, period_prm))
+    ``behaviour``, and ``finite[b]`` false where the row's state stopped being finite; ``sense``: as
+    :func:`loop_kernel`'s."""
+    _step_rows(prm, batch, rows, proposal, behaviour, finite, _scratch(rows, period_prm, sense))
 
 
 @numba.njit(cache=True, nogil=True, error_model="numpy")
-def finish_kernel(prm, batch, rows):
+def finish_kernel(prm, period_prm, batch, rows, sense):
     """The monitor's view of the last period of every row of ``rows`` (in place): what :func:`loop_kernel` does after
-    a row's last period (``core.observe`` after the run: ``ClosedLoop.finish``)."""
-    k = rows.x.shape[1]
-    now, chain_x, chain_v, no_own = np.empty((1, k)), np.empty((1, k - 1)), np.empty((1, k - 1)), np.empty((1, 0))
+    a row's last period (``core.observe`` after the run: ``ClosedLoop.finish``); ``sense``: as
+    :func:`loop_kernel`'s."""
+    _finish_rows(prm, batch, rows, _scratch(rows, period_prm, sense))
+
+
+@numba.njit(nogil=True, error_model="numpy", _nrt=False)
+def _finish_rows(prm, batch, rows, w):
+    """:func:`finish_kernel`'s rows, on its scratch arrays ``w``."""
     for b in range(rows.x.shape[0]):
-        if rows.rb[b, 4]:
-            _seen(prm, batch, b, rows.ri[b, 4], rows.x[b], rows.v[b], now, chain_x, chain_v, no_own)
-            monitor_row(b, rows.rf[b, 4], prm[0], prm[10], now, rows.snap_x, rows.snap_v, rows.snap_b, rows.snap_nc,
-                        rows.st, rows.sk)  # fmt: skip
+        _load(rows, b, batch, w)
+        _seen(prm, batch, b, w)
+        _store(rows, b, w)
 
 
 @row_function
-def _seen(prm, batch, b, step, x, v, now, chain_x, chain_v, no_own):
-    """The target lane's positions as the ego sees them at period ``step`` into ``now`` (row 0, F in slot 0): the
-    true ones, or measured (``prm``'s ``sensing``: ``realworld.measure``)."""
+def _own_seen(prm, w):
+    """The own lane's leader ``L0`` where the shield keeps ``p_m`` to it (``ShieldConfig.own_lane``) into the
+    period's ``own_x``, ``own_v`` (``+inf``: none) and returned."""
+    w.own_x[0, 0], w.own_v[0, 0] = _INF, 0.0
+    if prm[24] > 0.0:
+        w.own_x[0, 0], w.own_v[0, 0] = w.rf[0, 10], w.rf[0, 11]
+    return w.own_x[0, 0], w.own_v[0, 0]
+
+
+@row_function
+def _seen(prm, batch, b, w):
+    """The monitor's view of the last period of row ``b`` (loaded into the scratch ``w``), where there is one:
+    ``core.observe`` after the run (``ClosedLoop.finish``) — the target lane as the ego sees it now (the true
+    states, or measured: ``prm``'s ``sensing``, ``realworld.measure``), at the sensing box's observed corner with the
+    anchor's comparison where the shield's sensing is on (``_fast_period.observe_row``)."""
+    if not w.rb[0, 4]:
+        return
+    x, v, chain_x, chain_v = w.x2[0], w.v2[0], w.chain_x, w.chain_v
+    l0x, l0v = _own_seen(prm, w)
+    fx, fv = x[0], v[0]
     if prm[25] > 0.0:
-        now[0, 0] = measure_row(batch, b, step, prm[26], x, v, chain_x, chain_v, _INF, 0.0, no_own, no_own)[0]
-        for i in range(chain_x.shape[1]):
-            now[0, i + 1] = chain_x[0, i]
+        fx, fv = measure_row(batch, b, w.ri[0, 4], prm[26], x, v, chain_x, chain_v, l0x, l0v, w.own_x, w.own_v)
     else:
-        for i in range(x.shape[0]):
-            now[0, i] = x[i]
+        for i in range(chain_x.shape[1]):
+            chain_x[0, i], chain_v[0, i] = x[i + 1], v[i + 1]
+    observe_row(0, w.rf[0, 4], prm[0], prm[10], chain_x, chain_v, w.own_x, w.own_v, fx, fv, w.px2, w.snap_x,
+                w.snap_v, w.snap_b, w.snap_nc, w.st, w.sk, _sense(prm, batch, b, w.sense, True))  # fmt: skip
+
+
+def _sense(prm, batch, b, a, has_last):
+    """``period_row``'s ``sense`` tuple (``_fast_period.SENSE``) for row ``b`` on the scratch ``a``
+    (``_fast_rows.Sense``), as ``shield/fast_step.sense_arrays`` builds it: with the shield's sensing on, the row's
+    bounds (the own lane's where the shield keeps ``p_m`` to ``L0``, zeros else), every mode on but the own lane's
+    where none is analysed, the held anchor where the monitor has a last period (``has_last``), and a new one made;
+    off (``a`` is ``None``), ``None``: ``period_row`` compiled without them (an overload: a branch on ``a is None``
+    would type the result as optional, which ``period_row`` cannot index)."""
+    raise NotImplementedError("compiled only (numba)")
+
+
+@overload(_sense, inline="always", jit_options=dict(_nrt=False, error_model="numpy", nogil=True))
+def _sense_typed(prm, batch, b, a, has_last):
+    if isinstance(a, types.NoneType):
+        return lambda prm, batch, b, a, has_last: None
+    return _sense_row
+
+
+def _sense_row(prm, batch, b, a, has_last):
+    """:func:`_sense` with the box's scratch ``a``."""
+    boxed = prm[_SHIELD_SENSING] > 0.0
+    a.modes[0], a.modes[1], a.modes[2] = boxed, boxed, prm[_OWN_ANALYSED] > 0.0
+    err_own = a.err_own0[0:1]
+    if prm[24] > 0.0 and batch.err_own.shape[1] > 0:
+        err_own = batch.err_own[b : b + 1]
+    held = 1 if boxed and has_last else 0
+    made = 1 if boxed else 0
+    return (batch.err_f[b : b + 1], batch.err_chain[b : b + 1], err_own, a.modes, a.corner_x, a.corner_v,
+            a.anc_f[:held], a.anc_x[:held], a.anc_v[:held], a.anc_b[:held], a.anc_nc[:held], a.new_f[:made],
+            a.new_x[:made], a.new_v[:made], a.new_b[:made], a.new_nc[:made])  # fmt: skip
+
+
+@row_function
+def _held(a, chain_x, chain_v):
+    """After ``period_row``, with the shield's sensing on (the scratch ``a``; ``None``: off): the anchor made becomes
+    the held one, and the snapshot is the chain at the analysis' corner (``fast_step.step``'s ``out.snapshot``);
+    returns the snapshot's chain (``chain_x``, ``chain_v`` as seen, off)."""
+    if a is None:
+        return chain_x, chain_v
+    if not a.modes[0]:
+        return chain_x, chain_v
+    for j in range(a.anc_f.shape[1]):
+        a.anc_f[0, j] = a.new_f[0, j]
+    for i in range(a.anc_x.shape[1]):
+        a.anc_x[0, i], a.anc_v[0, i], a.anc_b[0, i] = a.new_x[0, i], a.new_v[0, i], a.new_b[0, i]
+    a.anc_nc[0] = a.new_nc[0]
+    return a.corner_x, a.corner_v
 
 
 @numba.njit(nogil=True, error_model="numpy", _nrt=False)
 def _loop_rows(n_steps, prm, batch, start, out, w):
     """:func:`loop_kernel`'s rows, on its scratch arrays ``w`` (no allocation, no reference counting)."""
-    dt, lane_w, mon_tol = prm[0], prm[6], prm[10]
+    dt, lane_w = prm[0], prm[6]
     a_a, a_d, a_ym, y_safe = prm[1], prm[2], prm[3], prm[4]
     gains = ExpertGains(prm[14], prm[15], prm[16], prm[17], prm[18], prm[19])
     lim = Limits(a_a, a_d, a_ym, y_safe)
     out_f, out_b, counts, n_invalid, breach_flags, bad_step = out
-    x2, v2, st, sk, px2, rf, rb, ri = w.x2, w.v2, w.st, w.sk, w.px2, w.rf, w.rb, w.ri
-    snap_x, snap_v, snap_b, snap_nc = w.snap_x, w.snap_v, w.snap_b, w.snap_nc
+    x2, v2, st, sk, rf, rb, ri = w.x2, w.v2, w.st, w.sk, w.rf, w.rb, w.ri
     x, v = x2[0], v2[0]
     den = _window(w.times, dt)
     adversaries = batch.planner_kind.shape[0] > 0
@@ -160,9 +237,7 @@ def _loop_rows(n_steps, prm, batch, start, out, w):
         bad = -1
         for step in range(n_steps + 1):
             if step == n_steps:  # the monitor's view of the last period (core.observe after the run: finish)
-                if rb[0, 4]:
-                    _seen(prm, batch, b, ri[0, 4], x, v, px2, w.chain_x, w.chain_v, w.own_promise)
-                    monitor_row(0, rf[0, 4], dt, mon_tol, px2, snap_x, snap_v, snap_b, snap_nc, st, sk)
+                _seen(prm, batch, b, w)
                 break
             # --- observe, the nominal planner: the expert (planners.base.ExpertPlanner) or an adversary as data ---
             if adversaries:
@@ -234,7 +309,7 @@ def _period(prm, batch, b, w, den, ax_n, ay_n):
     (x2, v2, f_acc2, f_ts2, f_xe2, f_ve2, acc, cap, general2, pp, sf, sb, chain_x, chain_v, own_x, own_v, own_promise,
      own_nc, history, count, st, sk, plan, snap_x, snap_v, snap_b, snap_nc, bounds_out, no_chain, of, ob, knots, px2,
      pv2, pb2, kn, kax, kay, scratch, lon_t, lon_x, lon_v, lon_a, lat_t, lat_x, lat_v, lat_a, o_t, o_x, o_v, o_a, lo,
-     hi, times, rf, rb, ri, sw, own, queue, act) = w  # fmt: skip
+     hi, times, rf, rb, ri, sw, own, queue, act, sn) = w  # fmt: skip
     x, v, f_acc, f_ts, f_xe, f_ve = x2[0], v2[0], f_acc2[0], f_ts2[0], f_xe2[0], f_ve2[0]
     general = general2[0]
     consts = (dt, p_m, a_lim, conflict, overlap, length, max_level)
@@ -250,29 +325,33 @@ def _period(prm, batch, b, w, den, ax_n, ay_n):
     # true one (ClosedLoop.step); the own lane's leader L0 where the shield keeps p_m to it (+inf: none)
     l0x, l0v = rf[0, 10], rf[0, 11]
     sensing = prm[25] > 0.0
-    own_x[0, 0], own_v[0, 0] = _INF, 0.0
-    if prm[24] > 0.0:
-        own_x[0, 0], own_v[0, 0] = l0x, l0v
+    l0x_seen, l0v_seen = _own_seen(prm, w)
     fx_seen, fv_seen = x[0], v[0]
     if sensing:
-        fx_seen, fv_seen = measure_row(batch, b, ri[0, 4], prm[26], x, v, chain_x, chain_v, l0x, l0v, own_x, own_v)
+        fx_seen, fv_seen = measure_row(batch, b, ri[0, 4], prm[26], x, v, chain_x, chain_v, l0x_seen, l0v_seen, own_x,
+                                       own_v)  # fmt: skip
     else:
         for i in range(m):
             chain_x[0, i], chain_v[0, i] = x[i + 1], v[i + 1]
     sf[0, 0], sf[0, 1], sf[0, 2], sf[0, 3], sf[0, 4], sf[0, 5] = ex, ey, evx, evy, fx_seen, fv_seen
     sf[0, 6], sf[0, 7], sf[0, 8], sf[0, 9] = v[0], ax_n, ay_n, nc
     pp[0] = t
+    if pp[_PRM_DELAY] > 0.0:  # the shield's delay is the world's (_fused): the world's commands in flight are its own
+        c = _SF_CARRIED
+        sf[0, c], sf[0, c + 1], sf[0, c + 2], sf[0, c + 3] = carried_queue(queue, dt, ex, ey, evx, evy)
     completed = rb[0, 7]  # the world's (with an actuation delay the command acting completes it, not the one issued)
     active = not completed
     behaviour = period_row(0, pp, times, den, sf, sb, batch.rule[b : b + 1], chain_x, chain_v, link_promise,
                            link_margin, own_x, own_v, own_promise, own_nc, history, count, st, sk, plan, rb[0, 4],
                            snap_x, snap_v, snap_b, snap_nc, bounds_out, no_chain, of, ob, knots, px2, pv2, pb2,
-                           kn)  # fmt: skip
+                           kn, _sense(prm, batch, b, sn, rb[0, 4]))  # fmt: skip
     ax_cmd, ay_cmd = of[0, 0], of[0, 1]
     completing, invalid_active = ob[0, 0], ob[0, 1]
-    # The snapshot the next period's monitor compares with (the caller keeps it: fast_step.step): the chain as seen.
+    # The snapshot the next period's monitor compares with (the caller keeps it: fast_step.step): the chain as seen,
+    # at the analysis' corner with the shield's sensing on; the anchor made becomes the held one.
+    seen_x, seen_v = _held(sn, chain_x, chain_v)
     for i in range(m):
-        snap_x[0, i], snap_v[0, i], snap_b[0, i] = chain_x[0, i], chain_v[0, i], bounds[i + 1]
+        snap_x[0, i], snap_v[0, i], snap_b[0, i] = seen_x[0, i], seen_v[0, i], bounds[i + 1]
     snap_nc[0] = nc
     rb[0, 4] = True
     on_plan = ob[0, 4]  # the held plan's motion (an abort under the paper's rule; an RSS response is constant)

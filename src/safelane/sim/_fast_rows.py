@@ -22,10 +22,13 @@ _INF = np.inf
 #: ``cap`` ``(B, K)``; the running values ``rf`` (:data:`RF`), ``rb`` (:data:`RB`), ``ri`` (:data:`RI`); the
 #: shield's state as :func:`~safelane.shield._fast_period.period_row` holds it (``shield/fast_step.Packed``:
 #: ``plan``, ``history``, ``count``, ``st``, ``sk``), the monitor's snapshot of the last period (``snap_*``) and the
-#: actuation delay's commands in flight, oldest first (``queue`` ``(B, D, _fast_world.COMMAND)``; ``D = 0``: none).
+#: actuation delay's commands in flight, oldest first (``queue`` ``(B, D, _fast_world.COMMAND)``; ``D = 0``: none) —
+#: the shield's own where its delay is the world's — and the monitor's cumulative anchor held with the shield's
+#: sensing on (``anc_f`` ``(B, len(ANCHOR_F))``, ``anc_x``, ``anc_v``, ``anc_b`` ``(B, M)``, ``anc_nc`` ``(B,)``:
+#: ``Packed.anchor``; held where ``has_last``, made anew every period).
 Rows = collections.namedtuple("Rows", (
     "x", "v", "acc", "cap", "rf", "rb", "ri", "plan", "history", "count", "st", "sk", "snap_x", "snap_v", "snap_b",
-    "snap_nc", "queue",
+    "snap_nc", "queue", "anc_f", "anc_x", "anc_v", "anc_b", "anc_nc",
 ))  # fmt: skip
 #: A row's running floats: the ego's state, the row's clock, the results' times and smallest gaps, and the own lane's
 #: leader ``L0``'s state (``l0_x = +inf``: none).
@@ -44,7 +47,16 @@ Scratch = collections.namedtuple("Scratch", (
     "own_x", "own_v", "own_promise", "own_nc", "history", "count", "st", "sk", "plan", "snap_x", "snap_v", "snap_b",
     "snap_nc", "bounds_out", "no_chain", "of", "ob", "knots", "px2", "pv2", "pb2", "kn", "kax", "kay", "scratch",
     "lon_t", "lon_x", "lon_v", "lon_a", "lat_t", "lat_x", "lat_v", "lat_a", "o_t", "o_x", "o_v", "o_a", "lo", "hi",
-    "times", "rf", "rb", "ri", "sw", "own", "queue", "act",
+    "times", "rf", "rb", "ri", "sw", "own", "queue", "act", "sense",
+))  # fmt: skip
+#: The scratch of the shield's sensing box in a period (``Scratch.sense``, ``None`` with its sensing off;
+#: ``_fast_loop._sense`` builds
+#: ``period_row``'s ``sense`` tuple from it, :data:`~safelane.shield._fast_period.SENSE`): its modes, zero bounds for
+#: an own lane not analysed (``err_own0`` ``(1, 1, 2)``), the chain at the analysis' corner (``corner_x``,
+#: ``corner_v``), the held anchor (``anc_*``, the row's) and the new one (``new_*``), each ``(1, .)``.
+Sense = collections.namedtuple("Sense", (
+    "modes", "err_own0", "corner_x", "corner_v", "anc_f", "anc_x", "anc_v", "anc_b", "anc_nc", "new_f", "new_x",
+    "new_v", "new_b", "new_nc",
 ))  # fmt: skip
 #: The scratch of a period in which ``L(N+1)``'s profile switches (``Scratch.sw``): the row's ``valid`` and lane
 #: pairs without that vehicle (the checks' rows skip it; ``_fast_loop._period`` checks its pairs on its two segments),
@@ -61,9 +73,11 @@ Own = collections.namedtuple("Own", ("acc", "ts", "xe", "ve", "t", "x", "v", "a"
 
 
 @numba.njit(cache=True, nogil=True, error_model="numpy")
-def _scratch(rows, period_prm):
+def _scratch(rows, period_prm, sense):
     """The scratch arrays of one row's period, allocated once per call of a kernel: the rows then run without
-    reference counting (every array a period touches would otherwise cost atomic increments and decrements)."""
+    reference counting (every array a period touches would otherwise cost atomic increments and decrements).
+    ``sense``: the sensing box's scratch (:data:`Sense`, ``_fused.sense_scratch``), or ``None`` where the shield's
+    sensing is off (the kernel is then compiled without the box, ``period_row``'s ``sense=None``: nothing to pay)."""
     k = rows.x.shape[1]
     m = k - 1
     window = rows.history.shape[1]
@@ -85,6 +99,7 @@ def _scratch(rows, period_prm):
         Own(np.empty(1), np.empty(1), np.empty(1), np.empty(1), np.empty(5), np.empty(5), np.empty(5), np.empty(4),
             np.empty(8), np.empty(8), np.empty(8), np.empty(7)),
         np.empty((rows.queue.shape[1], rows.queue.shape[2])), np.empty(rows.queue.shape[2]),
+        sense,
     )  # fmt: skip
 
 
@@ -117,6 +132,7 @@ def _load(rows, b, batch, w):
     for i in range(w.queue.shape[0]):
         for j in range(w.queue.shape[1]):
             w.queue[i, j] = rows.queue[b, i, j]
+    _load_anchor(rows, b, w.sense)
     sb[0, 0] = batch.f_connected[b]  # F trusted where the variant listens: connected (it declares itself collaborative)
     sb[0, 2], sb[0, 3], sb[0, 4] = batch.uses[b, 0], batch.uses[b, 1], batch.uses[b, 2]
     sb[0, 5] = batch.f_aggressive[b]  # F's true type (read by the 'truth' assessment only)
@@ -151,6 +167,31 @@ def _store(rows, b, w):
     for i in range(w.queue.shape[0]):
         for j in range(w.queue.shape[1]):
             rows.queue[b, i, j] = w.queue[i, j]
+    _store_anchor(rows, b, w.sense)
+
+
+@row_function
+def _load_anchor(rows, b, a):
+    """Row ``b``'s held anchor into the scratch ``a`` (:data:`Sense`; ``None``: nothing to load)."""
+    if a is None:
+        return
+    for j in range(a.anc_f.shape[1]):
+        a.anc_f[0, j] = rows.anc_f[b, j]
+    for j in range(a.anc_x.shape[1]):
+        a.anc_x[0, j], a.anc_v[0, j], a.anc_b[0, j] = rows.anc_x[b, j], rows.anc_v[b, j], rows.anc_b[b, j]
+    a.anc_nc[0] = rows.anc_nc[b]
+
+
+@row_function
+def _store_anchor(rows, b, a):
+    """:func:`_load_anchor`'s inverse."""
+    if a is None:
+        return
+    for j in range(a.anc_f.shape[1]):
+        rows.anc_f[b, j] = a.anc_f[0, j]
+    for j in range(a.anc_x.shape[1]):
+        rows.anc_x[b, j], rows.anc_v[b, j], rows.anc_b[b, j] = a.anc_x[0, j], a.anc_v[0, j], a.anc_b[0, j]
+    rows.anc_nc[b] = a.anc_nc[0]
 
 
 @row_function

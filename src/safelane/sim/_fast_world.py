@@ -23,6 +23,7 @@ from ..safety import _compile
 from ..safety import responsible as _responsible  # noqa: F401  (marks advance_core: registered below)
 from ..safety._backend import INF, SCALAR
 from ..safety._fast_base import _max, _min, announce_compiles, row_function
+from ..shield._fast_period import carried_command
 from ._fast_general import _general_pair
 from ._fast_traffic import _profile_row
 from .checks import ego_verdict
@@ -153,6 +154,21 @@ def push_command(queue, act, on_plan, a_x, a_y, completing, kt, kax, kay):
             queue[last, 4 + j] = kt[j]
         for j in range(7):
             queue[last, 12 + j], queue[last, 19 + j] = kax[j], kay[j]
+
+
+@row_function
+def carried_queue(queue, dt, ex, ey, evx, evy):
+    """The ego ``(x, y, vx, vy)`` once the commands in ``queue`` (oldest first) have acted: what the shield carries
+    it over before it decides under its actuation delay (``stages.frame``: ``InFlight.carry``) where the shield's
+    delay is the world's, so that the world's commands in flight are the shield's. Each command by the compiled
+    period's :func:`~safelane.shield._fast_period.carried_command` (an aborting row over its 7 segments, another over
+    one: the segments of length 0 that ``Command.piece`` adds where some other row aborts leave the bits as they
+    are)."""
+    for c in range(queue.shape[0]):
+        aborts = queue[c, 0] > 0.0
+        ex, ey, evx, evy = carried_command(dt, 7 if aborts else 1, aborts, queue[c, 4:12], queue[c, 12:19],
+                                           queue[c, 19:26], queue[c, 1], queue[c, 2], ex, ey, evx, evy)  # fmt: skip
+    return ex, ey, evx, evy
 
 
 @row_function

@@ -7,9 +7,9 @@ any gains) or the adversarial planners (:func:`~safelane.planners.adversarial.ad
 profiles, with or without :class:`~.traffic.WaveHooks`: hooks as data), the paper's
 four variants and the RSS variants (their rule: ``shield/_fast_rules.py``), the settings of the default and paper
 presets (any assessment, the commit guard or the paper's completion rule, the monitor on or off, either leader rule,
-supervised), the realistic world's side of the real-world settings where the shield's side is one its period runs
-(the own lane's leader ``L0`` alone, sensing error with the shield's sensing off, the actuation delay with the
-shield's delay off: :data:`WITH`) and an F that ignores the ego, without a trace or recorded observations
+supervised), the realistic world (the ``realistic`` preset: the own lane's leader ``L0`` alone, sensing error with the
+shield's sensing on or off, the actuation delay with the shield's delay off or the world's: :data:`WITH`) and an F
+that ignores the ego, without a trace or recorded observations
 (those, and other planners, run its period: :class:`~._stepper.Stepper`).
 Everything else — and everything with ``SAFELANE_NO_FUSED=1`` or without numba — runs period by period
 (:mod:`.step`), whose parts are compiled where they have kernels. Importing this module does not import numba.
@@ -46,24 +46,25 @@ PROGRESS_CHUNK = 4096
 READ = frozenset({"horizon_s", "brake_start_s", "shield.assess_window", "shield.assess_threshold",
                   "follower_open_decel", "follower_open_gap_m", "shield.monitor", "leader_rule",
                   "shield.assess_delay_s", "shield.assess_miss", "shield.assessment",
-                  "follower_ignores_ego", "own_lane"})  # fmt: skip
+                  "follower_ignores_ego", "own_lane", "sensing_error", "actuation_delay_s"})  # fmt: skip
 #: The loop implements these fields at this value (or these values) only; any other value runs period by period:
 FIXED = {
     "shield.completion": ("commit_guard", "paper_evasion"),
     "sensor_noise_std": 0.0,
     "shield.enabled": True, "v2x_loss": 0.0, "v2x_latency_periods": 0,
-    "sensing_error": False,
-    "actuation_delay_s": 0.0, "shield.actuation_delay_s": 0.0, "neighbours": False,
+    "shield.actuation_delay_s": 0.0, "neighbours": False,
 }  # fmt: skip
+#: A :data:`WITH` value: the other field at this field's value (the shield's delay the world's: the world's commands
+#: in flight are then the shield's).
+SAME = "the same value"
 #: Settings the loop implements away from their defaults only together with other settings at these values: field →
 #: ``{other field: its values}``. A :data:`FIXED` field's other values run compiled where the others are at their
 #: values (and are refused, naming the field, where they are not); a :data:`READ` field away from its default refuses
-#: where they are not. The world's side of a real-world feature runs compiled while the shield's side is off, until
-#: the shield's compiled period takes it (``shield/fast_step.COMPILED``, ``SITUATION_FIELDS``):
+#: where they are not. :data:`SAME` for the values: the other field at this field's value.
 WITH = {
     "own_lane": {"own_lane_connected": (0,)},  # L0 alone (a connected own lane's traffic: period by period)
-    "sensing_error": {"shield.sensing": (False,)},  # the shield takes the measurements as exact
-    "actuation_delay_s": {"shield.actuation_delay_s": (0.0,)},  # the shield decides as if its commands acted at once
+    # the shield's delay where it is the world's (its commands in flight: the world's queue, _fast_world.carried_queue)
+    "shield.actuation_delay_s": {"actuation_delay_s": SAME},
 }
 #: These fields act only through another setting; while the fields named (or the nominal planner: ``"nominal"``)
 #: are at the loop's values they change nothing, so any value runs compiled (where the setting named is read, any
@@ -162,7 +163,7 @@ def config_reasons(cfg) -> list[str]:
         now = setting(cfg, name)
         if now in implemented(name):
             continue
-        needs = WITH.get(name)
+        needs = _values(WITH.get(name), now)
         if needs is None:
             out.append(f"config.{name}={now!r} (compiled: {value!r})")
         elif any(setting(cfg, other) not in values for other, values in needs.items()):
@@ -171,8 +172,14 @@ def config_reasons(cfg) -> list[str]:
         now = setting(cfg, name)
         if name not in FIXED and now != setting(type(cfg)(), name):
             out.extend(f"config.{other}={setting(cfg, other)!r} with {name}={now!r} (compiled: {values!r})"
-                       for other, values in needs.items() if setting(cfg, other) not in values)  # fmt: skip
+                       for other, values in _values(needs, now).items()
+                       if setting(cfg, other) not in values)  # fmt: skip
     return out
+
+
+def _values(needs: dict | None, now) -> dict | None:
+    """:data:`WITH`'s ``{other field: its values}`` for a field at ``now`` (:data:`SAME`: ``(now,)``)."""
+    return None if needs is None else {other: (now,) if values is SAME else values for other, values in needs.items()}
 
 
 def _needs(needs: dict) -> str:
@@ -220,7 +227,8 @@ def run_chunk(sim, n_steps: int) -> dict:
     counts, n_invalid = np.empty((n, 3), np.int64), np.empty(n, np.int64)
     flags, bad = np.empty((n, len(BREACH_KINDS)), np.bool_), np.empty(n, np.int64)
     loop_kernel(n_steps, prm_vec, period_prm, batch, rows_of(start), LoopOut(out_f, out_b, counts, n_invalid, flags,
-                                                                              bad))  # fmt: skip
+                                                                              bad),
+                sense_scratch(prm_vec, batch.x.shape[1]))  # fmt: skip
     if (bad >= 0).any():
         step = int(bad[bad >= 0].min())
         _non_finite(sim.b.scenario_id, np.flatnonzero(bad == step), (step + 1) * sim.prm.dt)
@@ -248,6 +256,8 @@ def kernel_inputs(sim, planner: bool = False):
         two_omega=2.0 * gains.omega, a_o_d=prm.others_decel, reactive=cfg.leader_rule == "reactive",
         ignores_ego=cfg.follower_ignores_ego, own_width=prm.vehicle_width, shield_own=cfg.shield.own_lane,
         sensing=sim.sensing is not None, edge_share=cfg.sensing_edge_share,
+        shield_sensing=cfg.shield.sensing and sim.sensing is not None,
+        own_analysed=cfg.shield.own_lane and b.l0_x is not None and bool(np.isfinite(b.l0_x).any()),
     )  # fmt: skip
     c = np.ascontiguousarray
     is_last, acts = traffic.roles
@@ -263,6 +273,22 @@ def kernel_inputs(sim, planner: bool = False):
         *_planner(nominal if planner else None, len(b)),
     )  # fmt: skip
     return np.array([float(values[name]) for name in PRM]), period_constants(prm, cfg.shield), batch
+
+
+def sense_scratch(prm_vec: np.ndarray, slots: int):
+    """The kernels' ``sense`` argument for the loop's parameter vector and ``slots`` target-lane vehicles: the scratch
+    of the shield's sensing box (``_fast_rows.Sense``) where it is on, else ``None`` (the kernels are then compiled
+    without it: nothing to pay for it)."""
+    from ..shield._fast_period import ANCHOR_F
+    from ._fast_loop import PRM
+    from ._fast_rows import Sense
+
+    if prm_vec[PRM.index("shield_sensing")] <= 0.0:
+        return None
+    m, f = slots - 1, len(ANCHOR_F)
+    return Sense(np.zeros(3, bool), np.zeros((1, 1, 2)), np.empty((1, m)), np.empty((1, m)), np.empty((1, f)),
+                 np.empty((1, m)), np.empty((1, m)), np.empty((1, m)), np.zeros(1, np.int64), np.empty((1, f)),
+                 np.empty((1, m)), np.empty((1, m)), np.empty((1, m)), np.zeros(1, np.int64))  # fmt: skip
 
 
 def _planner(nominal, n: int) -> tuple:
@@ -338,6 +364,7 @@ LOOP_ONLY = ("planner_kind", "planner_q")
 def rows_of(start):
     """A :class:`~.step.SimState` at the start of a run (its first period not yet run) as the compiled loop's row
     state (``_fast_rows.Rows``)."""
+    from ..shield._fast_period import ANCHOR_F
     from ..shield.fast_step import Packed
     from ._fast_rows import RB, RF, RI, Rows
     from ._fast_world import COMMAND
@@ -360,9 +387,12 @@ def rows_of(start):
                                            for cmd in start.in_flight.commands):  # fmt: skip
         raise ValueError("rows_of: a run starts with idle commands in flight (InFlight.idle)")
     queue = np.zeros((n, 0 if start.in_flight is None else len(start.in_flight.commands), COMMAND))
+    if packed.anchor is not None:
+        raise ValueError("rows_of: a run starts with a monitor's anchor (it starts without a last period)")
+    anchor = (np.zeros((n, len(ANCHOR_F))), snap.copy(), snap.copy(), snap.copy(), np.zeros(n, np.int64))
     return Rows(c(start.x), c(start.v), np.zeros((n, k)), np.full((n, k), np.inf), rf, rb,
                 np.zeros((n, len(RI)), np.int64), c(packed.plan), c(packed.history), c(packed.count), c(packed.st),
-                c(packed.sk), snap, snap.copy(), snap.copy(), np.zeros(n, np.int64), queue)  # fmt: skip
+                c(packed.sk), snap, snap.copy(), snap.copy(), np.zeros(n, np.int64), queue, *anchor)  # fmt: skip
 
 
 def _slow(sim) -> bool:

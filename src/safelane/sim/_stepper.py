@@ -21,6 +21,7 @@ from ._fused import (
     kernel_inputs,
     reasons,
     rows_of,
+    sense_scratch,
     setting,
 )
 
@@ -90,7 +91,8 @@ class Stepper:
 
         self._whole("finish")
         rows = self.rows_after(s)
-        finish_kernel(self.prm_vec, self.batch, rows)
+        finish_kernel(self.prm_vec, self.period_prm, self.batch, rows,
+                      sense_scratch(self.prm_vec, rows.x.shape[1]))
         return _state(dict(
             t_complete=rows.rf[:, 5], min_gap_f=rows.rf[:, 6], min_gap_l1=rows.rf[:, 7], min_lane_ratio=rows.rf[:, 8],
             first_collaborative_s=rows.st[:, 1], breach_first_s=rows.st[:, 2], completed=rows.rb[:, 7],
@@ -119,7 +121,8 @@ class Stepper:
         proposal[:, 0], proposal[:, 1] = a_x, a_y
         rows = self.rows_after(s)
         behaviour, finite = np.empty(len(a_x), np.int64), np.empty(len(a_x), np.bool_)
-        step_kernel(self.prm_vec, self.period_prm, self.batch, rows, proposal, behaviour, finite)
+        step_kernel(self.prm_vec, self.period_prm, self.batch, rows, proposal, behaviour, finite,
+                    sense_scratch(self.prm_vec, rows.x.shape[1]))
         self.check_finite(rows, finite)
         return StepState(rows), behaviour
 
