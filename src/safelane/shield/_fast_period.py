@@ -580,7 +580,8 @@ def carried_command(dt, segs, aborts, knots, ax_seg, ay_seg, a_x, a_y, ex, ey, e
     (:func:`~.command.segment_core`) — an aborting row (``aborts``) follows its ``knots`` with their segments'
     accelerations ``ax_seg``, ``ay_seg``, another row its constant command ``(a_x, a_y)`` for ``dt``, then segments
     of length 0 (which leave the state's bits as they are). :func:`carried_ego` (the queue as :class:`.fast_step.Packed`
-    holds it) and the compiled closed loop (its queue, ``sim/_fast_world.carried_queue``) call it."""
+    holds it) calls it, for :func:`period_kernel` and the compiled closed loop (``sim/_fast_loop._period``: the
+    world's commands in flight, kept in the same layout and pushed by :func:`push_row`)."""
     for k in range(segs):
         if aborts:
             h, ax, ay = knots[k + 1] - knots[k], ax_seg[k], ay_seg[k]
@@ -595,7 +596,8 @@ def push_row(b, of, ob, knots, q_knots, q_seg, q_acc, q_flag):
     """:meth:`~.command.InFlight.push` of row ``b``'s command of this period (:meth:`~.command.Command.issued`: the
     accelerations ``of[b, :2]``, completing ``ob[b, 0]``, following the held plan ``ob[b, 4]`` over the knots
     ``knots[b]`` with their segments' accelerations, :func:`~safelane.sim.kinematics.piece_acc`): the oldest
-    command, which acts now, leaves the queue ``q_*``; a row that does not abort has zero knots and segments."""
+    command, which acts now, leaves the queue ``q_*``; a row that does not abort has zero knots and segments.
+    :func:`period_kernel` and the compiled closed loop (``sim/_fast_loop._period``, the world's queue) push with it."""
     d, s = q_knots.shape[1], q_seg.shape[3]
     if d == 0:
         return

@@ -39,7 +39,7 @@ from ..planners.base import ExpertGains, expert_accel
 from ..safety import _compile
 from ..safety._backend import SCALAR, Limits
 from ..safety._fast_base import _max, _min, announce_compiles, row_function
-from ..shield._fast_period import _PRM_DELAY, _SF_CARRIED, observe_row, period_row
+from ..shield._fast_period import _PRM_DELAY, _SF_CARRIED, carried_ego, observe_row, period_row, push_row
 from ..shield.decide import ABORT, HESITATE, PROCEED
 from ..tolerances import DIST_TOL_M
 from ._fast_checks import _ego_row, _lane_row
@@ -55,7 +55,7 @@ from ._fast_traffic import (
     _wave_follower,
     _wave_task,
 )
-from ._fast_world import _switched, carried_queue, executed_plan, measure_row, own_checks, own_motion, push_command
+from ._fast_world import _switched, executed_plan, measure_row, own_checks, own_motion
 from .behaviours import hold_speed, last_accel, link_decel, reactive_core, task_core, violation_accel
 from .checks import far_gap, lane_far_ratio, lane_near, lane_verdict, lateral_extent, near_pair, near_threshold
 from .kinematics import constant_segment, piece_acc
@@ -309,7 +309,7 @@ def _period(prm, batch, b, w, den, ax_n, ay_n):
     (x2, v2, f_acc2, f_ts2, f_xe2, f_ve2, acc, cap, general2, pp, sf, sb, chain_x, chain_v, own_x, own_v, own_promise,
      own_nc, history, count, st, sk, plan, snap_x, snap_v, snap_b, snap_nc, bounds_out, no_chain, of, ob, knots, px2,
      pv2, pb2, kn, kax, kay, scratch, lon_t, lon_x, lon_v, lon_a, lat_t, lat_x, lat_v, lat_a, o_t, o_x, o_v, o_a, lo,
-     hi, times, rf, rb, ri, sw, own, queue, act, sn) = w  # fmt: skip
+     hi, times, rf, rb, ri, sw, own, q_knots, q_seg, q_acc, q_flag, segs, sn) = w  # fmt: skip
     x, v, f_acc, f_ts, f_xe, f_ve = x2[0], v2[0], f_acc2[0], f_ts2[0], f_xe2[0], f_ve2[0]
     general = general2[0]
     consts = (dt, p_m, a_lim, conflict, overlap, length, max_level)
@@ -337,8 +337,11 @@ def _period(prm, batch, b, w, den, ax_n, ay_n):
     sf[0, 6], sf[0, 7], sf[0, 8], sf[0, 9] = v[0], ax_n, ay_n, nc
     pp[0] = t
     if pp[_PRM_DELAY] > 0.0:  # the shield's delay is the world's (_fused): the world's commands in flight are its own
+        for j in range(segs.shape[0]):  # an aborting command over its segments, another over one (Command.piece's
+            segs[j] = q_seg.shape[3] if q_flag[0, j, 1] else 1  # segments of length 0 leave the bits as they are)
         c = _SF_CARRIED
-        sf[0, c], sf[0, c + 1], sf[0, c + 2], sf[0, c + 3] = carried_queue(queue, dt, ex, ey, evx, evy)
+        sf[0, c], sf[0, c + 1], sf[0, c + 2], sf[0, c + 3] = carried_ego(0, dt, segs, q_knots, q_seg, q_acc, q_flag,
+                                                                         ex, ey, evx, evy)  # fmt: skip
     completed = rb[0, 7]  # the world's (with an actuation delay the command acting completes it, not the one issued)
     active = not completed
     behaviour = period_row(0, pp, times, den, sf, sb, batch.rule[b : b + 1], chain_x, chain_v, link_promise,
@@ -355,20 +358,16 @@ def _period(prm, batch, b, w, den, ax_n, ay_n):
     snap_nc[0] = nc
     rb[0, 4] = True
     on_plan = ob[0, 4]  # the held plan's motion (an abort under the paper's rule; an RSS response is constant)
-    if on_plan:  # the held plan's period (knots and samples from period_row): its segment accelerations
-        for j in range(7):
+    if q_knots.shape[1] > 0:  # the actuation delay: the oldest command in flight acts, executed from the ego's state
+        on_plan, ax_cmd, ay_cmd, completing = q_flag[0, 0, 1], q_acc[0, 0, 0], q_acc[0, 0, 1], q_flag[0, 0, 0]
+        if on_plan:  # (into kn: the command issued, which push_row queues, is in knots)
+            executed_plan(q_knots[0, 0], q_seg[0, 0, 0], q_seg[0, 0, 1], ex, ey, evx, evy, kt, kx, kv, ky, kvy)
+        push_row(0, of, ob, knots, q_knots, q_seg, q_acc, q_flag)  # the oldest leaves, this period's joins
+    if on_plan:  # the plan's period (the held plan's knots and samples from period_row, or executed): its segments'
+        for j in range(7):  # accelerations
             span = kt[j + 1] - kt[j]
             kax[j] = piece_acc(SCALAR, kv[j], kv[j + 1], span)
             kay[j] = piece_acc(SCALAR, kvy[j], kvy[j + 1], span)
-    if queue.shape[0] > 0:  # the actuation delay: the oldest command in flight acts, executed from the ego's state
-        push_command(queue, act, on_plan, ax_cmd, ay_cmd, completing, kt, kax, kay)
-        on_plan, ax_cmd, ay_cmd, completing = act[0] > 0.0, act[1], act[2], act[3] > 0.0
-        if on_plan:
-            executed_plan(act, ex, ey, evx, evy, kt, kx, kv, ky, kvy)
-            for j in range(7):
-                span = kt[j + 1] - kt[j]
-                kax[j] = piece_acc(SCALAR, kv[j], kv[j + 1], span)
-                kay[j] = piece_acc(SCALAR, kvy[j], kvy[j + 1], span)
     # --- traffic (behaviours: the leaders by their rule, F) ---
     true_bounds = bounds  # the traffic's chain analysis is on the true states (ClosedLoop.chain)
     if sensing:  # the shield's was on the measured ones

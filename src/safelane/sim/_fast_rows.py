@@ -22,13 +22,15 @@ _INF = np.inf
 #: ``cap`` ``(B, K)``; the running values ``rf`` (:data:`RF`), ``rb`` (:data:`RB`), ``ri`` (:data:`RI`); the
 #: shield's state as :func:`~safelane.shield._fast_period.period_row` holds it (``shield/fast_step.Packed``:
 #: ``plan``, ``history``, ``count``, ``st``, ``sk``), the monitor's snapshot of the last period (``snap_*``) and the
-#: actuation delay's commands in flight, oldest first (``queue`` ``(B, D, _fast_world.COMMAND)``; ``D = 0``: none) —
-#: the shield's own where its delay is the world's — and the monitor's cumulative anchor held with the shield's
-#: sensing on (``anc_f`` ``(B, len(ANCHOR_F))``, ``anc_x``, ``anc_v``, ``anc_b`` ``(B, M)``, ``anc_nc`` ``(B,)``:
-#: ``Packed.anchor``; held where ``has_last``, made anew every period).
+#: actuation delay's commands in flight, oldest first, in the shield's layout (``shield/fast_step.Packed.queue``:
+#: ``q_knots`` ``(B, D, 8)``, ``q_seg`` ``(B, D, 2, 7)``, ``q_acc`` ``(B, D, 2)``, ``q_flag`` ``(B, D, 2)``
+#: completing, aborting; ``D = 0``: none; pushed by ``_fast_period.push_row``) — the shield's own where its delay is
+#: the world's — and the monitor's cumulative anchor held with the shield's sensing on (``anc_f``
+#: ``(B, len(ANCHOR_F))``, ``anc_x``, ``anc_v``, ``anc_b`` ``(B, M)``, ``anc_nc`` ``(B,)``: ``Packed.anchor``; held
+#: where ``has_last``, made anew every period).
 Rows = collections.namedtuple("Rows", (
     "x", "v", "acc", "cap", "rf", "rb", "ri", "plan", "history", "count", "st", "sk", "snap_x", "snap_v", "snap_b",
-    "snap_nc", "queue", "anc_f", "anc_x", "anc_v", "anc_b", "anc_nc",
+    "snap_nc", "q_knots", "q_seg", "q_acc", "q_flag", "anc_f", "anc_x", "anc_v", "anc_b", "anc_nc",
 ))  # fmt: skip
 #: A row's running floats: the ego's state, the row's clock, the results' times and smallest gaps, and the own lane's
 #: leader ``L0``'s state (``l0_x = +inf``: none).
@@ -41,13 +43,14 @@ RB = ("collided", "violated", "leader_collided", "leader_violated", "has_last", 
       "completed")  # fmt: skip
 #: A row's counts: periods that proceeded, hesitated, aborted; invalid proposals; periods run (the draws' counter).
 RI = ("proceed", "hesitate", "abort", "invalid", "step")
-#: The scratch arrays of one row's period (:func:`_scratch`), by name.
+#: The scratch arrays of one row's period (:func:`_scratch`), by name (the row's commands in flight ``q_*`` as
+#: :data:`Rows` holds them, ``(1, D, .)``, and ``segs`` ``(D,)`` each command's segments as the carry takes them).
 Scratch = collections.namedtuple("Scratch", (
     "x2", "v2", "f_acc2", "f_ts2", "f_xe2", "f_ve2", "acc", "cap", "general2", "pp", "sf", "sb", "chain_x", "chain_v",
     "own_x", "own_v", "own_promise", "own_nc", "history", "count", "st", "sk", "plan", "snap_x", "snap_v", "snap_b",
     "snap_nc", "bounds_out", "no_chain", "of", "ob", "knots", "px2", "pv2", "pb2", "kn", "kax", "kay", "scratch",
     "lon_t", "lon_x", "lon_v", "lon_a", "lat_t", "lat_x", "lat_v", "lat_a", "o_t", "o_x", "o_v", "o_a", "lo", "hi",
-    "times", "rf", "rb", "ri", "sw", "own", "queue", "act", "sense",
+    "times", "rf", "rb", "ri", "sw", "own", "q_knots", "q_seg", "q_acc", "q_flag", "segs", "sense",
 ))  # fmt: skip
 #: The scratch of the shield's sensing box in a period (``Scratch.sense``, ``None`` with its sensing off;
 #: ``_fast_loop._sense`` builds
@@ -81,6 +84,7 @@ def _scratch(rows, period_prm, sense):
     k = rows.x.shape[1]
     m = k - 1
     window = rows.history.shape[1]
+    d = rows.q_knots.shape[1]  # commands in flight
     return Scratch(
         np.empty((1, k)), np.empty((1, k)), np.empty((1, k)), np.empty((1, k)), np.empty((1, k)), np.empty((1, k)),
         np.empty(k), np.empty(k), np.zeros((1, k), np.bool_), period_prm.copy(), np.empty((1, len(SIT_F))),
@@ -98,7 +102,8 @@ def _scratch(rows, period_prm, sense):
                  np.empty(5), np.empty(4), np.zeros(2), np.ones(2), np.zeros(2), np.zeros(1)),
         Own(np.empty(1), np.empty(1), np.empty(1), np.empty(1), np.empty(5), np.empty(5), np.empty(5), np.empty(4),
             np.empty(8), np.empty(8), np.empty(8), np.empty(7)),
-        np.empty((rows.queue.shape[1], rows.queue.shape[2])), np.empty(rows.queue.shape[2]),
+        np.empty((1, d, rows.q_knots.shape[2])), np.empty((1, d, 2, rows.q_seg.shape[3])), np.empty((1, d, 2)),
+        np.empty((1, d, 2), np.bool_), np.empty(d, np.int64),
         sense,
     )  # fmt: skip
 
@@ -129,9 +134,7 @@ def _load(rows, b, batch, w):
     for j in range(snap_x.shape[1]):
         snap_x[0, j], snap_v[0, j], snap_b[0, j] = rows.snap_x[b, j], rows.snap_v[b, j], rows.snap_b[b, j]
     snap_nc[0] = rows.snap_nc[b]
-    for i in range(w.queue.shape[0]):
-        for j in range(w.queue.shape[1]):
-            w.queue[i, j] = rows.queue[b, i, j]
+    _move_queue(rows.q_knots, rows.q_seg, rows.q_acc, rows.q_flag, b, w.q_knots, w.q_seg, w.q_acc, w.q_flag, 0)
     _load_anchor(rows, b, w.sense)
     sb[0, 0] = batch.f_connected[b]  # F trusted where the variant listens: connected (it declares itself collaborative)
     sb[0, 2], sb[0, 3], sb[0, 4] = batch.uses[b, 0], batch.uses[b, 1], batch.uses[b, 2]
@@ -164,10 +167,20 @@ def _store(rows, b, w):
     for j in range(snap_x.shape[1]):
         rows.snap_x[b, j], rows.snap_v[b, j], rows.snap_b[b, j] = snap_x[0, j], snap_v[0, j], snap_b[0, j]
     rows.snap_nc[b] = snap_nc[0]
-    for i in range(w.queue.shape[0]):
-        for j in range(w.queue.shape[1]):
-            rows.queue[b, i, j] = w.queue[i, j]
+    _move_queue(w.q_knots, w.q_seg, w.q_acc, w.q_flag, 0, rows.q_knots, rows.q_seg, rows.q_acc, rows.q_flag, b)
     _store_anchor(rows, b, w.sense)
+
+
+@row_function
+def _move_queue(knots, seg, acc, flag, b, to_knots, to_seg, to_acc, to_flag, to_b):
+    """Row ``b``'s commands in flight (``Packed.queue``'s layout) into row ``to_b`` of the ``to_*`` arrays."""
+    for c in range(knots.shape[1]):
+        for j in range(knots.shape[2]):
+            to_knots[to_b, c, j] = knots[b, c, j]
+        for j in range(seg.shape[3]):
+            to_seg[to_b, c, 0, j], to_seg[to_b, c, 1, j] = seg[b, c, 0, j], seg[b, c, 1, j]
+        to_acc[to_b, c, 0], to_acc[to_b, c, 1] = acc[b, c, 0], acc[b, c, 1]
+        to_flag[to_b, c, 0], to_flag[to_b, c, 1] = flag[b, c, 0], flag[b, c, 1]
 
 
 @row_function

@@ -1,8 +1,10 @@
 """The compiled closed loop's world beyond the paper (numba, extra ``fast``; used by ``_fast_loop._period``), row by
 row: the own lane's leader ``L0`` (its profile motion, the ego's exact checks against it: :mod:`.realworld`'s
 :func:`~.realworld.own_lane_checks`, ``ClosedLoop._own_lane``) and the measurement noise of sensing error
-(:func:`~.realworld.measure`), and the actuation delay's queue of commands in flight (``InFlight``, the oldest acting,
-executed from the ego's actual state: :func:`~.realworld.executed_motion`). Loops and indexing only.
+(:func:`~.realworld.measure`), and under the actuation delay the command acting (``InFlight``'s oldest, executed
+from the ego's actual state: :func:`~.realworld.executed_motion`). The commands in flight themselves are the shield's
+queue (``shield/fast_step.Packed.queue``'s layout, pushed by ``_fast_period.push_row``, carried by
+``_fast_period.carried_ego``). Loops and indexing only.
 
 No rule lives here. ``L0``'s motion is :func:`~.traffic.profile_segment` (``_profile_row``) and
 :meth:`~.kinematics.Fleet.switched`'s numbers (:func:`~.kinematics.constant_segment`, :func:`_switched`); its checks
@@ -23,7 +25,6 @@ from ..safety import _compile
 from ..safety import responsible as _responsible  # noqa: F401  (marks advance_core: registered below)
 from ..safety._backend import INF, SCALAR
 from ..safety._fast_base import _max, _min, announce_compiles, row_function
-from ..shield._fast_period import carried_command
 from ._fast_general import _general_pair
 from ._fast_traffic import _profile_row
 from .checks import ego_verdict
@@ -129,56 +130,16 @@ def measure_row(batch, b, step, share, x, v, chain_x, chain_v, l0x, l0v, own_x, 
     return f_x, f_v
 
 
-#: A command's columns in the actuation delay's queue (``_fast_rows.Rows.queue``, ``Scratch.queue``): on the held
-#: plan, its accelerations at the period's start, completing, then the plan's 8 knots and its 7 segments'
-#: accelerations, longitudinal and lateral (:class:`~safelane.shield.command.Command`'s fields for one row).
-COMMAND = 4 + 8 + 7 + 7
-
-
 @row_function
-def push_command(queue, act, on_plan, a_x, a_y, completing, kt, kax, kay):
-    """The actuation delay (``ClosedLoop.step``: ``InFlight.push``): the oldest command in ``queue`` into ``act``,
-    the queue moved on by one and the command issued now (``Command.of``: on the held plan, its knots ``kt`` and
-    segment accelerations ``kax``, ``kay``) appended."""
-    d = queue.shape[0]
-    for j in range(COMMAND):
-        act[j] = queue[0, j]
-    for i in range(d - 1):
-        for j in range(COMMAND):
-            queue[i, j] = queue[i + 1, j]
-    last = d - 1
-    queue[last, 0], queue[last, 1], queue[last, 2] = 1.0 if on_plan else 0.0, a_x, a_y
-    queue[last, 3] = 1.0 if completing else 0.0
-    if on_plan:
-        for j in range(8):
-            queue[last, 4 + j] = kt[j]
-        for j in range(7):
-            queue[last, 12 + j], queue[last, 19 + j] = kax[j], kay[j]
-
-
-@row_function
-def carried_queue(queue, dt, ex, ey, evx, evy):
-    """The ego ``(x, y, vx, vy)`` once the commands in ``queue`` (oldest first) have acted: what the shield carries
-    it over before it decides under its actuation delay (``stages.frame``: ``InFlight.carry``) where the shield's
-    delay is the world's, so that the world's commands in flight are the shield's. Each command by the compiled
-    period's :func:`~safelane.shield._fast_period.carried_command` (an aborting row over its 7 segments, another over
-    one: the segments of length 0 that ``Command.piece`` adds where some other row aborts leave the bits as they
-    are)."""
-    for c in range(queue.shape[0]):
-        aborts = queue[c, 0] > 0.0
-        ex, ey, evx, evy = carried_command(dt, 7 if aborts else 1, aborts, queue[c, 4:12], queue[c, 12:19],
-                                           queue[c, 19:26], queue[c, 1], queue[c, 2], ex, ey, evx, evy)  # fmt: skip
-    return ex, ey, evx, evy
-
-
-@row_function
-def executed_plan(act, ex, ey, evx, evy, kt, kx, kv, ky, kvy):
-    """An aborting command ``act``'s plan executed from the ego's actual state (``executed_motion``:
-    ``Command.plan_samples``, ``segment_states``): its knots into ``kt``, the states there into ``kx, kv, ky, kvy``."""
-    kt[0], kx[0], kv[0], ky[0], kvy[0] = act[4], ex, evx, ey, evy
+def executed_plan(knots, ax_seg, ay_seg, ex, ey, evx, evy, kt, kx, kv, ky, kvy):
+    """An aborting command's plan executed from the ego's actual state (``executed_motion``:
+    ``Command.plan_samples``, ``segment_states``): the command acting, the oldest in flight as
+    ``shield/fast_step.Packed.queue`` holds it (its 8 ``knots`` and its 7 segments' accelerations ``ax_seg``,
+    ``ay_seg``); its knots into ``kt``, the states there into ``kx, kv, ky, kvy``."""
+    kt[0], kx[0], kv[0], ky[0], kvy[0] = knots[0], ex, evx, ey, evy
     for j in range(7):
-        kt[j + 1] = act[5 + j]
-        h = act[5 + j] - act[4 + j]
-        kx[j + 1], kv[j + 1] = advance_core(SCALAR, kx[j], kv[j], act[12 + j], h)
-        ay = act[19 + j]
+        kt[j + 1] = knots[1 + j]
+        h = knots[1 + j] - knots[j]
+        kx[j + 1], kv[j + 1] = advance_core(SCALAR, kx[j], kv[j], ax_seg[j], h)
+        ay = ay_seg[j]
         ky[j + 1], kvy[j + 1] = ky[j] + kvy[j] * h + 0.5 * ay * h * h, kvy[j] + ay * h

@@ -63,7 +63,7 @@ SAME = "the same value"
 #: where they are not. :data:`SAME` for the values: the other field at this field's value.
 WITH = {
     "own_lane": {"own_lane_connected": (0,)},  # L0 alone (a connected own lane's traffic: period by period)
-    # the shield's delay where it is the world's (its commands in flight: the world's queue, _fast_world.carried_queue)
+    # the shield's delay where it is the world's (its commands in flight: the world's queue, _fast_period.carried_ego)
     "shield.actuation_delay_s": {"actuation_delay_s": SAME},
 }
 #: These fields act only through another setting; while the fields named (or the nominal planner: ``"nominal"``)
@@ -365,9 +365,9 @@ def rows_of(start):
     """A :class:`~.step.SimState` at the start of a run (its first period not yet run) as the compiled loop's row
     state (``_fast_rows.Rows``)."""
     from ..shield._fast_period import ANCHOR_F
-    from ..shield.fast_step import Packed
+    from ..shield.command import InFlight
+    from ..shield.fast_step import Packed, _queue_of
     from ._fast_rows import RB, RF, RI, Rows
-    from ._fast_world import COMMAND
 
     packed = Packed.of(start.shield)  # the shield's state as its compiled period holds it
     n, k = start.x.shape
@@ -386,13 +386,13 @@ def rows_of(start):
     if start.in_flight is not None and any(cmd.rows.size or cmd.a_x.any() or cmd.a_y.any() or cmd.completing.any()
                                            for cmd in start.in_flight.commands):  # fmt: skip
         raise ValueError("rows_of: a run starts with idle commands in flight (InFlight.idle)")
-    queue = np.zeros((n, 0 if start.in_flight is None else len(start.in_flight.commands), COMMAND))
+    queue = _queue_of(InFlight(commands=()) if start.in_flight is None else start.in_flight, n)  # Packed.queue's
     if packed.anchor is not None:
         raise ValueError("rows_of: a run starts with a monitor's anchor (it starts without a last period)")
     anchor = (np.zeros((n, len(ANCHOR_F))), snap.copy(), snap.copy(), snap.copy(), np.zeros(n, np.int64))
     return Rows(c(start.x), c(start.v), np.zeros((n, k)), np.full((n, k), np.inf), rf, rb,
                 np.zeros((n, len(RI)), np.int64), c(packed.plan), c(packed.history), c(packed.count), c(packed.st),
-                c(packed.sk), snap, snap.copy(), snap.copy(), np.zeros(n, np.int64), queue, *anchor)  # fmt: skip
+                c(packed.sk), snap, snap.copy(), snap.copy(), np.zeros(n, np.int64), *queue, *anchor)  # fmt: skip
 
 
 def _slow(sim) -> bool:
