@@ -275,6 +275,22 @@ def _step_rows(prm, batch, rows, proposal, behaviour, finite, w):
 
 
 @row_function
+def _ego_pieces(lon_t, lon_x, lon_v, lon_a, lat_t, lat_x, lat_v, lat_a, dt, ex, evx, l_ts, l_xe, l_ve, l_acc, ey, ey1,
+                evy, evy1, ay_cmd):  # fmt: skip
+    """The ego's motion over the period off its held plan, as the checks take it: longitudinal ``(t, x, v, a)`` knots
+    ``0, l_ts, dt`` (constant ``l_acc`` until ``l_ts``, at rest after: ``kinematics.constant_segment``), lateral one
+    free segment ``0, dt`` at ``ay_cmd`` — into the pieces' arrays (what the target lane's pairs and ``L0``'s read)."""
+    lon_t[0], lon_t[1], lon_t[2] = 0.0, l_ts, dt
+    lon_x[0], lon_x[1], lon_x[2] = ex, l_xe, l_xe
+    lon_v[0], lon_v[1], lon_v[2] = evx, l_ve, l_ve
+    lon_a[0], lon_a[1] = l_acc, 0.0
+    lat_t[0], lat_t[1] = 0.0, dt
+    lat_x[0], lat_x[1] = ey, ey1
+    lat_v[0], lat_v[1] = evy, evy1
+    lat_a[0] = ay_cmd
+
+
+@row_function
 def _draw(batch, b, step, slot, salt):
     """The closed loop's counter-based draw of row ``b`` (``rng.counter_uniform(seed, scenario id, step, slot, salt)``:
     promise violations, salts 7 and 8)."""
@@ -469,14 +485,8 @@ def _period(prm, batch, b, w, den, ax_n, ay_n):
                 lo[n_level], hi[n_level] = _general_pair(kt, kx, kv, kax[:7], m_t, m_x, m_v, m_a, kt, ky, kvy,
                                                          kay[:7], level, scratch)  # fmt: skip
             else:
-                lon_t[0], lon_t[1], lon_t[2] = 0.0, l_ts, dt
-                lon_x[0], lon_x[1], lon_x[2] = ex, l_xe, l_xe
-                lon_v[0], lon_v[1], lon_v[2] = evx, l_ve, l_ve
-                lon_a[0], lon_a[1] = l_acc, 0.0
-                lat_t[0], lat_t[1] = 0.0, dt
-                lat_x[0], lat_x[1] = ey, ey1
-                lat_v[0], lat_v[1] = evy, evy1
-                lat_a[0] = ay_cmd
+                _ego_pieces(lon_t, lon_x, lon_v, lon_a, lat_t, lat_x, lat_v, lat_a, dt, ex, evx, l_ts, l_xe, l_ve,
+                            l_acc, ey, ey1, evy, evy1, ay_cmd)  # fmt: skip
                 lo[n_level], hi[n_level] = _general_pair(lon_t, lon_x, lon_v, lon_a, m_t, m_x, m_v, m_a, lat_t,
                                                          lat_x, lat_v, lat_a, level, scratch)  # fmt: skip
         hit = hit or (lo[1] < length and hi[1] > -length)
@@ -515,14 +525,8 @@ def _period(prm, batch, b, w, den, ax_n, ay_n):
             o_hit, o_close, o_low = own_checks(own, n_o, (kt, kx, kv, kax[:7]), (kt, ky, kvy, kay[:7]), prm[23],
                                                length, p_m, scratch)  # fmt: skip
         else:
-            lon_t[0], lon_t[1], lon_t[2] = 0.0, l_ts, dt
-            lon_x[0], lon_x[1], lon_x[2] = ex, l_xe, l_xe
-            lon_v[0], lon_v[1], lon_v[2] = evx, l_ve, l_ve
-            lon_a[0], lon_a[1] = l_acc, 0.0
-            lat_t[0], lat_t[1] = 0.0, dt
-            lat_x[0], lat_x[1] = ey, ey1
-            lat_v[0], lat_v[1] = evy, evy1
-            lat_a[0] = ay_cmd
+            _ego_pieces(lon_t, lon_x, lon_v, lon_a, lat_t, lat_x, lat_v, lat_a, dt, ex, evx, l_ts, l_xe, l_ve, l_acc,
+                        ey, ey1, evy, evy1, ay_cmd)  # fmt: skip
             o_hit, o_close, o_low = own_checks(own, n_o, (lon_t, lon_x, lon_v, lon_a), (lat_t, lat_x, lat_v, lat_a),
                                                prm[23], length, p_m, scratch)  # fmt: skip
         o_close = o_close and not completed
