@@ -22,6 +22,7 @@ nothing else in the closed loop reads the absolute time — as long as ``L(N+1)`
 from __future__ import annotations
 
 import dataclasses
+import math
 from collections.abc import Sequence
 
 import numpy as np
@@ -252,8 +253,9 @@ class StepOutcome:
 def check_action(action, shape: tuple[int, ...], accepted: tuple[int, ...] | None = None) -> np.ndarray:
     """``action`` as a float array of ``shape``; an :class:`~safelane.errors.InputError` naming the action, its
     shape and the expected one otherwise (``accepted``: the shape the caller takes, named in the message)."""
-    if type(action) is np.ndarray and action.dtype == np.float64 and action.shape in (shape, accepted):
-        return action.reshape(shape)  # nothing to check or convert (the envs check, then hand the array to the task)
+    if type(action) is np.ndarray and action.dtype.kind == "f" and action.shape in (shape, accepted):
+        # nothing to check (the envs check, then hand the array to the task); a float32 policy's action converted
+        return action.astype(np.float64, copy=False).reshape(shape)
     from ..errors import InputError
 
     want = accepted or shape
@@ -262,7 +264,7 @@ def check_action(action, shape: tuple[int, ...], accepted: tuple[int, ...] | Non
     except (TypeError, ValueError) as exc:
         raise InputError(f"action must be numbers (a_x, a_y) in m/s² of shape {want}; got {action!r}",
                          "action") from exc  # fmt: skip
-    if arr.size != int(np.prod(shape)) or arr.shape not in (shape, want):
+    if arr.size != math.prod(shape) or arr.shape not in (shape, want):
         text = np.array2string(np.asarray(arr), threshold=8, precision=3)
         raise InputError(f"action must have shape {want}: (a_x, a_y) in m/s²; got shape {arr.shape}: {text}",
                          "action")  # fmt: skip
@@ -352,8 +354,8 @@ class LaneChangeTask:
         obs, outcome = np.empty((n, len(FEATURE_NAMES)), np.float32), np.empty((n, len(OUTCOME)))
         behaviour, finite = np.empty(n, np.int64), np.empty(n, np.bool_)
         self.steps += 1
-        env_step_kernel(loop.prm_vec, loop.period_prm, loop.batch, rows, proposal, self._env_values, self._view,
-                        self.steps, obs, outcome, behaviour, finite)  # fmt: skip
+        env_step_kernel(loop.prm_vec, loop.period_prm, tuple(loop.batch), tuple(rows), proposal, self._env_values,
+                        self._view, self.steps, obs, outcome, behaviour, finite)  # fmt: skip
         loop.check_finite(rows, finite)
         return StepOutcome(
             obs=obs,
