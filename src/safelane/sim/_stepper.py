@@ -56,7 +56,8 @@ class StepState:
 
 class Stepper:
     """:class:`~.step.ClosedLoop`'s interface for stepping (``initial_state``, ``step``, ``observe``) on the compiled
-    period (``_fast_loop.step_kernel``): the envs' loop, where :func:`steps_compiled` says it runs. The nominal
+    period (``_fast_loop.step_kernel``): the envs' loop, where :func:`steps_compiled` says it runs, and
+    ``simulate_batch``'s, which steps in place (:meth:`advance`). The nominal
     proposals are the planner's (the envs' ``ActionPlanner``: the agent's actions), passed to the kernel as they are;
     the state's arithmetic is the closed loop's, bit for bit (``tests/test_env_compiled.py``)."""
 
