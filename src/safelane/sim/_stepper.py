@@ -106,12 +106,16 @@ class Stepper:
 
     def step(self, s: StepState):
         """:meth:`~.step.ClosedLoop.step`: the nominal planner's proposals on this state's observation, one period."""
+        obs = self.observe(s)
+        new, behaviour = self.step_with(s, *self._proposal(obs))
+        return new, obs, behaviour
+
+    def _proposal(self, obs) -> list[np.ndarray]:
+        """The nominal planner's ``[a_x, a_y]`` on ``obs``, checked as the shield checks it (errors name the
+        planner)."""
         from ..shield.proposals import proposal_arrays
 
-        obs = self.observe(s)
-        proposal = proposal_arrays(self.sim.planner_name, self.sim.nominal(obs, self.sim.prm), len(self.sim.b))
-        new, behaviour = self.step_with(s, *proposal)  # (checked as the shield checks it: errors name the planner)
-        return new, obs, behaviour
+        return proposal_arrays(self.sim.planner_name, self.sim.nominal(obs, self.sim.prm), len(self.sim.b))
 
     def step_with(self, s: StepState, a_x, a_y):
         """One period with the nominal proposals ``a_x``, ``a_y`` ``(B,)`` given (a planner that does not read the
@@ -124,11 +128,8 @@ class Stepper:
         returned — for a loop that keeps no earlier state (``engine.simulate_batch``'s), which then does not copy the
         whole state every period as :meth:`step` does. The observation owns its arrays (:meth:`observe_owned`), so the
         planner, a trace or the recorded observations see what :meth:`step` would have shown them."""
-        from ..shield.proposals import proposal_arrays
-
         obs = self.observe_owned(s)
-        proposal = proposal_arrays(self.sim.planner_name, self.sim.nominal(obs, self.sim.prm), len(self.sim.b))
-        return s, obs, self._period(s.rows, *proposal)
+        return s, obs, self._period(s.rows, *self._proposal(obs))
 
     def observe_owned(self, s: StepState):
         """:meth:`observe` with every array the observation shares with ``s``'s rows copied (the rest, e.g. the
