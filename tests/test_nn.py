@@ -78,6 +78,23 @@ def test_plan_speed_change_hand_computed():
     assert np.all(plan_speed_change(np.zeros((3, 0)), np.ones(3), 0.1) == 0.0)
 
 
+@pytest.mark.parametrize("horizon", [1, 3, 10, 25])
+def test_plan_speed_change_is_the_running_sum_bit_for_bit(horizon):
+    # Horizons of 0, 1, 4, 10 and 20 periods at dt = 0.1 (some past a short plan, two the same) on random plans: the
+    # change is the sequential running sum's (a plain loop here, np.cumsum's order), floored, to the last bit.
+    rng = np.random.default_rng(horizon)
+    plan, v0 = rng.uniform(-9.0, 4.0, (500, horizon)), rng.uniform(0.0, 40.0, 500)
+    times = (0.04, 0.1, 0.35, 1.0, 1.0, 2.0)
+    running, expected = np.zeros(500), np.zeros((500, len(times)))
+    for k in range(horizon):
+        running = running + plan[:, k] if k else plan[:, 0].copy()
+        for j, t in enumerate(times):
+            if min(round(t / 0.1), horizon) == k + 1:
+                expected[:, j] = np.maximum(0.1 * running, -v0)
+    out = plan_speed_change(plan, v0, 0.1, times)
+    assert out.tobytes() == expected.tobytes()
+
+
 # ---------------------------------------------------------------- NumPy forward pass
 @pytest.mark.parametrize("activation", ["tanh", "relu"])
 def test_outputs_bounded_and_protocol(activation):

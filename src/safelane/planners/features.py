@@ -85,10 +85,19 @@ def plan_speed_change(l1_plan: np.ndarray, v_x_l: np.ndarray, dt: float, times_s
     out = np.zeros((batch, len(times_s)))
     if horizon == 0:
         return out
-    running = np.cumsum(plan, axis=1)  # (a sequential sum: the compiled envs' running sum gives the same bits)
-    for j, steps in enumerate(plan_steps(dt, horizon, times_s)):
-        if steps > 0:
-            out[:, j] = planned_change(ARRAY, running[:, steps - 1], dt, v0)
+    # The running sum up to the last period a horizon reads, column by column: the sequential sum np.cumsum makes
+    # (and the compiled envs' running sum), the same bits, without summing the rest of the plan; each horizon's
+    # change computed once however many of times_s share its number of periods.
+    steps = plan_steps(dt, horizon, times_s)
+    wanted = set(steps)
+    change, running = {}, None
+    for col in range(max(steps, default=0)):
+        running = plan[:, 0].copy() if running is None else np.add(running, plan[:, col], out=running)
+        if col + 1 in wanted:
+            change[col + 1] = planned_change(ARRAY, running, dt, v0)
+    for j, k in enumerate(steps):
+        if k > 0:
+            out[:, j] = change[k]
     return out
 
 

@@ -56,7 +56,8 @@ class StepState:
 
 class Stepper:
     """:class:`~.step.ClosedLoop`'s interface for stepping (``initial_state``, ``step``, ``observe``) on the compiled
-    period (``_fast_loop.step_kernel``): the envs' loop, where :func:`steps_compiled` says it runs. The nominal
+    period (``_fast_loop.step_kernel``): the envs' loop, where :func:`steps_compiled` says it runs, and
+    ``simulate_batch``'s, which steps in place (:meth:`advance`). The nominal
     proposals are the planner's (the envs' ``ActionPlanner``: the agent's actions), passed to the kernel as they are;
     the state's arithmetic is the closed loop's, bit for bit (``tests/test_env_compiled.py``)."""
 
@@ -105,26 +106,54 @@ class Stepper:
 
     def step(self, s: StepState):
         """:meth:`~.step.ClosedLoop.step`: the nominal planner's proposals on this state's observation, one period."""
+        obs = self.observe(s)
+        new, behaviour = self.step_with(s, *self._proposal(obs))
+        return new, obs, behaviour
+
+    def _proposal(self, obs) -> list[np.ndarray]:
+        """The nominal planner's ``[a_x, a_y]`` on ``obs``, checked as the shield checks it (errors name the
+        planner)."""
         from ..shield.proposals import proposal_arrays
 
-        obs = self.observe(s)
-        proposal = proposal_arrays(self.sim.planner_name, self.sim.nominal(obs, self.sim.prm), len(self.sim.b))
-        new, behaviour = self.step_with(s, *proposal)  # (checked as the shield checks it: errors name the planner)
-        return new, obs, behaviour
+        return proposal_arrays(self.sim.planner_name, self.sim.nominal(obs, self.sim.prm), len(self.sim.b))
 
     def step_with(self, s: StepState, a_x, a_y):
         """One period with the nominal proposals ``a_x``, ``a_y`` ``(B,)`` given (a planner that does not read the
         observation: the envs' actions): ``(state', behaviour)``; ``s`` is not changed."""
+        rows = self.rows_after(s)
+        return StepState(rows), self._period(rows, a_x, a_y)
+
+    def advance(self, s: StepState):
+        """:meth:`step` in place: ``s``'s rows become the state after the period, and ``(s, obs, behaviour)`` is
+        returned — for a loop that keeps no earlier state (``engine.simulate_batch``'s), which then does not copy the
+        whole state every period as :meth:`step` does. The observation owns its arrays (:meth:`observe_owned`), so the
+        planner, a trace or the recorded observations see what :meth:`step` would have shown them."""
+        obs = self.observe_owned(s)
+        return s, obs, self._period(s.rows, *self._proposal(obs))
+
+    def observe_owned(self, s: StepState):
+        """:meth:`observe` with every array the observation shares with ``s``'s rows copied (the rest, e.g. the
+        batch's own arrays or ``l1_plan``, made anew each period, as they are): an observation that stays what it was
+        while :meth:`advance` steps the rows in place."""
+        obs = self.observe(s)
+        held = [a for a in s.rows if a.size]
+        owned = {f.name: value.copy() for f in dataclasses.fields(obs)
+                 if isinstance(value := getattr(obs, f.name), np.ndarray)
+                 and any(np.may_share_memory(value, a) for a in held)}  # fmt: skip
+        return dataclasses.replace(obs, **owned)
+
+    def _period(self, rows, a_x, a_y) -> np.ndarray:
+        """One period of ``rows`` (advanced in place) with the nominal proposals ``a_x``, ``a_y``: the behaviour
+        codes ``(B,)``."""
         from ._fast_loop import step_kernel
 
         proposal = np.empty((len(a_x), 2))
         proposal[:, 0], proposal[:, 1] = a_x, a_y
-        rows = self.rows_after(s)
         behaviour, finite = np.empty(len(a_x), np.int64), np.empty(len(a_x), np.bool_)
         step_kernel(self.prm_vec, self.period_prm, self.batch, rows, proposal, behaviour, finite,
                     sense_scratch(self.prm_vec, rows.x.shape[1]))
         self.check_finite(rows, finite)
-        return StepState(rows), behaviour
+        return behaviour
 
     def splice(self, rows: np.ndarray, part: Stepper) -> None:
         """Rows ``rows`` of the batch become ``part``'s rows, in place: ``part`` steps ``len(rows)`` other scenarios

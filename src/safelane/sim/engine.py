@@ -149,9 +149,12 @@ def simulate_batch(
         steps = track(steps, f"simulating {len(batch)} scenarios")
     # The batch is elementwise NumPy plus small matrix products (NN planners): BLAS threads only oversubscribe
     # the cores (and the worker processes), so they are limited to one for the run.
+    # The loop keeps no earlier state: the compiled periods advance the rows in place (Stepper.advance), where
+    # Stepper.step would copy the whole state every period to keep the state before it.
+    advance = sim.advance if isinstance(sim, Stepper) else sim.step
     with threadpool_limits(limits=1, user_api="blas"):
         for _ in steps:
-            state, obs, behaviour = sim.step(state)
+            state, obs, behaviour = advance(state)
             if record_observations:
                 observations.append(obs)
             if trace:

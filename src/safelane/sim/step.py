@@ -207,9 +207,8 @@ class ClosedLoop:
     def observe(self, s: SimState) -> Observation:
         b = self.b
         ex, ey, evx, evy = s.ego
-        l1_plan = np.where(self.shares_plan[:, None], s.acc[:, 1:2], 0.0) * np.ones(
-            (1, self.cfg.l1_plan_steps)
-        )
+        l1_plan = np.empty((len(b), self.cfg.l1_plan_steps))  # L1's last acceleration, held over the plan
+        l1_plan[:] = np.where(self.shares_plan[:, None], s.acc[:, 1:2], 0.0)
         return Observation(
             p_x=ex,
             p_y=ey,
