@@ -152,15 +152,35 @@ def leaders_gap(xp, u, p, v, lead, l0, l1, T, nothing, lead_margin, own_margin, 
     return xp.minimum(g0, g1), g1, g0
 
 
+def member_switch(xp, p, v, lead, T, margin_k, prm, tol):
+    """``u_k``: the paper's closed form against the followed leader ``k`` on ``[0, T]``
+    (:func:`~.longitudinal.longitudinal_core`), an upper bound on member ``G(·, k)``'s best switch time."""
+    return longitudinal_core(xp, p, v, lead[0], lead[1], lead[2], T, margin_k, prm, tol)[1]
+
+
+def needs_search(g_hi, g_lo, tol):
+    """Whether the bisection must run: the closed form breaks a leader constraint (``g_hi``, the gap at ``u_k``)
+    that ``u = 0`` keeps (``g_lo``)."""
+    return (g_hi < -tol) & (g_lo >= -tol)
+
+
 def member_bounds(xp, p, v, lead, l0, l1, T, nothing, lead_margin, own_margin, margin_k, prm, tol):
-    """The start of member ``G(·, k)`` (``lead`` the followed leader ``k``, ``margin_k`` its margin): ``(u_k, g_lo,
-    search)`` — the paper's closed form against ``k`` on ``[0, T]`` (:func:`~.longitudinal.longitudinal_core`, an
-    upper bound on the best ``u``), both leaders' gap at ``u = 0``, and whether the bisection must run (the closed
-    form breaks a leader constraint that ``u = 0`` keeps)."""
-    u_k = longitudinal_core(xp, p, v, lead[0], lead[1], lead[2], T, margin_k, prm, tol)[1]
-    g_hi = leaders_gap(xp, u_k, p, v, lead, l0, l1, T, nothing, lead_margin, own_margin, prm)[0]
-    g_lo = leaders_gap(xp, 0.0 * u_k, p, v, lead, l0, l1, T, nothing, lead_margin, own_margin, prm)[0]
-    return u_k, g_lo, (g_hi < -tol) & (g_lo >= -tol)
+    """The start of member ``G(·, k)`` (``lead`` the followed leader ``k``, ``margin_k`` its margin): ``(u_k, lo, hi,
+    search)`` — :func:`member_switch`, :func:`leaders_gap`'s triple at ``u = 0`` (taken at ``0 · u_k``) and at
+    ``u_k``, and :func:`needs_search`."""
+    u_k = member_switch(xp, p, v, lead, T, margin_k, prm, tol)
+    hi = leaders_gap(xp, u_k, p, v, lead, l0, l1, T, nothing, lead_margin, own_margin, prm)
+    lo = leaders_gap(xp, 0.0 * u_k, p, v, lead, l0, l1, T, nothing, lead_margin, own_margin, prm)
+    return u_k, lo, hi, needs_search(hi[0], lo[0], tol)
+
+
+def known_gaps(u_k, g_lo, g_hi, tol):
+    """Where :func:`member_parts`' leader gaps at its switch time are :func:`member_bounds`' already, so that they are
+    not computed twice: ``(at_k, at_0)`` — the gaps at ``u_k`` where the member keeps ``u_k`` (``u = 0`` and ``u_k``
+    both keep the leader constraints: no search), those at ``u = 0`` where ``u = 0`` breaks them and they were taken
+    at ``0 · u_k = +0.0`` exactly (``u_k`` positive and finite; at ``0 · inf`` or ``−0.0`` they are taken again at
+    ``0``). Elsewhere (a search, a NaN) the caller takes them at the member's switch time."""
+    return (g_lo >= -tol) & (g_hi >= -tol), (g_lo < -tol) & (u_k > 0.0) & (u_k < INF)
 
 
 def _search(xp, u_hi, p, v, lead, l0, l1, T, nothing, lead_margin, own_margin, prm, tol):
@@ -177,12 +197,12 @@ def _search(xp, u_hi, p, v, lead, l0, l1, T, nothing, lead_margin, own_margin, p
     return lo
 
 
-def member_parts(xp, u, g_lo, p, v, lead, l0, l1, T, nothing, lead_margin, own_margin, f_p, f_v, aggressive,
-                 follow_margin, prm, tol):  # fmt: skip
+def member_parts(xp, u, g_lo, gaps, p, v, lead, T, nothing, f_p, f_v, aggressive, follow_margin, prm, tol):
     """Member ``G(u, k)`` checked at its switch time ``u`` (``u_k`` or the search's; 0 where even ``u = 0`` breaks a
-    leader constraint, ``g_lo < -tol``): the fields :data:`MEMBER`."""
+    leader constraint, ``g_lo < -tol``), ``gaps`` :func:`leaders_gap`'s triple at that switch time: the fields
+    :data:`MEMBER`."""
     u = xp.where(g_lo >= -tol, u, 0.0)
-    g, g1, g0 = leaders_gap(xp, u, p, v, lead, l0, l1, T, nothing, lead_margin, own_margin, prm)
+    g, g1, g0 = gaps
     lead_ok = g >= -tol
     fg = xp.where(nothing, INF, follower_gap_core(xp, u, p, v, lead, f_p, f_v, aggressive, follow_margin, T, prm))
     follow_ok = fg >= -tol
@@ -239,14 +259,24 @@ def own_lane_core(
                  for x, y in zip((l1_p, l1_v, l1_decel), (l0_p, l0_v, l0_decel), strict=True))  # fmt: skip
     lm, om = two(lead_margin), two(own_margin)
     margin_k = np.concatenate([np.broadcast_to(lead_margin, shape), np.broadcast_to(own_margin, shape)])
-    u_k, g_lo, search = member_bounds(xp, p, v, lead, l0, l1, T2, nothing, lm, om, margin_k, prm, tol)
+    u_k, lo, hi, search = member_bounds(xp, p, v, lead, l0, l1, T2, nothing, lm, om, margin_k, prm, tol)
+    g_lo = lo[0]
     u = u_k.copy()
     rows = np.flatnonzero(search)
     if rows.size:  # where the closed form breaks the other leader: search [0, u_k], keeping a feasible lower end
         sub = lambda vehicle: tuple(a[rows] for a in vehicle)  # noqa: E731
         u[rows] = _search(xp, u_k[rows], p[rows], v[rows], sub(lead), sub(l0), sub(l1), T2[rows], nothing[rows],
                           lm[rows], om[rows], prm, tol)  # fmt: skip
-    both = member_parts(xp, u, g_lo, p, v, lead, l0, l1, T2, nothing, lm, om, two(f_p), two(f_v), two(aggressive),
+    at_k, at_0 = known_gaps(u_k, g_lo, hi[0], tol)
+    gaps = tuple(np.where(at_k, at_u_k, at_0_) for at_u_k, at_0_ in zip(hi, lo, strict=True))
+    rows = np.flatnonzero(~(at_k | at_0))
+    if rows.size:  # the gaps at the switch time where member_bounds did not take them there
+        sub = lambda vehicle: tuple(a[rows] for a in vehicle)  # noqa: E731
+        again = leaders_gap(xp, np.where(g_lo[rows] >= -tol, u[rows], 0.0), p[rows], v[rows], sub(lead), sub(l0),
+                            sub(l1), T2[rows], nothing[rows], lm[rows], om[rows], prm)  # fmt: skip
+        for into, part in zip(gaps, again, strict=True):
+            into[rows] = part
+    both = member_parts(xp, u, g_lo, gaps, p, v, lead, T2, nothing, two(f_p), two(f_v), two(aggressive),
                         two(follow_margin), prm, tol)  # fmt: skip
     exists, own, *chosen = choose_member(xp, tuple(a[:b] for a in both), tuple(a[b:] for a in both))
     parts = dict(zip(CHOSEN, chosen, strict=True))
@@ -259,5 +289,5 @@ def own_lane_core(
 
 # The closed forms compiled into the shield's kernel (shield/_fast_own.py, through safety/_compile.py): the same
 # functions, evaluated row by row.
-jitable(_finite, leader_gap_core, follower_gap_core, leaders_gap, member_bounds, _search, member_parts, choose_member,
-        own_period)  # fmt: skip
+jitable(_finite, leader_gap_core, follower_gap_core, leaders_gap, member_switch, needs_search, member_bounds,
+        known_gaps, _search, member_parts, choose_member, own_period)  # fmt: skip

@@ -29,7 +29,16 @@ from ..safety import _compile
 from ..safety._backend import FEASIBILITY_TOL_M, SCALAR, Limits
 from ..safety._fast_base import _B, _F, announce_compiles, kernel, row_function
 from ..safety.lateral import LATERAL_TOL_M, lateral_core
-from ..safety.own_lane import _search, choose_member, member_bounds, member_parts, own_period
+from ..safety.own_lane import (
+    _search,
+    choose_member,
+    known_gaps,
+    leaders_gap,
+    member_parts,
+    member_switch,
+    needs_search,
+    own_period,
+)
 from .decide import candidate_period, own_margin
 
 _compile.register_rows()
@@ -52,10 +61,25 @@ _OWN_LANE_SIGNATURE = types.void(*(_F,) * 9, _B, *(_F,) * 6, *(types.float64,) *
 @row_function
 def _member(p, v, lead, l0, l1, T, nothing, lm, om, margin_k, fp, fv, aggr, fm, prm, tol):
     """One member ``G(·, k)`` of one row (``lead``: the followed leader ``k``): ``own_lane_core``'s stacked pass for
-    that row and ``k``, the bisection only where :func:`~safelane.safety.own_lane.member_bounds` asks for it."""
-    u_k, g_lo, search = member_bounds(SCALAR, p, v, lead, l0, l1, T, nothing, lm, om, margin_k, prm, tol)
-    u = _search(SCALAR, u_k, p, v, lead, l0, l1, T, nothing, lm, om, prm, tol) if search else u_k
-    return member_parts(SCALAR, u, g_lo, p, v, lead, l0, l1, T, nothing, lm, om, fp, fv, aggr, fm, prm, tol)
+    that row and ``k`` (:func:`~safelane.safety.own_lane.member_bounds`' pieces), the bisection only where
+    :func:`~safelane.safety.own_lane.needs_search` asks for it, and the leaders' gaps at ``u_k`` only where ``u = 0``
+    keeps them (the same bits: elsewhere nothing reads them)."""
+    u_k = member_switch(SCALAR, p, v, lead, T, margin_k, prm, tol)
+    lo = leaders_gap(SCALAR, 0.0 * u_k, p, v, lead, l0, l1, T, nothing, lm, om, prm)
+    # The gaps at u_k only where u = 0 keeps the leader constraints (elsewhere no search and no use for them: lo
+    # stands in, which needs_search and known_gaps read as "no")
+    hi = lo if lo[0] < -tol else leaders_gap(SCALAR, u_k, p, v, lead, l0, l1, T, nothing, lm, om, prm)
+    u = u_k
+    if needs_search(hi[0], lo[0], tol):
+        u = _search(SCALAR, u_k, p, v, lead, l0, l1, T, nothing, lm, om, prm, tol)
+    at_k, at_0 = known_gaps(u_k, lo[0], hi[0], tol)
+    if at_k:
+        gaps = hi
+    elif at_0:
+        gaps = lo
+    else:
+        gaps = leaders_gap(SCALAR, u if lo[0] >= -tol else 0.0, p, v, lead, l0, l1, T, nothing, lm, om, prm)
+    return member_parts(SCALAR, u, lo[0], gaps, p, v, lead, T, nothing, fp, fv, aggr, fm, prm, tol)
 
 
 @row_function
@@ -66,7 +90,9 @@ def _own_lane(p, py, v, vy, p1, v1, d1, fp, fv, aggr, p0, v0, d0, lm, fm, om, pr
     nothing = T <= 0.0
     l1, l0 = (p1, v1, d1), (p0, v0, d0)
     via_l1 = _member(p, v, l1, l0, l1, T, nothing, lm, om, lm, fp, fv, aggr, fm, prm, tol)
-    via_l0 = _member(p, v, l0, l0, l1, T, nothing, lm, om, om, fp, fv, aggr, fm, prm, tol)
+    # Where following L1 evades, choose_member takes that member whatever the other's fields: L0's is not needed
+    # (the array path computes it and discards it; the same bits)
+    via_l0 = via_l1 if via_l1[0] else _member(p, v, l0, l0, l1, T, nothing, lm, om, om, fp, fv, aggr, fm, prm, tol)
     # r: exists, follows_own, lead_ok, follow_ok, t_x1, v_switch, t_brake_end, follows_leader, lead_gap, follow_gap,
     # own_gap
     r = choose_member(SCALAR, via_l1, via_l0)
