@@ -91,6 +91,10 @@ jitable(_where, _maximum, _minimum, _sqrt, _clip, _div, _stop_dist, _stop_time)
 class _Scalar:
     """Python-float implementation (inputs are ``float``/``bool``); numba's row backend (:mod:`._compile`)."""
 
+    #: One row at a time: a closed form may skip a term that a ``where`` would discard there (``ARRAY``: ``False``,
+    #: every element computes every term). The same bits either way; a kernel's row then skips the work.
+    row = True
+
     where = staticmethod(_where)
     maximum = staticmethod(_maximum)
     minimum = staticmethod(_minimum)
@@ -107,6 +111,8 @@ OPERATIONS = ("where", "maximum", "minimum", "sqrt", "clip", "div", "stop_dist",
 
 class _Array:
     """NumPy implementation (inputs are broadcastable float64/bool arrays)."""
+
+    row = False
 
     where = staticmethod(np.where)
     maximum = staticmethod(np.maximum)

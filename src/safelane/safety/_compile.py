@@ -22,6 +22,7 @@ from numba.extending import (
     NativeValue,
     models,
     overload,
+    overload_attribute,
     overload_method,
     register_model,
     typeof_impl,
@@ -102,3 +103,9 @@ def register_rows() -> None:
 register_rows()
 for _name in _backend.OPERATIONS:
     overload_method(RowBackend, _name)(_method(getattr(_backend._Scalar, _name)))
+
+
+@overload_attribute(RowBackend, "row")
+def _row(xp):
+    """``SCALAR.row``: ``True``, a constant of the kernel (``_backend._Scalar.row``)."""
+    return lambda xp: True

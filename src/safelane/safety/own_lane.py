@@ -148,7 +148,10 @@ def leaders_gap(xp, u, p, v, lead, l0, l1, T, nothing, lead_margin, own_margin, 
     """Both leader constraints at switch time ``u``: ``(min(g0, g1), g1, g0)`` with ``g0`` the gap to ``L0`` over
     ``[0, ∞)`` and ``g1`` that to ``L1`` over ``[0, T]`` (``+inf`` where there is nothing to evade)."""
     g0 = leader_gap_core(xp, u, p, v, lead, l0, own_margin, INF, prm)
-    g1 = xp.where(nothing, INF, leader_gap_core(xp, u, p, v, lead, l1, lead_margin, T, prm))
+    if xp.row and nothing:  # (a row skips the gap the where below would discard)
+        g1 = INF
+    else:
+        g1 = xp.where(nothing, INF, leader_gap_core(xp, u, p, v, lead, l1, lead_margin, T, prm))
     return xp.minimum(g0, g1), g1, g0
 
 
@@ -204,7 +207,10 @@ def member_parts(xp, u, g_lo, gaps, p, v, lead, T, nothing, f_p, f_v, aggressive
     u = xp.where(g_lo >= -tol, u, 0.0)
     g, g1, g0 = gaps
     lead_ok = g >= -tol
-    fg = xp.where(nothing, INF, follower_gap_core(xp, u, p, v, lead, f_p, f_v, aggressive, follow_margin, T, prm))
+    if xp.row and nothing:  # (a row skips the gap the where below would discard)
+        fg = INF
+    else:
+        fg = xp.where(nothing, INF, follower_gap_core(xp, u, p, v, lead, f_p, f_v, aggressive, follow_margin, T, prm))
     follow_ok = fg >= -tol
     V, t2, match = profile(xp, u, p, v, lead[0], lead[1], lead[2], prm)
     return lead_ok & follow_ok, lead_ok, follow_ok, u, V, t2, match, g1, fg, g0
