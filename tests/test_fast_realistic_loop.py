@@ -161,8 +161,8 @@ def test_the_monitors_anchor_breaches_in_some_rows(monkeypatch):
 def test_the_compiled_period_stepped_from_python_runs_the_shields_sensing_and_delay(monkeypatch):
     """A nominal planner the loop does not run (a subclass of the expert) steps the compiled period from Python
     (``sim/_stepper.Stepper``, engine ``"compiled period"``, its final view ``finish_kernel``): the realistic preset's
-    table period by period. The envs' step runs the realistic world's side but still refuses the shield's sensing and
-    delay (``ENV_WORLD``: never compared with the NumPy env there)."""
+    table period by period. The envs' step runs it too (``tests/test_env_realworld.py`` compares it with the NumPy
+    env)."""
     mine = type("Mine", (ExpertPlanner,), {})(**PRESET.planner)
     kwargs = dict(params=REALISTIC, nominal=mine, config=_preset(**NEAR_L0, **WIDE))
     batch = _mixed(3, 10.0, per_variant=20, seed=9)
@@ -175,10 +175,7 @@ def test_the_compiled_period_stepped_from_python_runs_the_shields_sensing_and_de
     assert stepped.table.equals(periods.table)
     assert periods.table["assumption_breach"].any() and periods.table["n_abort"].sum() > 0
     monkeypatch.delenv("SAFELANE_NO_FUSED")
-    assert {r.split("=")[0] for r in steps_compiled(batch, kwargs["config"], None)} == {
-        "config.shield.actuation_delay_s",
-        "config.shield.sensing",
-    }
+    assert steps_compiled(batch, kwargs["config"], None) == []
 
 
 def test_the_realistic_preset_runs_in_the_compiled_loop(monkeypatch):

@@ -187,7 +187,8 @@ def test_what_the_loop_does_not_run_yet_runs_period_by_period_and_says_why(monke
 
 def test_the_realistic_world_without_its_shield_sides_runs_compiled(monkeypatch):
     """The realistic preset's config with the shield's sensing and delay off (what this loop runs) is covered, in the
-    loop and stepped from Python (the envs); with the shield's sides on it is not, and the envs name them."""
+    loop and stepped from Python (the envs); with the shield's sides on too (``tests/test_fast_realistic_loop.py``,
+    ``tests/test_env_realworld.py``), but for a shield's delay other than the world's, which the envs name."""
     for name in ("SAFELANE_NO_NUMBA", "SAFELANE_NO_FUSED"):
         monkeypatch.delenv(name, raising=False)
     cfg = load_preset("realistic").sim
@@ -196,9 +197,11 @@ def test_the_realistic_world_without_its_shield_sides_runs_compiled(monkeypatch)
     assert _fused.reasons(_mixed(1, 5.0, per_variant=20), cfg, ExpertPlanner(), None, False, False) == []
     assert steps_compiled(_mixed(1, 5.0), cfg, None) == []
     whole = load_preset("realistic").sim
-    why = steps_compiled(_mixed(1, 5.0), whole, None)
-    assert any("shield.actuation_delay_s=" in r and "envs' compiled step" in r for r in why), why
-    assert any("shield.sensing=True in the envs' compiled step" in r for r in why), why
+    assert whole.shield.sensing and whole.shield.actuation_delay_s == whole.actuation_delay_s
+    assert steps_compiled(_mixed(1, 5.0), whole, None) == []
+    other = whole.model_copy(update=dict(shield=whole.shield.model_copy(update=dict(actuation_delay_s=0.1))))
+    why = steps_compiled(_mixed(1, 5.0), other, None)
+    assert any(r.startswith("config.shield.actuation_delay_s=0.1") for r in why), why
 
 
 def test_the_compiled_period_stepped_from_python_runs_the_own_lane_and_sensing(monkeypatch):
