@@ -15,8 +15,9 @@ time of this process (on a busy machine the wall clock also counts the time othe
 Targets: vector >= 1,000,000 env-steps/s at 1,024 sub-envs, single >= 10,000 steps/s. Run with
 ``python benchmarks/bench_env.py [--envs 1024] [--quick] [--world]``; it prints, never asserts.
 
-``--world``: the realistic world's side (:data:`WORLD`: the own lane's leader ``L0``, sensing error, an actuation
-delay of 0.2 s; the shield's sensing and delay off, as the compiled period runs them). The vector env refuses
+``--world``: the realistic world (:data:`WORLD`: the own lane's leader ``L0``, sensing error, an actuation delay of
+0.2 s, the shield's sensing box and its delay on, as they follow the world's by default; ``--world-only``: the
+shield's sensing and delay off, the world's side alone). The vector env refuses
 ``L0`` and the delay period by period (its sub-envs share one clock there, so a restarted row would run another
 episode); its NumPy row here is the same env built on the compiled path and switched to the NumPy path before its
 first reset (:func:`time_vector`): the work per step is the NumPy path's, its episodes after a reset are not the
@@ -38,8 +39,10 @@ from safelane.envs import LaneChangeVectorEnv
 
 TARGET_VECTOR = 1_000_000  # env-steps/s at 1,024 sub-envs
 TARGET_SINGLE = 10_000  # steps/s of one env
-#: ``--world``'s settings (``sim_config``).
-WORLD = dict(own_lane=True, sensing_error=True, shield_sensing=False, actuation_delay_s=0.2, shield_delay=False)
+#: ``--world``'s settings (``sim_config``): the shield's sensing and delay follow the world's.
+WORLD = dict(own_lane=True, sensing_error=True, actuation_delay_s=0.2)
+#: ``--world-only``'s: the world's side alone (the shield's sensing and delay off).
+WORLD_ONLY = dict(WORLD, shield_sensing=False, shield_delay=False)
 
 
 def expert_actions(obs: np.ndarray, rng: np.random.Generator, prm: Params) -> np.ndarray:
@@ -113,15 +116,18 @@ def main(argv=None) -> None:
     ap.add_argument("--repeat", type=int, default=3, help="vector runs (the best counts)")
     ap.add_argument("--single-steps", type=int, default=5000, help="timed steps of the single env (NumPy: a tenth)")
     ap.add_argument("--quick", action="store_true", help="128 envs, 20 steps, 1 run, 500 single steps (a smoke run)")
-    ap.add_argument("--world", action="store_true", help="the realistic world's side (WORLD: L0, sensing error, delay)")
+    ap.add_argument("--world", action="store_true", help="the realistic world (WORLD: L0, sensing error, delay)")
+    ap.add_argument("--world-only", action="store_true", help="its world's side alone (WORLD_ONLY: the shield's "
+                    "sensing and delay off)")  # fmt: skip
     args = ap.parse_args(argv)
     if args.quick:
         args.envs, args.steps, args.warmup, args.repeat, args.single_steps = 128, 20, 5, 1, 500
     prm = Params()
-    kwargs = dict(sim_config=WORLD) if args.world else {}
+    world = WORLD_ONLY if args.world_only else WORLD if args.world else None
+    kwargs = dict(sim_config=world) if world else {}
     print(
         f"bench_env: safelane/LaneChange-v0 defaults (CV_all, N = 3, decel U[2, 6], shield on)"
-        f"{f', sim_config={WORLD}' if args.world else ''}; vector: {args.envs} "
+        f"{f', sim_config={world}' if world else ''}; vector: {args.envs} "
         f"sub-envs, {args.steps} steps after {args.warmup} (best of {args.repeat}); single: gymnasium.make, "
         f"{args.single_steps} steps"
     )

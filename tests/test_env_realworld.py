@@ -1,11 +1,11 @@
 """The envs in the realistic world on the compiled period (``envs/_fast.py``) against the NumPy env period by period
 (``SAFELANE_NO_FUSED=1``: :class:`~safelane.sim.step.ClosedLoop`, the reference): the own lane's leader ``L0``,
-sensing error and the actuation delay (the world's side; the shield's sensing and delay off, as the compiled period
-runs them). Observations, rewards, flags and every info key bit for bit over many steps with resets, for the single
-env and for the vector env's sub-envs (each against the NumPy single env on its seed, every episode: the compiled
-rows keep their own clocks, and the spliced rows carry their own ``L0`` profile, world key and sensing bounds); and
-the settings matter there: collisions and costs with ``L0``, a delayed command, a completion the world reaches
-periods after the shield's flag."""
+sensing error and the actuation delay — the world's side, and the shield's (its sensing box and monitor's anchor,
+its delay where it is the world's). Observations, rewards, flags and every info key bit for bit over many steps
+with resets, for the single env and for the vector env's sub-envs (each against the NumPy single env on its seed,
+every episode: the compiled rows keep their own clocks, and the spliced rows carry their own ``L0`` profile, world
+key and sensing bounds); and the settings matter there: collisions and costs with ``L0``, a delayed command, a
+completion the world reaches periods after the shield's flag, the shield's box and delay."""
 
 from __future__ import annotations
 
@@ -28,11 +28,20 @@ NEAR_L0 = dict(own_lane=True, l0_gap_min_m=6.0, l0_gap_max_m=30.0, l0_brake_wind
 #: The world's sensing error and actuation delay, the shield's sides off.
 SENSING = dict(sensing_error=True, sensing_edge_share=0.2, shield_sensing=False)
 DELAY = dict(actuation_delay_s=0.2, shield_delay=False)
+#: The shield's sides on: its sensing box (wide bounds: its corners and anchor matter) and its delay (the world's).
+WIDE = dict(sensing_error=True, sense_sensed_pos_m=2.0, sense_sensed_speed_mps=1.0, sense_connected_pos_m=1.0,
+            sense_connected_speed_mps=0.5)  # fmt: skip
+SHIELD_SIDES = dict(NEAR_L0, sensing_error=True, sensing_edge_share=0.2, actuation_delay_s=0.2)
 CASES = {
     "L0, the shield blind to it": dict(NEAR_L0, shield_own_lane=False),
     "L0, sensing error, delay": dict(NEAR_L0, **SENSING, **DELAY),
     "delay alone": dict(actuation_delay_s=0.3, shield_delay=False),
+    "the shield's sensing and delay on, with L0, sensing error, delay": SHIELD_SIDES,
+    "wide sensing error, the shield's sensing on": WIDE,
+    "delay alone, the shield's delay on": dict(actuation_delay_s=0.3),
 }
+#: Each case's seed.
+SEEDS = (6, 2, 13, 6, 2, 13)
 
 
 def lane_changes(steps: int, rows: int, seed: int) -> np.ndarray:
@@ -62,7 +71,7 @@ def run_single(seed: int, steps: int, **kw):
     return out, type(env.task.loop), np.array(flags, bool).reshape(-1, 4)
 
 
-@pytest.mark.parametrize(("case", "seed"), [(case, seed) for case, seed in zip(CASES, (6, 2, 13), strict=True)])
+@pytest.mark.parametrize(("case", "seed"), [(case, seed) for case, seed in zip(CASES, SEEDS, strict=True)])
 def test_single_env_in_the_realistic_world_is_the_numpy_env_bit_for_bit(case, seed, monkeypatch):
     kw = dict(KW, sim_config=CASES[case])
     compiled, kind, flags = run_single(seed, 400, **kw)
@@ -92,6 +101,17 @@ def test_single_env_in_the_realistic_world_is_the_numpy_env_bit_for_bit(case, se
                    for i in start)  # fmt: skip
 
 
+@pytest.mark.parametrize("side", ["sensing", "delay"])
+def test_the_shields_sides_change_the_episodes(side):
+    """The shield's sensing box and its delay reach the episodes: without either (the world as it is), they differ."""
+    cfg = dict(SHIELD_SIDES, shield_sensing=side != "sensing", shield_delay=side != "delay")
+    on, kind, _ = run_single(6, 200, **dict(KW, sim_config=SHIELD_SIDES))
+    off, kind_off, _ = run_single(6, 200, **dict(KW, sim_config=cfg))
+    assert kind is Stepper and kind_off is Stepper
+    with pytest.raises(AssertionError):
+        assert_same(on, off)
+
+
 def test_sensing_error_changes_the_episodes():
     """The world's sensing error reaches the shield's decisions (the shield takes the measurements as exact)."""
     kw = dict(KW, sim_config=dict(NEAR_L0, **DELAY))
@@ -102,11 +122,12 @@ def test_sensing_error_changes_the_episodes():
         assert_same(plain, sensed)
 
 
-@pytest.mark.parametrize(("n", "steps", "seed"), [(12, 150, 3)])
-def test_vector_env_sub_envs_are_numpy_single_envs_in_the_realistic_world(n, steps, seed, monkeypatch):
+@pytest.mark.parametrize(("n", "steps", "seed", "shield_sides"), [(12, 150, 3, False), (12, 150, 5, True)])
+def test_vector_env_sub_envs_are_numpy_single_envs_in_the_realistic_world(n, steps, seed, shield_sides, monkeypatch):
     """Every episode of each compiled sub-env, resets spliced into the running batch, is the NumPy single env's on its
-    seed bit for bit: observation, reward, flags and every info key."""
-    cfg = dict(NEAR_L0, **SENSING, **DELAY)
+    seed bit for bit: observation, reward, flags and every info key; the world's side alone, and with the shield's
+    sensing box and delay (each row's anchor and commands in flight its own across the splices)."""
+    cfg = SHIELD_SIDES if shield_sides else dict(NEAR_L0, **SENSING, **DELAY)
     acts = lane_changes(steps, n, seed)
     venv = LaneChangeVectorEnv(n, **dict(KW, sim_config=cfg))
     vobs, _ = venv.reset(seed=seed)
@@ -142,12 +163,14 @@ def test_vector_env_sub_envs_are_numpy_single_envs_in_the_realistic_world(n, ste
     assert l0_events  # L0 was met
 
 
-@pytest.mark.parametrize("cfg", [NEAR_L0, DELAY, dict(actuation_delay_s=0.1)])
+@pytest.mark.parametrize("cfg", [NEAR_L0, DELAY, dict(actuation_delay_s=0.1), dict(actuation_delay_s=0.2,
+                                                                                    shield={"actuation_delay_s": 0.1})])
 def test_vector_env_refuses_l0_and_the_delay_period_by_period(cfg, monkeypatch):
     """Period by period the sub-envs share one clock and restarted rows are overwritten in the state: L0's braking
     instant and the commands in flight would be another episode's. The vector env refuses them there, naming why
-    (``SAFELANE_NO_FUSED=1``; the shield's own delay, which follows the world's by default, is not compiled)."""
-    if cfg.get("actuation_delay_s") and "shield_delay" not in cfg:  # the shield's delay: no compiled step at all
+    (``SAFELANE_NO_FUSED=1``; the shield's delay where it is the world's — the default — runs compiled, another one
+    has no compiled step at all)."""
+    if cfg.get("shield"):  # a shield's delay other than the world's: no compiled step at all
         with pytest.raises(ValueError, match=r"shield\.actuation_delay_s=0\.1"):
             LaneChangeVectorEnv(4, sim_config=cfg)
         return

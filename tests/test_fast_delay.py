@@ -185,3 +185,72 @@ def test_a_delay_without_commands_in_flight_refuses():
     assert fast_step.situation_refusals(s, cfg, state) == []
     bare = dataclasses.replace(state, pending=None)
     assert fast_step.situation_refusals(s, cfg, bare) == ["an actuation delay without commands in flight"]
+
+
+def test_rss_rows_under_a_delay_decide_from_the_carried_ego_and_the_chain_at_the_periods_start(monkeypatch):
+    """What RSS's rows see under the shield's actuation delay (docs/rss.md): the ego carried over the commands in
+    flight and F along the frame's worst case (``stages.frame``), the chain as observed at the period's start — not
+    carried over the delay, where the paper's rule carries ``L1`` — on the stages' path; the compiled period gives the
+    same decisions (:func:`test_delayed_period_is_the_stages`, the closed loop below)."""
+    from safelane.shield import stages
+
+    params = Params()
+    cfg = ShieldConfig(actuation_delay_s=0.2)
+    rng = np.random.default_rng(17)
+    world = random_world(rng, 12, 3, stale=False)
+    state = shield_core.init(situation_of(world, 0.0, params), params, cfg, "RSS_matched")
+    seen = []
+    real = stages.RuleInputs
+    monkeypatch.setattr(stages, "RuleInputs", lambda *a: seen.append(real(*a)) or seen[-1])
+    for k in range(4):
+        s = situation_of(world, k * params.dt, params)
+        pending = state.pending
+        state, ref = shield_core.stages_step(state, s, (np.full(12, 0.5), np.full(12, 0.6)), params, cfg,
+                                             "RSS_matched")  # fmt: skip
+        inp = seen[-1]
+        assert np.array_equal(inp.chain_x, s.chain_x) and np.array_equal(inp.chain_v, s.chain_v), k
+        ego = pending.carry(s.ego_x, s.ego_y, s.ego_vx, s.ego_vy, params.dt)
+        frame = (inp.ego_x, inp.ego_y, inp.ego_vx, inp.ego_vy)
+        assert all(np.array_equal(a, b) for a, b in zip(frame, ego, strict=True)), k
+        assert not np.array_equal(inp.ego_x, s.ego_x)  # the commands in flight move the ego: not the period's start
+        advance(world, ref, rng, params.dt)
+    assert len(seen) == 4
+
+
+@pytest.mark.parametrize("delay", [0.1, 0.3])
+def test_rss_rows_under_the_shields_delay_give_the_numpy_table_in_the_compiled_loop(monkeypatch, delay):
+    """RSS's four variants under the shield's delay (the world's) in the compiled closed loop: the NumPy path's table
+    (``SAFELANE_NO_NUMBA=1``) bit for bit, RSS's rows proceeding, hesitating and responding; the delay changes the
+    table. The chain at the period's start (both paths) decides as the chain carried over the delay at RSS's
+    ``brake_max`` would: a vehicle ahead braking at ``brake_max`` keeps its stopping point, which is all RSS's
+    longitudinal distance reads of it (docs/rss.md) — the same table with the rule fed the carried chain."""
+    from safelane.baselines.rss_rule import RssRule
+    from safelane.shield.realworld import carry_worst
+    from safelane.sim import ScenarioConfig, SimConfig, concat, paper_scenarios, simulate_batch
+
+    variants = ("RSS", "RSS_V2X", "RSS_matched", "RSS_V2X_matched")
+    # wide gaps, N = 1: the chain's positions decide some rows (fed the chain carried at constant speed, 4 rows of
+    # 80 differ at 0.3 s)
+    spread = ScenarioConfig(follower_connected_share=0.5, gap=(30.0, 40.0), ego_speed=(25.0, 31.0))
+    batch = concat([paper_scenarios(v, 1, 6.0, 20, np.random.default_rng(2100 + k), spread, first_id=1000 * k)
+                    for k, v in enumerate(variants)])  # fmt: skip
+    cfg = SimConfig(actuation_delay_s=delay)
+    assert cfg.shield.actuation_delay_s == delay
+    for name in ("SAFELANE_NO_NUMBA", "SAFELANE_NO_FUSED"):
+        monkeypatch.delenv(name, raising=False)
+    fused = simulate_batch(batch, seed=4, config=cfg)
+    assert fused.engine == "compiled loop", fused.engine_reasons
+    monkeypatch.setenv("SAFELANE_NO_NUMBA", "1")
+    table = simulate_batch(batch, seed=4, config=cfg).table
+    assert fused.table.equals(table)
+    assert (table[["n_proceed", "n_hesitate", "n_abort"]].sum() > 0).all()
+    undelayed = simulate_batch(batch, seed=4, config=SimConfig()).table
+    assert not undelayed[["n_proceed", "n_hesitate", "n_abort"]].equals(table[["n_proceed", "n_hesitate", "n_abort"]])
+    real = RssRule.decide
+
+    def carried(self, inp, params):
+        x, v = carry_worst(inp.chain_x, inp.chain_v, self.brake_max(inp, params), delay)
+        return real(self, dataclasses.replace(inp, chain_x=x, chain_v=v), params)
+
+    monkeypatch.setattr(RssRule, "decide", carried)
+    assert simulate_batch(batch, seed=4, config=cfg).table.equals(table)

@@ -161,8 +161,8 @@ def test_the_monitors_anchor_breaches_in_some_rows(monkeypatch):
 def test_the_compiled_period_stepped_from_python_runs_the_shields_sensing_and_delay(monkeypatch):
     """A nominal planner the loop does not run (a subclass of the expert) steps the compiled period from Python
     (``sim/_stepper.Stepper``, engine ``"compiled period"``, its final view ``finish_kernel``): the realistic preset's
-    table period by period. The envs' step runs the realistic world's side but still refuses the shield's sensing and
-    delay (``ENV_WORLD``: never compared with the NumPy env there)."""
+    table period by period. The envs' step runs it too (``tests/test_env_realworld.py`` compares it with the NumPy
+    env)."""
     mine = type("Mine", (ExpertPlanner,), {})(**PRESET.planner)
     kwargs = dict(params=REALISTIC, nominal=mine, config=_preset(**NEAR_L0, **WIDE))
     batch = _mixed(3, 10.0, per_variant=20, seed=9)
@@ -175,10 +175,7 @@ def test_the_compiled_period_stepped_from_python_runs_the_shields_sensing_and_de
     assert stepped.table.equals(periods.table)
     assert periods.table["assumption_breach"].any() and periods.table["n_abort"].sum() > 0
     monkeypatch.delenv("SAFELANE_NO_FUSED")
-    assert {r.split("=")[0] for r in steps_compiled(batch, kwargs["config"], None)} == {
-        "config.shield.actuation_delay_s",
-        "config.shield.sensing",
-    }
+    assert steps_compiled(batch, kwargs["config"], None) == []
 
 
 def test_the_realistic_preset_runs_in_the_compiled_loop(monkeypatch):
@@ -197,3 +194,39 @@ def test_a_shields_delay_other_than_the_worlds_runs_period_by_period_and_says_wh
     assert any(r.startswith(f"config.shield.actuation_delay_s={shield}") for r in why), why
     same = SimConfig(actuation_delay_s=world, shield={"actuation_delay_s": world})
     assert _fused.reasons(_mixed(1, 5.0, per_variant=20), same, ExpertPlanner(), None, False, False) == []
+
+
+def test_progress_chunks_without_l0_give_the_whole_batchs_table_with_the_shields_sensing(monkeypatch):
+    """A run behind a progress bar runs in chunks (``_fused.PROGRESS_CHUNK``), and whether the shield's sensing box
+    analyses the own lane (``_fused.kernel_inputs``' ``own_analysed``, ``stages.own_leader``'s batch-wide
+    ``Situation.has_own_lane``) is decided per chunk: a chunk whose rows have no ``L0`` runs with it off, the whole
+    batch with it on. It reaches only the monitor's anchor for the rows without ``L0`` (whose own columns no
+    comparison reads), so the table is the same: chunked, whole and period by period."""
+    from dataclasses import replace
+
+    from safelane.sim._fast_loop import PRM
+    from safelane.sim.realworld import with_own_lane
+
+    cfg = _preset(**NEAR_L0, **WIDE, l0_decel_mps2=11.0)  # L0 brakes beyond a_o_d: the own lane's anchor flags it
+    batch = with_own_lane(_mixed(3, 10.0, per_variant=30, seed=14), 4, cfg, REALISTIC)
+    l0_x = batch.l0_x.copy()
+    l0_x[:45] = np.inf  # the first chunk of three (40 rows each) has no L0
+    batch = replace(batch, l0_x=l0_x)
+    kwargs = dict(params=REALISTIC, config=cfg, nominal=PRESET.expert())
+    analysed = []
+    real = _fused.kernel_inputs
+    monkeypatch.setattr(_fused, "kernel_inputs", lambda sim, **k: analysed.append(real(sim, **k)[0][
+        PRM.index("own_analysed")]) or real(sim, **k))  # fmt: skip
+    monkeypatch.setattr(_fused, "PROGRESS_CHUNK", 40)
+    _clear(monkeypatch)
+    chunked = simulate_batch(batch, seed=4, progress=True, **kwargs)
+    assert chunked.engine == "compiled loop", chunked.engine_reasons
+    assert analysed == [0.0, 1.0, 1.0]
+    whole = simulate_batch(batch, seed=4, **kwargs)
+    assert analysed[3:] == [1.0]
+    assert chunked.table.equals(whole.table)
+    monkeypatch.setenv("SAFELANE_NO_FUSED", "1")
+    assert simulate_batch(batch, seed=4, **kwargs).table.equals(whole.table)
+    table = whole.table
+    assert np.isnan(table["min_gap_own_lane_m"].to_numpy()[:45]).all()
+    assert 0 < table["assumption_breach"].sum() < len(batch) and table["assumption_breach"].to_numpy()[45:].any()

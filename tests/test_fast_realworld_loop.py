@@ -187,7 +187,8 @@ def test_what_the_loop_does_not_run_yet_runs_period_by_period_and_says_why(monke
 
 def test_the_realistic_world_without_its_shield_sides_runs_compiled(monkeypatch):
     """The realistic preset's config with the shield's sensing and delay off (what this loop runs) is covered, in the
-    loop and stepped from Python (the envs); with the shield's sides on it is not, and the envs name them."""
+    loop and stepped from Python (the envs); with the shield's sides on too (``tests/test_fast_realistic_loop.py``,
+    ``tests/test_env_realworld.py``), but for a shield's delay other than the world's, which the envs name."""
     for name in ("SAFELANE_NO_NUMBA", "SAFELANE_NO_FUSED"):
         monkeypatch.delenv(name, raising=False)
     cfg = load_preset("realistic").sim
@@ -196,9 +197,11 @@ def test_the_realistic_world_without_its_shield_sides_runs_compiled(monkeypatch)
     assert _fused.reasons(_mixed(1, 5.0, per_variant=20), cfg, ExpertPlanner(), None, False, False) == []
     assert steps_compiled(_mixed(1, 5.0), cfg, None) == []
     whole = load_preset("realistic").sim
-    why = steps_compiled(_mixed(1, 5.0), whole, None)
-    assert any("shield.actuation_delay_s=" in r and "envs' compiled step" in r for r in why), why
-    assert any("shield.sensing=True in the envs' compiled step" in r for r in why), why
+    assert whole.shield.sensing and whole.shield.actuation_delay_s == whole.actuation_delay_s
+    assert steps_compiled(_mixed(1, 5.0), whole, None) == []
+    other = whole.model_copy(update=dict(shield=whole.shield.model_copy(update=dict(actuation_delay_s=0.1))))
+    why = steps_compiled(_mixed(1, 5.0), other, None)
+    assert any(r.startswith("config.shield.actuation_delay_s=0.1") for r in why), why
 
 
 def test_the_compiled_period_stepped_from_python_runs_the_own_lane_and_sensing(monkeypatch):
@@ -257,3 +260,42 @@ def test_a_batch_with_an_own_lane_chain_runs_period_by_period_and_says_why(monke
                             REALISTIC)  # fmt: skip
     why = _fused.reasons(chained, SimConfig(own_lane=True), ExpertPlanner(), None, False, False)
     assert any("own_ahead_x" in r for r in why), why
+
+
+#: Sensing error with the shield's sensing off over three periods: the monitor's view after the last period
+#: (``ClosedLoop.finish``, ``_fast_loop._seen``) is one of two comparisons, so it decides many rows' breach flags.
+FINAL_VIEW = {
+    "target lane": (lambda: _mixed(3, 10.0, per_variant=40, seed=3), dict()),
+    "with L0 near and the edge share": (lambda: _mixed(2, 10.0, per_variant=40, seed=13),
+                                        dict(**NEAR_L0, sensing_edge_share=0.3)),
+}  # fmt: skip
+
+
+@pytest.mark.parametrize("case", list(FINAL_VIEW))
+def test_the_final_monitor_view_takes_the_measurements_as_exact_where_the_shields_sensing_is_off(monkeypatch, case):
+    """The monitor's view of the last period (after the run) compares the measurements as the shield takes them — as
+    exact, with its sensing off, the comparison every period's ``stages.observe`` makes — on every path: the compiled
+    loop, the compiled period stepped from Python (``finish_kernel``), period by period and the NumPy path. Before,
+    the NumPy paths' ``core.observe`` compared the sensing box's observed corner there (it had no config), and flagged
+    fewer breaches than the compiled ones."""
+    from safelane.shield import core
+
+    make, update = FINAL_VIEW[case]
+    batch = make()
+    cfg = SimConfig(sensing_error=True, shield_sensing=False, horizon_s=0.3, **update)
+    kwargs = dict(params=REALISTIC, config=cfg)
+    fused, periods, _ = _two_paths(monkeypatch, batch, **kwargs)
+    assert fused.equals(periods), case
+    monkeypatch.delenv("SAFELANE_NO_FUSED")
+    stepped = simulate_batch(batch, seed=4, nominal=type("Mine", (ExpertPlanner,), {})(), **kwargs)
+    assert stepped.engine == "compiled period", stepped.engine_reasons
+    assert stepped.table.equals(periods), case
+    monkeypatch.setenv("SAFELANE_NO_NUMBA", "1")
+    assert simulate_batch(batch, seed=4, **kwargs).table.equals(periods), case
+    # the final view decides breach flags here: at the observed corner (the old view) fewer rows are flagged
+    flags = [c for c in periods.columns if c.startswith("breach_")]
+    real = core.observe
+    monkeypatch.setattr(core, "observe", lambda state, situation, params, config=None: real(state, situation, params))
+    corner = simulate_batch(batch, seed=4, **kwargs).table
+    assert (corner[flags].sum() <= periods[flags].sum()).all()
+    assert (corner[flags] != periods[flags]).any(axis=None), periods[flags].sum()

@@ -24,6 +24,8 @@ measured situation; the feature map has no ``L0`` column). ``tests/test_env_real
 from __future__ import annotations
 
 import numba
+from numba import types
+from numba.extending import overload
 
 from ..planners import features as _features  # noqa: F401  (its closed forms are marked: registered below)
 from ..planners.features import feature_row, planned_change
@@ -32,7 +34,7 @@ from ..safety._backend import SCALAR
 from ..safety._fast_base import announce_compiles
 from ..shield.decide import ABORT, HESITATE
 from ..sim._fast_loop import LoopBatch, _period
-from ..sim._fast_rows import Rows, _load, _scratch, _store, _window
+from ..sim._fast_rows import Rows, Sense, _load, _scratch, _store, _window
 from . import core as _core  # noqa: F401  (outcome_core is marked: registered below)
 from .core import outcome_core
 
@@ -47,18 +49,32 @@ OUTCOME = ("reward", "a_x", "a_y", "crashed", "cost", "success", "terminated", "
 
 
 @numba.njit(cache=True, nogil=True, error_model="numpy")
-def env_step_kernel(prm, period_prm, batch, rows, proposal, env, view, steps, obs, outcome, behaviour, finite):
+def env_step_kernel(prm, period_prm, batch, rows, proposal, env, view, steps, obs, outcome, behaviour, finite, sense):
     """One period of every row of ``rows`` (``_fast_rows.Rows``'s arrays as a plain tuple, in place; ``batch``:
     ``_fast_loop.LoopBatch``'s as a plain tuple) with the agents' proposals ``(B, 2)``,
     then each row's observation into ``obs`` ``(B, F)`` and its :data:`OUTCOME` into ``outcome``; ``env``:
     :data:`ENV`'s values; ``view``: ``(shares_plan (B,), f_connected (B,), plan_steps (len(PLAN_TIMES_S),),
     plan_sums (l1_plan_steps,))`` — the rows whose ``L1`` shares its plan, the follower's flag, how many of the plan's
     periods each feature's horizon covers, and a scratch array; ``steps``: each row's periods so far, this one
-    included. Plain tuples, not the named ones: numba types a call's plain tuples of arrays in C, named ones in
-    Python (measured: 13 µs of a single env's step of about 100 µs); the names are put back here, for free."""
+    included; ``sense``: the scratch of the shield's sensing box (``_fast_rows.Sense``'s arrays as a plain tuple,
+    ``_fused.sense_scratch``), ``None`` where it is off (compiled without it, as ``step_kernel``). Plain tuples, not
+    the named ones: numba types a call's plain tuples of arrays in C, named ones in Python (measured: 13 µs of a
+    single env's step of about 100 µs); the names are put back here, for free."""
     batch, rows = LoopBatch(*batch), Rows(*rows)
     _env_rows(prm, batch, rows, proposal, env, view, steps, obs, outcome, behaviour, finite,
-              _scratch(rows, period_prm, None))  # fmt: skip
+              _scratch(rows, period_prm, _named_sense(sense)))  # fmt: skip
+
+
+def _named_sense(sense):
+    """``sense`` as ``_fast_rows.Sense`` (a plain tuple of its arrays), ``None`` as it is."""
+    raise NotImplementedError("compiled only (numba)")
+
+
+@overload(_named_sense, inline="always", jit_options=dict(error_model="numpy", nogil=True))
+def _named_sense_typed(sense):
+    if isinstance(sense, types.NoneType):
+        return lambda sense: None
+    return lambda sense: Sense(*sense)
 
 
 @numba.njit(nogil=True, error_model="numpy", _nrt=False)

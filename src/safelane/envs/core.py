@@ -33,6 +33,7 @@ from ..planners.base import Observation
 from ..planners.features import FEATURE_NAMES, features, plan_steps
 from ..planners.variants import VARIANT_NAMES, get_variant
 from ..safety._backend import ARRAY, jitable
+from ..sim._fused import sense_scratch
 from ..sim._stepper import Stepper, steps_compiled
 from ..sim.config import SimConfig
 from ..sim.scenario import ScenarioBatch, ScenarioConfig, paper_scenarios
@@ -355,7 +356,7 @@ class LaneChangeTask:
         behaviour, finite = np.empty(n, np.int64), np.empty(n, np.bool_)
         self.steps += 1
         env_step_kernel(loop.prm_vec, loop.period_prm, tuple(loop.batch), tuple(rows), proposal, self._env_values,
-                        self._view, self.steps, obs, outcome, behaviour, finite)  # fmt: skip
+                        self._view, self.steps, obs, outcome, behaviour, finite, self._sense)  # fmt: skip
         loop.check_finite(rows, finite)
         return StepOutcome(
             obs=obs,
@@ -384,7 +385,11 @@ class LaneChangeTask:
         self._view = (np.array(loop.shares_plan), np.array(loop.b.connected[:, 0]),  # (ours: restart splices rows)
                       np.array(plan_steps(prm.dt, self.config.l1_plan_steps), np.int64),
                       np.empty(self.config.l1_plan_steps))  # fmt: skip
-        return Stepper(loop)
+        stepper = Stepper(loop)
+        # the scratch of the shield's sensing box (None: off), allocated once: the rows' anchors live in their state
+        sense = sense_scratch(stepper.prm_vec, batch.x.shape[1])
+        self._sense = None if sense is None else tuple(sense)
+        return stepper
 
     def observe(self) -> np.ndarray:
         return features(self.loop.observe(self.state), self.params).astype(np.float32)

@@ -191,13 +191,19 @@ def stages_step(
     return new_state, decision
 
 
-def observe(state: ShieldState, situation: Situation, params: Params) -> ShieldState:
+def observe(
+    state: ShieldState, situation: Situation, params: Params, config: ShieldConfig | None = None
+) -> ShieldState:
     """The state with the monitor's view of the last period recorded, without deciding anything (e.g. after a run's
-    final period, which :func:`step` would observe only at the next one)."""
+    final period, which :func:`step` would observe only at the next one): :func:`.stages.observe`'s comparison, at
+    the sensing box's observed corner where ``config.sensing`` is on (the default) and on the measurements as exact
+    where it is off (as the next period's :func:`step` would compare them)."""
     if state.last is None:
         return state
     if situation.others is not None:  # the roles the last period's snapshot holds (world.py)
         situation = world.roles(situation, params)
+    if config is not None and not config.sensing:  # the shield takes the measurements as exact (stages.observe)
+        situation = exact(situation)
     breach = observe_breaches(state.breach, state.last, worst_corners(situation)[1], params, situation.t)
     return dataclasses.replace(state, breach=breach)
 

@@ -203,12 +203,13 @@ class Stepper:
             _non_finite(self.batch.scenario_id, bad, float(rows.rf[bad[0], 4]))
 
 
-#: The realistic world's settings the envs' compiled step (``envs/_fast.py``) does not take though :class:`Stepper`
-#: may run them for ``simulate_batch``: the shield's side of sensing error and of the actuation delay, which the envs
-#: have not been compared with the NumPy env with (``tests/test_env_realworld.py`` covers the world's side: the own
-#: lane's ``L0``, sensing error and the actuation delay with the shield's side off). Setting → (the values the envs'
-#: compiled step takes, the setting without which it changes nothing: ``None``, always).
-ENV_WORLD = {"shield.actuation_delay_s": ((0.0,), None), "shield.sensing": ((False,), "sensing_error")}
+#: Settings the envs' compiled step (``envs/_fast.py``) does not take though :class:`Stepper` may run them for
+#: ``simulate_batch``: none today. The realistic world runs there whole — the world's side (the own lane's ``L0``,
+#: sensing error, the actuation delay) and the shield's (its sensing box, its delay where it is the world's: a shield's
+#: delay other than the world's is refused by :func:`reasons`, as in the loop) — compared with the NumPy env bit for
+#: bit, single env and vector env (``tests/test_env_realworld.py``). Setting → (the values the envs' compiled step
+#: takes, the setting without which it changes nothing: ``None``, always).
+ENV_WORLD: dict[str, tuple[tuple, str | None]] = {}
 
 
 def steps_compiled(batch, cfg, traffic) -> list[str]:

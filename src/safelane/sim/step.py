@@ -315,7 +315,7 @@ class ClosedLoop:
         situation = self.situation(s.t, s.ego, s.x, s.v, s.link, s.v[:, 0], s.l0)
         if self.sensing is not None:
             situation = measure(self.seed, self.b, s.step, situation, self.sensing, self.cfg.sensing_edge_share)
-        return dataclasses.replace(s, shield=shield.observe(s.shield, situation, self.prm))
+        return dataclasses.replace(s, shield=shield.observe(s.shield, situation, self.prm, self.shield_config))
 
     def others_accels(self, s: SimState, ex, evx, ey, evy, bounds):
         """The traffic model's accelerations of the target-lane vehicles for this period ``(B, K)`` and any switch
