@@ -58,6 +58,8 @@ def _save(fig, out_dir: Path, stem: str) -> list[Path]:
     png, svg = out_dir / f"{stem}.png", out_dir / f"{stem}.svg"
     with matplotlib.rc_context({"svg.hashsalt": "safelane"}):
         fig.savefig(png, dpi=DPI, metadata={"Software": None})
+        # The constrained layout was computed for the PNG; the SVG keeps it instead of solving it again.
+        fig.set_layout_engine(None)
         fig.savefig(svg, metadata={"Date": None})
     return [png, svg]
 
