@@ -56,10 +56,17 @@ def _save(fig, out_dir: Path, stem: str) -> list[Path]:
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
     png, svg = out_dir / f"{stem}.png", out_dir / f"{stem}.svg"
-    with matplotlib.rc_context({"svg.hashsalt": "safelane"}):
+    # No rc setting may give the figure a layout engine again once its layout is solved.
+    keep = {"svg.hashsalt": "safelane", "figure.autolayout": False, "figure.constrained_layout.use": False}
+    with matplotlib.rc_context(keep):
+        # The layout is solved once, at the PNG's resolution, and kept for both files: savefig would solve it for
+        # each file, each time after a draw pass of its own that only measures.
+        engine = fig.get_layout_engine()
+        if engine is not None:
+            fig.set_dpi(DPI)
+            engine.execute(fig)
+            fig.set_layout_engine(None)
         fig.savefig(png, dpi=DPI, metadata={"Software": None})
-        # The constrained layout was computed for the PNG; the SVG keeps it instead of solving it again.
-        fig.set_layout_engine(None)
         fig.savefig(svg, metadata={"Date": None})
     return [png, svg]
 
