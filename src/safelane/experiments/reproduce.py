@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import dataclasses
 import datetime as dt
+import gc
 import importlib.util
 import json
 import platform
@@ -216,7 +217,22 @@ def write_files(
     be = as_backend(workers)
     local = (be.workers or 1) if be.name == "process" else 1
     order = sorted(range(len(jobs)), key=lambda k: -_job_cost(jobs[k]))
-    written = dict(zip(order, map_chunks(_file_job, [jobs[k] for k in order], "process", workers=local), strict=True))
+    # The workers are forks of this process: frozen, its objects (the simulations' heap) are left out of their
+    # garbage collections, which would otherwise walk them all and copy the pages they touch. (Not where the caller
+    # froze objects of its own: unfreezing would release them too.)
+    if local > 1 and figure_jobs:
+        from ..reporting.figures import import_plotting
+
+        import_plotting()  # once here, not once in each worker
+    freeze = local > 1 and gc.get_freeze_count() == 0
+    if freeze:
+        gc.freeze()
+    try:
+        done = map_chunks(_file_job, [jobs[k] for k in order], "process", workers=local)
+    finally:
+        if freeze:
+            gc.unfreeze()
+    written = dict(zip(order, done, strict=True))
     figures = {name: written[k] for name, k in figure_jobs.items()}
     return RunFiles(data_files, figures, claims, side, mae)
 

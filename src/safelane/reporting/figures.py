@@ -40,6 +40,14 @@ _DECEL_LABEL = "sudden deceleration of $L_{N+1}$, $a_{x,N+1,d}$ [m/s²]"
 _SECONDARY_STYLES = ("-", "--", ":", "-.")
 
 
+def import_plotting() -> None:
+    """Import what drawing a figure needs (matplotlib's figure, its Agg and SVG backends): a process that is about
+    to fork workers that draw imports it once instead of once in each worker."""
+    import matplotlib.backends.backend_agg
+    import matplotlib.backends.backend_svg
+    import matplotlib.figure  # noqa: F401
+
+
 def _figure(ncols: int = 1, width: float = 5.0, height: float = 3.6):
     from matplotlib.backends.backend_agg import FigureCanvasAgg
     from matplotlib.figure import Figure
