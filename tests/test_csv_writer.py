@@ -44,9 +44,9 @@ def test_the_run_tables_dtypes_and_edge_values_match_pandas(tmp_path):
     assert path.read_bytes() == (tmp_path / "pandas.csv").read_bytes()
 
 
-def test_repeated_and_distinct_floats_take_both_formatting_paths():
-    repeated = pd.DataFrame({"a": np.tile([0.0, -0.0, np.nan, 0.1, 1e-7], 50), "b": np.arange(250)})
-    distinct = pd.DataFrame({"a": np.linspace(-1, 1, 250), "b": np.arange(250)})
+def test_repeated_and_distinct_numbers_take_both_formatting_paths():
+    repeated = pd.DataFrame({"a": np.tile([0.0, -0.0, np.nan, 0.1, 1e-7], 50), "b": np.tile([0, -7, 2**62], 250)[:250]})
+    distinct = pd.DataFrame({"a": np.linspace(-1, 1, 250), "b": np.arange(-125, 125)})
     for frame in (repeated, distinct):
         assert csv_text(frame) == frame.to_csv(index=False)
 
@@ -65,6 +65,7 @@ def test_repeated_and_distinct_floats_take_both_formatting_paths():
         pd.DataFrame({"a": pd.array([1, None], dtype="Int64"), "b": [1, 2]}),
         pd.DataFrame({"a": pd.Categorical(["u", "v"]), "b": [1, 2]}),
         pd.DataFrame({"a": [True, None], "b": [1, 2]}),  # objects that are not strings
+        pd.DataFrame({"a": [[1], [2, 3]], "b": [1, 2]}),  # unhashable objects
         pd.DataFrame({"a": pd.to_datetime(["2026-01-01", "2026-01-02"]), "b": [1, 2]}),
         pd.DataFrame({1: [1.5, 2.5], 2: [1, 2]}),  # names that are not strings
     ],
