@@ -238,7 +238,7 @@ def write_files(
 
 
 #: Rough cost of a job for the schedule: seconds per table cell, and per figure (measured on the full run).
-_CELL_S, _FIGURE_S = 1.3e-7, 0.3
+_CELL_S, _FIGURE_S = 8e-8, 0.3
 
 
 def _job_cost(job: tuple) -> float:
