@@ -184,8 +184,8 @@ def write_files(
 
     Every table and figure is an independent job. With ``workers`` > 1 local processes they run on that many
     processes, the costliest first so that the processes finish close together; with one, or on Ray (whose nodes
-    need not share this machine's disk), they run here, one after the other. The files are the same either way: each job
-    writes its own files, and the CSVs are byte-identical to ``DataFrame.to_csv`` (:mod:`.csv_writer`).
+    need not share this machine's disk), they run here, one after the other. The files are the same either way:
+    each job writes its own files, and the CSVs are byte-identical to ``DataFrame.to_csv`` (:mod:`.csv_writer`).
     """
     parquet = _has_pyarrow()
     jobs: list[tuple] = []
@@ -209,21 +209,22 @@ def write_files(
         jobs.append(("table", side, run_dir / "data" / "table1_side_by_side.csv", False))
         data_files.append(Path("data/table1_side_by_side.csv"))
     figure_jobs = {}  # experiment -> index of its figure's job
+    drawable = _figure_names()
     for name, res in results.items():
         data = res.summary if res.summary is not None else res.trace
-        if name in _figure_names() and data is not None and len(data):
+        if name in drawable and data is not None and len(data):
             figure_jobs[name] = len(jobs)
             jobs.append(("figure", name, data, run_dir / "figures", preset.params.y_boundary))
     be = as_backend(workers)
     local = (be.workers or 1) if be.name == "process" else 1
     order = sorted(range(len(jobs)), key=lambda k: -_job_cost(jobs[k]))
-    # The workers are forks of this process: frozen, its objects (the simulations' heap) are left out of their
-    # garbage collections, which would otherwise walk them all and copy the pages they touch. (Not where the caller
-    # froze objects of its own: unfreezing would release them too.)
     if local > 1 and figure_jobs:
         from ..reporting.figures import import_plotting
 
         import_plotting()  # once here, not once in each worker
+    # The workers are forks of this process: frozen, its objects (the simulations' heap) are left out of their
+    # garbage collections, which would otherwise walk them all and copy the pages they touch. (Not where the caller
+    # froze objects of its own: unfreezing would release them too.)
     freeze = local > 1 and gc.get_freeze_count() == 0
     if freeze:
         gc.freeze()
