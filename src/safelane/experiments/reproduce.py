@@ -13,28 +13,31 @@
     report.md, report.html            the report (HTML self-contained)
 
 The same seed reproduces every number: the CSVs are byte-identical between runs (timings live only in
-``run.json`` and the report).
+``run.json`` and the report), on any number of workers. With ``workers`` > 1 the tables and figures are also written
+on that many processes (:func:`write_files`).
 """
 
 from __future__ import annotations
 
 import dataclasses
 import datetime as dt
+import gc
 import importlib.util
 import json
 import platform
 import shutil
 import time
 from collections.abc import Mapping, Sequence
-from dataclasses import asdict
+from dataclasses import asdict, dataclass
 from pathlib import Path
 
 import pandas as pd
 from pydantic import BaseModel
 
-from ..parallel import Backend, as_backend
+from ..parallel import Backend, as_backend, map_chunks
 from .calibration import Preset, load_preset
 from .claims import check_claims, table1_side_by_side
+from .csv_writer import write_csv
 from .registry import EXPERIMENTS, get_experiment
 from .runner import ExperimentResult, run_experiment
 
@@ -92,19 +95,7 @@ def reproduce(
         raise
 
     t0 = time.perf_counter()
-    data_files = _write_tables(results, run_dir)
-    # The paper's claims are checked on the paper's conditions only (not on baselines run under other followers).
-    summaries = {n: r.summary for n, r in results.items() if r.summary is not None and EXPERIMENTS[n].feeds_claims}
-    fig5 = results["fig5_example"].trace if "fig5_example" in results else None
-    claims = check_claims(summaries, fig5_trace=fig5)
-    pd.DataFrame([asdict(c) for c in claims]).to_csv(run_dir / "data" / "claims.csv", index=False)
-    data_files.append(Path("data/claims.csv"))
-    side, mae = (None, None)
-    if "table1" in summaries:
-        side, mae = table1_side_by_side(summaries["table1"])
-        side.to_csv(run_dir / "data" / "table1_side_by_side.csv", index=False)
-        data_files.append(Path("data/table1_side_by_side.csv"))
-    figures = _draw_figures(results, run_dir / "figures", preset)
+    files = write_files(results, run_dir, preset, workers)
     timings = {n: r.elapsed_s for n, r in results.items()}
     timings["figures and files"] = time.perf_counter() - t0
     record = RunRecord(
@@ -115,11 +106,11 @@ def reproduce(
         command=command or _equivalent_command(seed, quick, workers, preset_label, out_dir, configs),
         preset=preset,
         results=results,
-        claims=claims,
-        side_by_side=side,
-        mae=mae,
-        figures=figures,
-        data_files=data_files,
+        claims=files.claims,
+        side_by_side=files.side_by_side,
+        mae=files.mae,
+        figures=files.figures,
+        data_files=files.data_files,
         versions=software_versions(),
         parquet=_has_pyarrow(),
         timings=timings,
@@ -173,32 +164,107 @@ def _run_all(names, configs, preset, seed, quick, workers, progress) -> dict[str
     return results
 
 
-def _write_tables(results: Mapping[str, ExperimentResult], run_dir: Path) -> list[Path]:
-    """Tidy CSV (and Parquet when pyarrow is importable) per experiment; returns paths relative to the run."""
+@dataclass(frozen=True)
+class RunFiles:
+    """What :func:`write_files` wrote and computed: the data files (relative to the run folder, in a fixed order),
+    the figures per experiment, the claims and Table 1 beside the paper's (``None`` without ``table1``)."""
+
+    data_files: list[Path]
+    figures: dict[str, list[Path]]
+    claims: list
+    side_by_side: pd.DataFrame | None
+    mae: float | None
+
+
+def write_files(
+    results: Mapping[str, ExperimentResult], run_dir: Path, preset: Preset, workers: int | Backend = 1
+) -> RunFiles:
+    """Write the run's tables (``data/``) and figures (``figures/``) and check the claims: the report's "figures and
+    files" step.
+
+    Every table and figure is an independent job. With ``workers`` > 1 local processes they run on that many
+    processes, the costliest first so that the processes finish close together; with one, or on Ray (whose nodes
+    need not share this machine's disk), they run here, one after the other. The files are the same either way:
+    each job writes its own files, and the CSVs are byte-identical to ``DataFrame.to_csv`` (:mod:`.csv_writer`).
+    """
     parquet = _has_pyarrow()
-    written = []
+    jobs: list[tuple] = []
+    data_files: list[Path] = []
     for name, res in results.items():
         for kind, frame in (("scenarios", res.table), ("summary", res.summary), ("trace", res.trace)):
             if frame is None:
                 continue
             rel = Path("data") / f"{name}_{kind}.csv"
-            frame.to_csv(run_dir / rel, index=False)
-            written.append(rel)
-            if parquet:
-                frame.to_parquet(run_dir / rel.with_suffix(".parquet"), index=False)
-                written.append(rel.with_suffix(".parquet"))
-    return written
-
-
-def _draw_figures(results: Mapping[str, ExperimentResult], out: Path, preset: Preset) -> dict[str, list[Path]]:
-    from ..reporting.figures import FIGURES
-
-    figures = {}
+            jobs.append(("table", frame, run_dir / rel, parquet))
+            data_files += [rel, rel.with_suffix(".parquet")] if parquet else [rel]
+    # The paper's claims are checked on the paper's conditions only (not on baselines run under other followers).
+    summaries = {n: r.summary for n, r in results.items() if r.summary is not None and EXPERIMENTS[n].feeds_claims}
+    fig5 = results["fig5_example"].trace if "fig5_example" in results else None
+    claims = check_claims(summaries, fig5_trace=fig5)
+    jobs.append(("table", pd.DataFrame([asdict(c) for c in claims]), run_dir / "data" / "claims.csv", False))
+    data_files.append(Path("data/claims.csv"))
+    side, mae = (None, None)
+    if "table1" in summaries:
+        side, mae = table1_side_by_side(summaries["table1"])
+        jobs.append(("table", side, run_dir / "data" / "table1_side_by_side.csv", False))
+        data_files.append(Path("data/table1_side_by_side.csv"))
+    figure_jobs = {}  # experiment -> index of its figure's job
+    drawable = _figure_names()
     for name, res in results.items():
         data = res.summary if res.summary is not None else res.trace
-        if name in FIGURES and data is not None and len(data):
-            figures[name] = FIGURES[name](data, out, preset.params.y_boundary)
-    return figures
+        if name in drawable and data is not None and len(data):
+            figure_jobs[name] = len(jobs)
+            jobs.append(("figure", name, data, run_dir / "figures", preset.params.y_boundary))
+    be = as_backend(workers)
+    local = (be.workers or 1) if be.name == "process" else 1
+    order = sorted(range(len(jobs)), key=lambda k: -_job_cost(jobs[k]))
+    if local > 1 and figure_jobs:
+        from ..reporting.figures import import_plotting
+
+        import_plotting()  # once here, not once in each worker
+    # The workers are forks of this process: frozen, its objects (the simulations' heap) are left out of their
+    # garbage collections, which would otherwise walk them all and copy the pages they touch. (Not where the caller
+    # froze objects of its own: unfreezing would release them too.)
+    freeze = local > 1 and gc.get_freeze_count() == 0
+    if freeze:
+        gc.freeze()
+    try:
+        done = map_chunks(_file_job, [jobs[k] for k in order], "process", workers=local)
+    finally:
+        if freeze:
+            gc.unfreeze()
+    written = dict(zip(order, done, strict=True))
+    figures = {name: written[k] for name, k in figure_jobs.items()}
+    return RunFiles(data_files, figures, claims, side, mae)
+
+
+#: Rough cost of a job for the schedule: seconds per table cell, and per figure (measured on the full run).
+_CELL_S, _FIGURE_S = 8e-8, 0.3
+
+
+def _job_cost(job: tuple) -> float:
+    return _CELL_S * job[1].size if job[0] == "table" else _FIGURE_S
+
+
+def _figure_names() -> set[str]:
+    from ..reporting.figures import FIGURES  # its names only: matplotlib is imported where a figure is drawn
+
+    return set(FIGURES)
+
+
+def _file_job(job: tuple) -> list[Path]:
+    """One table (CSV, and Parquet when asked) or one figure; returns the paths written."""
+    if job[0] == "table":
+        _, frame, path, parquet = job
+        write_csv(frame, path)
+        if parquet:
+            frame.to_parquet(path.with_suffix(".parquet"), index=False)
+            return [path, path.with_suffix(".parquet")]
+        return [path]
+    from ..reporting.figures import FIGURES
+
+    _, name, data, out, y_boundary = job
+    return FIGURES[name](data, out, y_boundary)
 
 
 def _has_pyarrow() -> bool:

@@ -40,6 +40,14 @@ _DECEL_LABEL = "sudden deceleration of $L_{N+1}$, $a_{x,N+1,d}$ [m/s²]"
 _SECONDARY_STYLES = ("-", "--", ":", "-.")
 
 
+def import_plotting() -> None:
+    """Import what drawing a figure needs (matplotlib's figure, its Agg and SVG backends): a process that is about
+    to fork workers that draw imports it once instead of once in each worker."""
+    import matplotlib.backends.backend_agg
+    import matplotlib.backends.backend_svg
+    import matplotlib.figure  # noqa: F401
+
+
 def _figure(ncols: int = 1, width: float = 5.0, height: float = 3.6):
     from matplotlib.backends.backend_agg import FigureCanvasAgg
     from matplotlib.figure import Figure
@@ -56,7 +64,16 @@ def _save(fig, out_dir: Path, stem: str) -> list[Path]:
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
     png, svg = out_dir / f"{stem}.png", out_dir / f"{stem}.svg"
-    with matplotlib.rc_context({"svg.hashsalt": "safelane"}):
+    # No rc setting may give the figure a layout engine again once its layout is solved.
+    keep = {"svg.hashsalt": "safelane", "figure.autolayout": False, "figure.constrained_layout.use": False}
+    with matplotlib.rc_context(keep):
+        # The layout is solved once, at the PNG's resolution, and kept for both files: savefig would solve it for
+        # each file, each time after a draw pass of its own that only measures.
+        engine = fig.get_layout_engine()
+        if engine is not None:
+            fig.set_dpi(DPI)
+            engine.execute(fig)
+            fig.set_layout_engine(None)
         fig.savefig(png, dpi=DPI, metadata={"Software": None})
         fig.savefig(svg, metadata={"Date": None})
     return [png, svg]
