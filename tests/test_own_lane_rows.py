@@ -122,6 +122,13 @@ def test_the_gaps_reported_are_those_at_the_reported_switch_time(seed):
     rng = np.random.default_rng(40 + seed)
     prm = Params()
     kw = random_states(rng, prm, 4000)
+    # A quarter at a knife edge: L0 at its margin plus less than the tolerance, as fast as the ego, braking softer
+    # than it can: the gap at u = 0 is within the tolerance above 0 and any acceleration breaks it, so the
+    # bisection runs and ends at a small u > 0, whose gaps are not those at 0
+    knife = np.arange(0, 4000, 4)
+    kw["l0_p"][knife] = kw["ego_px"][knife] + kw["own_margin"][knife] + rng.uniform(1e-10, 9e-10, knife.size)
+    kw["l0_v"][knife] = kw["ego_vx"][knife]
+    kw["l0_decel"][knife] = rng.uniform(0.5, prm.a_x_d - 0.5, knife.size)
     searched = []
     real_search = own_lane._search
 
