@@ -25,8 +25,9 @@ import time
 import numpy as np
 from threadpoolctl import threadpool_limits
 
+from safelane.planners import features as feature_map
 from safelane.planners.base import clip_actions
-from safelane.planners.features import FEATURE_NAMES, feature_row, plan_steps, planned_change
+from safelane.planners.features import PLAN_TIMES_S, plan_steps, planned_change
 from safelane.safety._backend import ARRAY
 from safelane.sim import _fast_loop
 from safelane.sim._alloc import tune_allocator
@@ -39,24 +40,25 @@ from safelane.sim.step import ClosedLoop
 VARIANTS = ("CV_all", "CV_follow", "CV_none", "No_agg_assess")
 
 
-def _features_before(obs, params) -> np.ndarray:
-    """The feature map as it was before (the running sum over the whole plan, every horizon's change computed
-    apart): the baseline's."""
-    p_x = np.asarray(obs.p_x, dtype=np.float64)
-    cols = feature_row(ARRAY, p_x, np.asarray(obs.p_y, dtype=np.float64), np.asarray(obs.v_x, dtype=np.float64),
-                       np.asarray(obs.v_y, dtype=np.float64), obs.p_x_l, obs.v_x_l, obs.p_x_f, obs.v_x_f)  # fmt: skip
-    plan_in = np.asarray(obs.l1_plan, dtype=np.float64)
-    plan = np.zeros((plan_in.shape[0], 4))
+def _plan_speed_change_before(l1_plan, v_x_l, dt, times_s=PLAN_TIMES_S) -> np.ndarray:
+    """L1's planned speed change as the feature map took it before: the running sum over the whole plan, every
+    horizon's change computed apart (the baseline's; the same values as ``plan_speed_change`` now)."""
+    plan_in = np.asarray(l1_plan, dtype=np.float64)
+    out = np.zeros((plan_in.shape[0], len(times_s)))
     running = np.cumsum(plan_in, axis=1)
-    for j, steps in enumerate(plan_steps(params.dt, plan_in.shape[1])):
+    for j, steps in enumerate(plan_steps(dt, plan_in.shape[1], times_s)):
         if steps > 0:
-            plan[:, j] = planned_change(ARRAY, running[:, steps - 1], params.dt, np.asarray(obs.v_x_l, float))
-    out = np.empty((p_x.shape[0], len(FEATURE_NAMES)))
-    for j, col in enumerate(cols):
-        out[:, j] = col
-    out[:, len(cols) : len(cols) + plan.shape[1]] = plan
-    out[:, -1] = np.asarray(obs.f_connected, dtype=np.float64)
+            out[:, j] = planned_change(ARRAY, running[:, steps - 1], dt, np.asarray(v_x_l, float))
     return out
+
+
+def _features_before(obs, params) -> np.ndarray:
+    """The feature map as it was before: ``features`` with :func:`_plan_speed_change_before`."""
+    saved, feature_map.plan_speed_change = feature_map.plan_speed_change, _plan_speed_change_before
+    try:
+        return feature_map.features(obs, params)
+    finally:
+        feature_map.plan_speed_change = saved
 
 
 class _Before:
