@@ -45,6 +45,7 @@ def _rows(seed: int):
 
 @pytest.mark.parametrize("seed", range(4))
 def test_the_rows_members_give_the_arrays_bits(seed):
+    pytest.importorskip("numba")  # (the row function's module imports numba; it runs uncompiled here all the same)
     from safelane.shield._fast_own import _member
 
     prm, kw = _rows(seed)
