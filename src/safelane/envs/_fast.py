@@ -1,5 +1,6 @@
 """The envs' compiled step (numba, extra ``fast``): one control period of every row — the closed loop's own period,
-``sim/_fast_loop._period`` — then what the agent gets from it, in the same compiled call.
+``sim/_fast_loop._step_rows``, what ``step_kernel`` runs (compiled and cached once for both) — then what the agent
+gets from it, in the same compiled call.
 
 No rule lives here: the period is the closed loop's own; the observation is
 :func:`~safelane.planners.features.feature_row` and :func:`~safelane.planners.features.planned_change` (the feature
@@ -24,6 +25,7 @@ measured situation; the feature map has no ``L0`` column). ``tests/test_env_real
 from __future__ import annotations
 
 import numba
+import numpy as np
 from numba import types
 from numba.extending import overload
 
@@ -33,8 +35,8 @@ from ..safety import _compile
 from ..safety._backend import SCALAR
 from ..safety._fast_base import announce_compiles
 from ..shield.decide import ABORT, HESITATE
-from ..sim._fast_loop import LoopBatch, _period
-from ..sim._fast_rows import Rows, Sense, _load, _scratch, _store, _window
+from ..sim._fast_loop import LoopBatch, _step_rows
+from ..sim._fast_rows import Rows, Sense, _scratch
 from . import core as _core  # noqa: F401  (outcome_core is marked: registered below)
 from .core import outcome_core
 
@@ -61,8 +63,9 @@ def env_step_kernel(prm, period_prm, batch, rows, proposal, env, view, steps, ob
     the named ones: numba types a call's plain tuples of arrays in C, named ones in Python (measured: 13 µs of a
     single env's step of about 100 µs); the names are put back here, for free."""
     batch, rows = LoopBatch(*batch), Rows(*rows)
+    before = np.empty((rows.x.shape[0], 6))
     _env_rows(prm, batch, rows, proposal, env, view, steps, obs, outcome, behaviour, finite,
-              _scratch(rows, period_prm, _named_sense(sense)))  # fmt: skip
+              _scratch(rows, period_prm, _named_sense(sense)), before)  # fmt: skip
 
 
 def _named_sense(sense):
@@ -78,38 +81,41 @@ def _named_sense_typed(sense):
 
 
 @numba.njit(nogil=True, error_model="numpy", _nrt=False)
-def _env_rows(prm, batch, rows, proposal, env, view, steps, obs, outcome, behaviour, finite, w):
+def _env_rows(prm, batch, rows, proposal, env, view, steps, obs, outcome, behaviour, finite, w, before):
+    """The closed loop's period of every row (``_fast_loop._step_rows``, compiled once for ``step_kernel`` and the
+    envs), then each row's observation and outcome from its state before (``before``, kept here first) and after."""
     dt, y_boundary, max_steps = env[0], env[1], env[2]
     w_pro, w_suc, w_col, w_com, w_tim, w_cos, w_int = env[3], env[4], env[5], env[6], env[7], env[8], env[9]
     shares_plan, f_connected, plan_steps, sums = view
-    den = _window(w.times, prm[0])
-    x, v, rf, rb = w.x2[0], w.v2[0], w.rf, w.rb
+    rf, rb, x, v, acc = rows.rf, rows.rb, rows.x, rows.v, rows.acc
     for b in range(rows.x.shape[0]):
-        _load(rows, b, batch, w)
-        vx0, y0, vy0 = rf[0, 2], rf[0, 1], rf[0, 3]
-        c0, v0, d0 = 1.0 if rb[0, 0] else 0.0, 1.0 if rb[0, 1] else 0.0, 1.0 if rb[0, 7] else 0.0
-        code, finite[b] = _period(prm, batch, b, w, den, proposal[b, 0], proposal[b, 1])
-        behaviour[b] = code
-        _store(rows, b, w)
-        ex, ey, evx, evy = rf[0, 0], rf[0, 1], rf[0, 2], rf[0, 3]
+        before[b, 0], before[b, 1], before[b, 2] = rf[b, 2], rf[b, 1], rf[b, 3]
+        before[b, 3] = 1.0 if rb[b, 0] else 0.0
+        before[b, 4] = 1.0 if rb[b, 1] else 0.0
+        before[b, 5] = 1.0 if rb[b, 7] else 0.0
+    _step_rows(prm, batch, rows, proposal, behaviour, finite, w)
+    for b in range(rows.x.shape[0]):
+        code = behaviour[b]
+        ex, ey, evx, evy = rf[b, 0], rf[b, 1], rf[b, 2], rf[b, 3]
         # --- the observation (ClosedLoop.observe, then features) ---
-        cols = feature_row(SCALAR, ex, ey, evx, evy, x[1], v[1], x[0], v[0])
+        cols = feature_row(SCALAR, ex, ey, evx, evy, x[b, 1], v[b, 1], x[b, 0], v[b, 0])
         for j in range(7):
             obs[b, j] = cols[j]
-        a_plan = w.acc[1] if shares_plan[b] else 0.0
+        a_plan = acc[b, 1] if shares_plan[b] else 0.0
         running = 0.0
         for h in range(sums.shape[0]):
             running = running + a_plan
             sums[h] = running
         for j in range(plan_steps.shape[0]):
             n = plan_steps[j]
-            obs[b, 7 + j] = planned_change(SCALAR, sums[n - 1], dt, v[1]) if n > 0 else 0.0
+            obs[b, 7 + j] = planned_change(SCALAR, sums[n - 1], dt, v[b, 1]) if n > 0 else 0.0
         obs[b, 7 + plan_steps.shape[0]] = 1.0 if f_connected[b] else 0.0
         # --- what the agent gets (outcome_core) ---
         intervened = 1.0 if (code == HESITATE or code == ABORT) else 0.0
         at_horizon = 1.0 if steps[b] >= max_steps else 0.0
-        c1, v1, d1 = 1.0 if rb[0, 0] else 0.0, 1.0 if rb[0, 1] else 0.0, 1.0 if rb[0, 7] else 0.0
-        out = outcome_core(SCALAR, dt, y_boundary, w_pro, w_suc, w_col, w_com, w_tim, w_cos, w_int, vx0, y0, vy0, c0,
-                           v0, d0, evx, ey, evy, c1, v1, d1, at_horizon, intervened)  # fmt: skip
+        c1, v1, d1 = 1.0 if rb[b, 0] else 0.0, 1.0 if rb[b, 1] else 0.0, 1.0 if rb[b, 7] else 0.0
+        out = outcome_core(SCALAR, dt, y_boundary, w_pro, w_suc, w_col, w_com, w_tim, w_cos, w_int, before[b, 0],
+                           before[b, 1], before[b, 2], before[b, 3], before[b, 4], before[b, 5], evx, ey, evy, c1, v1,
+                           d1, at_horizon, intervened)  # fmt: skip
         for j in range(8):
             outcome[b, j] = out[j]

@@ -264,9 +264,11 @@ def _loop_rows(n_steps, prm, batch, start, out, w):
         bad_step[b] = bad
 
 
-@numba.njit(nogil=True, error_model="numpy", _nrt=False)
+@numba.njit(cache=True, nogil=True, error_model="numpy", _nrt=False)
 def _step_rows(prm, batch, rows, proposal, behaviour, finite, w):
-    """:func:`step_kernel`'s rows, on its scratch arrays ``w``."""
+    """:func:`step_kernel`'s rows, on its scratch arrays ``w``: one period of every row. The envs' step
+    (``envs/_fast.py``) calls it too, so the period is compiled once for both (cached on its own: a kernel that
+    calls it loads it from the cache rather than compiling the period again)."""
     den = _window(w.times, prm[0])
     for b in range(rows.x.shape[0]):
         _load(rows, b, batch, w)
