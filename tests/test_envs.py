@@ -42,6 +42,20 @@ def test_import_safelane_does_not_import_gymnasium():
     subprocess.run([sys.executable, "-c", code], check=True)
 
 
+def test_an_env_step_and_the_shield_do_not_import_pandas():
+    """pandas (0.13–0.18 s to import here) loads with the first results table, not with an env or the shield."""
+    code = (
+        "import sys, numpy as np, gymnasium, safelane.envs\n"
+        "from safelane.shield import Shield\n"
+        "env = gymnasium.make('safelane/LaneChange-v0'); env.reset(seed=0); env.step(np.zeros(2, np.float32))\n"
+        "assert 'pandas' not in sys.modules, 'pandas imported'\n"
+        "from safelane.sim import paper_scenarios, simulate_batch\n"
+        "simulate_batch(paper_scenarios('CV_all', 1, 3.0, 2, np.random.default_rng(0)))\n"
+        "assert 'pandas' in sys.modules"
+    )
+    subprocess.run([sys.executable, "-c", code], check=True)
+
+
 def test_missing_gymnasium_gives_an_install_hint():
     code = (
         "import sys; sys.modules['gymnasium'] = None\n"

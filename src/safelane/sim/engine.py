@@ -9,9 +9,9 @@ cells is just a bigger batch) — in one process, or split into chunks on worker
 from __future__ import annotations
 
 import os
+from typing import TYPE_CHECKING
 
 import numpy as np
-import pandas as pd
 from threadpoolctl import threadpool_limits
 
 from ..errors import InputError
@@ -27,6 +27,9 @@ from .inputs import cell_rng, check_cell_args, check_settings, resolve
 from .results import SimResult, results_table, trace_rows
 from .scenario import ScenarioBatch, ScenarioConfig, check_batch, paper_scenarios
 from .step import ClosedLoop
+
+if TYPE_CHECKING:  # pandas loads with the first table, not with the package
+    import pandas as pd
 
 
 def simulate(
@@ -161,6 +164,8 @@ def simulate_batch(
                 rows.append(trace_rows(batch, state, behaviour, trace_limit))
     state = sim.finish(state)
     table = results_table(batch, state)
+    import pandas as pd
+
     trace_df = pd.concat(rows, ignore_index=True) if trace and rows else None
     return SimResult(table=table, trace=trace_df, observations=observations, engine=engine,
                      engine_reasons=tuple(why))  # fmt: skip
@@ -199,4 +204,6 @@ def _simulate_parallel(batch, seed, prm, cfg, nominal, backend: Backend, chunks:
     parts = np.array_split(np.arange(len(batch)), chunks)
     jobs = [(batch.take(rows), seed, prm, cfg, nominal, traffic, blame) for rows in parts]
     tables = map_chunks(_simulate_chunk, jobs, backend)
+    import pandas as pd
+
     return SimResult(table=pd.concat(tables, ignore_index=True))

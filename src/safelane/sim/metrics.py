@@ -2,8 +2,12 @@
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
 import numpy as np
-import pandas as pd
+
+if TYPE_CHECKING:  # pandas loads with the first table, not with the package
+    import pandas as pd
 
 Z95 = 1.959963984540054
 

@@ -3,15 +3,18 @@
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from typing import TYPE_CHECKING
 
 import numpy as np
-import pandas as pd
 
 from ..planners.base import Observation
 from ..planners.variants import VARIANT_NAMES
 from ..shield.monitor import BREACH_KINDS
 from . import blame_log
 from .scenario import ScenarioBatch
+
+if TYPE_CHECKING:  # pandas loads with the first table, not with the package
+    import pandas as pd
 
 
 @dataclass
@@ -60,6 +63,8 @@ def _ego_responsible(table: pd.DataFrame, out: pd.DataFrame) -> None:
 
 def results_table(b: ScenarioBatch, s) -> pd.DataFrame:
     """One row per scenario: outcomes, gaps, behaviour counts, assessment."""
+    import pandas as pd
+
     truth = b.follower_aggressive
     belief = s.belief.aggressive
     return pd.DataFrame(
@@ -113,6 +118,8 @@ def _own_lane_columns(s) -> dict:
 
 def trace_rows(b: ScenarioBatch, s, behaviour, limit: int) -> pd.DataFrame:
     """Per-step rows of the first ``limit`` scenarios."""
+    import pandas as pd
+
     n = min(limit, len(b))
     ex, ey, evx, evy = s.ego
     return pd.DataFrame(
