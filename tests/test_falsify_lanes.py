@@ -11,6 +11,7 @@ import pytest
 
 from safelane import Params
 from safelane.experiments import falsify_lanes as fl
+from safelane.experiments import falsify_lanes_world as flw
 from safelane.experiments.falsify_lanes_run import run
 from safelane.shield import ShieldConfig
 
@@ -56,7 +57,7 @@ def test_the_entry_distance_is_rss_plus_p_m_by_hand():
     rho, a, b, b_front = PRM.dt, PRM.a_x_a, PRM.a_x_d, PRM.others_decel
     v_r = v_rear + a * rho
     by_hand = v_rear * rho + 0.5 * a * rho**2 + v_r**2 / (2 * b) - v_front**2 / (2 * b_front) + PRM.p_m
-    assert fl._safe_gap(v_rear, v_front, PRM) == pytest.approx(by_hand, abs=1e-9)
+    assert flw.safe_gap(v_rear, v_front, PRM) == pytest.approx(by_hand, abs=1e-9)
     x = np.array([[-1e3, 1e3, np.inf, 0.0, np.inf]])  # the far entrant at 0, the ego (in lane 1) ahead
     v = np.array([[0.0, 0.0, 0.0, v_rear, 0.0]])
     y = np.array([[7.0, 3.5, 0.0, 7.0, -3.5]])
@@ -65,7 +66,7 @@ def test_the_entry_distance_is_rss_plus_p_m_by_hand():
 
     def ok(dx, ego_y, ego_vy=0.0):
         ego = (ego_x + dx, np.array([ego_y]), ego_v, np.array([ego_vy]))
-        return bool(fl._entry_ok(fl.FAR, x, v, y, vy, ego, PRM, 0.0)[0])
+        return bool(flw.may_enter(flw.FAR, x, v, y, vy, ego, PRM, 0.0)[0])
 
     assert ok(1e-6, 3.5) and not ok(-1e-6, 3.5)
     assert ok(-1e-6, 0.0)  # the ego in its own lane, not moving: it does not count
