@@ -234,6 +234,27 @@ def test_responsible_accel_caps_at_the_wish_and_floors_at_a_x_d():
     assert np.shape(responsible_accel(1.0, 5.0, 20.0, 20.0, PRM.a_x_d, PRM)) == ()
 
 
+def test_responsible_accel_with_a_softer_brake_floors_at_it_and_is_safe_under_it():
+    """``brake`` (another vehicle following brakes at up to ``a_o_d``, not ``a_x_d``): the answer is the wish where
+    that is safe under ``brake``, the floor ``-brake`` where nothing is, and in between passes the reference's check
+    braking at ``brake`` — a check that braking at ``a_x_d`` would fail on a part of the rows."""
+    rng = np.random.default_rng(9)
+    n = 400
+    slack, v_f, v_l = _rows(rng, n)
+    lead = rng.uniform(0.0, 3.0, n)
+    brake = np.full(n, 4.0)
+    wanted = rng.uniform(-4.0, PRM.a_x_a, n)
+    a = responsible_accel(wanted, slack, v_f, v_l, lead, PRM, brake=4.0)
+    floor = ref_ok(np.full(n, -4.0), slack, v_f, v_l, lead, brake) < -1e-6
+    np.testing.assert_array_equal(a[floor], -4.0)
+    assert floor.sum() > 10 and a.min() == -4.0
+    safe = ~floor
+    assert (ref_ok(a[safe], slack[safe], v_f[safe], v_l[safe], lead[safe], brake[safe]) >= -1e-9).all()
+    # The default (a_x_d) answers differently on many rows: the brake is read.
+    differs = a != responsible_accel(wanted, slack, v_f, v_l, lead, PRM)
+    assert differs.sum() > 0.2 * n
+
+
 def test_a_wish_exactly_at_the_bound_is_taken_on_the_safe_side():
     """``responsible_accel`` applies the closed-form bound ``ROOT_EPS_MPS2`` on the safe side (rounding at the
     boundary): a wish exactly equal to the bound is not taken as is; a wish just above it neither; one below it is.
