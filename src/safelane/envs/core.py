@@ -184,7 +184,9 @@ class LaneChangeTask:
         # (drawn from the episode's generator), so one fixed seed serves every episode.
         self.seed = 0
         self.loop: ClosedLoop | None = None
-        self.batch: ScenarioBatch | None = None
+        self._batch: ScenarioBatch | None = None
+        self._rngs: list[np.random.Generator] = []  # each row's generator (start)
+        self._reserve = None  # the rows' next episodes on the compiled loop (reserve.Reserve; made at the first reset)
         self.state = None
         self.steps = np.zeros(batch, np.int64)
         self._bounds = tuple(bound[:, None] for bound in self.action_bounds())  # (per action column, see step)
@@ -198,33 +200,49 @@ class LaneChangeTask:
         p = self.params
         return np.array([-p.a_x_d, -p.a_y_m]), np.array([p.a_x_a, p.a_y_m])
 
+    @property
+    def batch(self) -> ScenarioBatch | None:
+        """The running episodes' scenarios (the vector env's resets on the compiled loop put in when this is read:
+        nothing in a step reads it)."""
+        if self._reserve is not None:
+            self._batch = self._reserve.scenarios(self._batch)
+        return self._batch
+
     def start(self, rngs: Sequence[np.random.Generator]) -> np.ndarray:
-        """Every row starts a fresh episode (row ``i`` drawn from ``rngs[i]``); the observations ``(B, F)``."""
-        self.batch = self.sampler.draw_many(rngs)
-        self.loop = self._loop(self.batch)
+        """Every row starts a fresh episode (row ``i`` drawn from ``rngs[i]``, and its later episodes too: see
+        :meth:`restart`); the observations ``(B, F)``."""
+        self._rngs, self._reserve = list(rngs), None
+        self._batch = self.sampler.draw_many(self._rngs)
+        self.loop = self._loop(self._batch)
         self.state = self.loop.initial_state()
         self.steps[:] = 0
         return self.observe()
 
-    def restart(self, rows: np.ndarray, rngs: Sequence[np.random.Generator]) -> np.ndarray:
-        """Rows ``rows`` start fresh episodes (each drawn from its generator), the others go on (see the module
-        docstring for how the shared clock is handled); the fresh rows' first observations ``(len(rows), F)``."""
-        fresh = self.sampler.draw_many(rngs)
-        self.batch = replace_rows(self.batch, fresh, rows, self.n)
-        first = ClosedLoop(fresh, self.seed, self.params, self.config, self.planner, self.traffic)
-        start = first.initial_state()
-        obs = features(first.observe(start), self.params).astype(np.float32)  # (the clock is not a feature)
+    def restart(self, rows: np.ndarray) -> np.ndarray:
+        """Rows ``rows`` start fresh episodes (each drawn from its row's generator), the others go on (see the module
+        docstring for how the shared clock is handled); the fresh rows' first observations ``(len(rows), F)``. On the
+        compiled loop the rows' next episodes are prepared ahead, in batches (:mod:`.reserve`: the same scenarios)."""
         if isinstance(self.loop, Stepper):  # the fresh rows' inputs and state spliced in; each row its own clock
-            self.loop.splice(rows, Stepper(first))
-            shares_plan, f_connected = self._view[:2]
-            shares_plan[rows], f_connected[rows] = first.shares_plan, first.b.connected[:, 0]
-            for into, new in zip(self.state.rows, self.loop.state_of(start).rows, strict=True):
-                into[rows] = new
+            from .reserve import Reserve
+
+            if self._reserve is None:
+                self._reserve = Reserve(self, self._rngs)
+            obs = self._reserve.restart(rows)
         else:
-            self.loop = self._loop(self.batch)
+            fresh = self.sampler.draw_many([self._rngs[i] for i in rows.tolist()])
+            _, start, obs = self.first_states(fresh)
+            self._batch = replace_rows(self.batch, fresh, rows, self.n)
+            self.loop = self._loop(self._batch)
             self.state = replace_rows(self.state, shift_plan_clock(start, self.state.t), rows, self.n)
         self.steps[rows] = 0
         return obs
+
+    def first_states(self, fresh: ScenarioBatch):
+        """The closed loop over the scenarios ``fresh`` (the task's settings), its initial state and the first
+        observations ``(len(fresh), F)``."""
+        first = ClosedLoop(fresh, self.seed, self.params, self.config, self.planner, self.traffic)
+        start = first.initial_state()
+        return first, start, features(first.observe(start), self.params).astype(np.float32)  # (the clock: no feature)
 
     def _step_compiled(self, proposal: np.ndarray) -> StepOutcome:
         """:meth:`step` on the compiled loop: the period, the observation and the outcome in one compiled call

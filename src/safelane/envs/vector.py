@@ -111,7 +111,7 @@ class LaneChangeVectorEnv(VectorEnv):
                 final_obs[i] = last
             info["final_obs"], info["_final_obs"] = final_obs, done
             info["final_info"], info["_final_info"] = dict(info), done
-            first = self.task.restart(rows, [self._rngs[i] for i in rows.tolist()])
+            first = self.task.restart(rows)
             obs = obs.copy()
             obs[rows] = first
         return obs, out.reward, out.terminated, out.truncated, info
