@@ -9,7 +9,8 @@ into observations, rewards, costs and flags. :class:`~safelane.envs.LaneChangeEn
 Resets (the vector env's auto-reset): the rows that finished get fresh scenarios, sampled row by row from their own
 generators exactly as a single env samples them, and a ``ClosedLoop`` over those rows alone gives their initial
 state and first observation. On the compiled loop (:class:`~safelane.sim._stepper.Stepper`) the fresh rows' kernel
-inputs and state are spliced into the running batch's arrays (:meth:`~safelane.sim._stepper.Stepper.splice`); each row
+inputs and state are spliced into the running batch's arrays (:meth:`~safelane.sim._stepper.Stepper.splice`) from
+episodes prepared ahead, each row's next ones drawn from its generator in their order (:mod:`.reserve`); each row
 keeps its own clock, so a restarted row runs exactly the single env's episode. Period by period in NumPy a new
 ``ClosedLoop`` is built for the whole batch (its constant arrays), and the finished rows of the state are overwritten
 by the initial state of their new scenarios (where the initial state has no record at all — the shield's memory of

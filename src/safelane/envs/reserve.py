@@ -73,10 +73,9 @@ class Reserve:
             self.shares_plan, self.f_connected = np.array(first.shares_plan), np.array(first.b.connected[:, 0])
         else:
             self.task.batch  # noqa: B018  (the scenarios taken so far put in: self.batch is another one below)
-            self.loop.splice(at, part)
-            for into, new in zip(self.rows, rows, strict=True):
-                into[at] = new
-            self.obs[at], self.shares_plan[at], self.f_connected[at] = obs, first.shares_plan, first.b.connected[:, 0]
+            pairs = [*self.loop.splice_pairs(part), *zip(self.rows, rows, strict=True), (self.obs, obs),
+                     (self.shares_plan, np.asarray(first.shares_plan)), (self.f_connected, first.b.connected[:, 0])]
+            _copy_rows(_as_rows(pairs), at, np.arange(len(at)))
             self.batch = replace_rows(self.batch, fresh, at, len(self.obs))
         self.stock[:] = d
         self.preparations += 1
@@ -90,7 +89,7 @@ class Reserve:
         if self._pairs is None:  # the loop's inputs as Stepper.splice copies them, the state, the env kernel's view
             pairs = [*task.loop.splice_pairs(self.loop), *zip(task.state.rows, self.rows, strict=True),
                      *zip(task._view[:2], (self.shares_plan, self.f_connected), strict=True)]  # fmt: skip
-            self._pairs = tuple(pair for pair in pairs if pair[0].size)
+            self._pairs = _as_rows(pairs)
         _copy_rows(self._pairs, rows, at)
         self.source[rows] = at
         return self.obs[at]
@@ -105,12 +104,28 @@ class Reserve:
         return batch
 
 
+def _as_rows(pairs) -> tuple:
+    """``(into, new)`` pairs as :func:`_copy_rows` takes them: the arrays that have columns, each as ``(rows,
+    columns)`` — ``into`` a view (written through), ``new`` a view or a copy (only read)."""
+    out = []
+    for into, new in pairs:
+        if into.size:
+            rows = into.reshape(len(into), -1)
+            if not np.may_share_memory(rows, into):
+                raise ValueError("_as_rows: an array to write into has no (rows, columns) view")
+            out.append((rows, new.reshape(len(new), -1)))
+    return tuple(out)
+
+
 @numba.njit(cache=True, nogil=True)
 def _copy_rows(pairs, rows, at):
     """Row ``at[j]`` of each pair's second array into row ``rows[j]`` of its first, for every pair ``(into, new)`` of
-    ``pairs``, in one compiled call (NumPy's fancy indexing costs about a microsecond an array, and a reset copies
-    some sixty)."""
+    ``(rows, columns)`` arrays (:func:`_as_rows`), in one compiled call: NumPy's fancy indexing costs about a
+    microsecond an array, and a reset copies some fifty; element by element, as no row is taken as a view (each view
+    would count references)."""
     for pair in literal_unroll(pairs):
         into, new = pair
         for j in range(rows.shape[0]):
-            into[rows[j]] = new[at[j]]
+            r, a = rows[j], at[j]
+            for c in range(into.shape[1]):
+                into[r, c] = new[a, c]
