@@ -25,8 +25,8 @@ from ..sim._stepper import Stepper
 from ..sim.scenario import ScenarioBatch
 from .rows import replace_rows
 
-#: How many episodes ahead each sub-env is prepared: a sub-env that finishes ``DEPTH`` episodes since the last
-#: preparation makes the next one (every sub-env's stock filled again), so a preparation covers many rows.
+#: How many episodes ahead each sub-env is prepared: the reset of a sub-env whose stock ran out prepares every
+#: sub-env's stock again (one batch), so a preparation covers many rows.
 DEPTH = 2
 
 
