@@ -155,14 +155,24 @@ class Stepper:
         self.check_finite(rows, finite)
         return behaviour
 
-    def splice(self, rows: np.ndarray, part: Stepper) -> None:
+    def splice(self, rows: np.ndarray, part: Stepper, at: np.ndarray | None = None) -> None:
         """Rows ``rows`` of the batch become ``part``'s rows, in place: ``part`` steps ``len(rows)`` other scenarios
         (same settings and seed) and its kernel inputs replace those rows' (:func:`kernel_inputs` per row, so the
         rows' inputs are what a :class:`Stepper` over the spliced batch would hold: ``L0``'s profile, the world's key
         and the sensing bounds are the row's own, like the rest); the envs' resets, which would
-        otherwise rebuild the whole batch's inputs for a few rows. ``sim`` then describes the batch before the
+        otherwise rebuild the whole batch's inputs for a few rows; ``at``: ``part``'s rows to take, in ``rows``'
+        order (default: all of them, the vector env's resets take theirs from episodes prepared ahead,
+        ``envs/reserve.py``). ``sim`` then describes the batch before the
         splice: :meth:`observe`, :meth:`step` and :meth:`finish`, which read it, refuse (the envs step with
         :meth:`step_with` and the kernels; :meth:`check_finite` reads the spliced scenario ids)."""
+        for into, new in self.splice_pairs(part):
+            into[rows] = new if at is None else new[at]
+
+    def splice_pairs(self, part: Stepper) -> list[tuple[np.ndarray, np.ndarray]]:
+        """What :meth:`splice` copies: ``(into, new)`` for each array of the batch's kernel inputs that has rows, row
+        ``i`` of ``new`` (``part``'s) into row ``r`` of ``into`` (ours, in place: this batch counts as spliced from
+        now on); the arrays whose batch axis is last (``BATCH_LAST``) transposed. ``part`` is checked as
+        :meth:`splice` says."""
         same = (part.sim.seed == self.sim.seed and part.batch.x.shape[1] == self.batch.x.shape[1]
                 and np.array_equal(part.prm_vec, self.prm_vec) and np.array_equal(part.period_prm, self.period_prm))
         if not same:
@@ -177,12 +187,10 @@ class Stepper:
                              "spliced")  # fmt: skip
         if not self.spliced:  # (kernel_inputs may hand over the ClosedLoop's own arrays: from now on, ours)
             self.batch = type(self.batch)(*[a.copy() for a in self.batch])
-        for name, into, new in zip(self.batch._fields, self.batch, part.batch, strict=True):
-            if name in BATCH_LAST:
-                into[:, rows] = new
-            elif name not in BATCH_SHARED and name not in BY_ID and name not in LOOP_ONLY:
-                into[rows] = new
         self.spliced = True
+        return [(into.T, new.T) if name in BATCH_LAST else (into, new)
+                for name, into, new in zip(self.batch._fields, self.batch, part.batch, strict=True)
+                if name not in BATCH_SHARED and name not in BY_ID and name not in LOOP_ONLY]
 
     def _whole(self, what: str) -> None:
         if self.spliced:
