@@ -4,8 +4,9 @@ sensing error and the actuation delay — the world's side, and the shield's (it
 its delay where it is the world's). Observations, rewards, flags and every info key bit for bit over many steps
 with resets, for the single env and for the vector env's sub-envs (each against the NumPy single env on its seed,
 every episode: the compiled rows keep their own clocks, and the spliced rows carry their own ``L0`` profile, world
-key and sensing bounds); and the settings matter there: collisions and costs with ``L0``, a delayed command, a
-completion the world reaches periods after the shield's flag, the shield's box and delay."""
+key and sensing bounds), an own lane of three (``L0`` connected) among them; and the settings matter there:
+collisions and costs with ``L0``, a delayed command, a completion the world reaches periods after the shield's flag,
+the shield's box and delay."""
 
 from __future__ import annotations
 
@@ -39,8 +40,8 @@ CASES = {
     "the shield's sensing and delay on, with L0, sensing error, delay": SHIELD_SIDES,
     "wide sensing error, the shield's sensing on": WIDE,
     "delay alone, the shield's delay on": dict(actuation_delay_s=0.3),
-    "L0 connected, two vehicles ahead of it, the shield's sensing and delay on": dict(SHIELD_SIDES,
-                                                                                     own_lane_connected=2),
+    "a connected own lane (L0 and two vehicles ahead of it), the shield's sensing and delay on": dict(
+        SHIELD_SIDES, own_lane_connected=2),
 }
 #: Each case's seed.
 SEEDS = (6, 2, 13, 6, 2, 13, 6)
