@@ -126,13 +126,12 @@ def test_vector_env_sub_envs_are_single_envs_exactly(n, steps, seed):
 
 @pytest.mark.parametrize(
     "kwargs",
-    [dict(shield=False), dict(sim_config={"sensor_noise_std": 0.1}),
-     dict(sim_config={"own_lane": True, "own_lane_connected": 1}), dict(sim_config={"v2x_loss": 0.2}),
+    [dict(shield=False), dict(sim_config={"sensor_noise_std": 0.1}), dict(sim_config={"v2x_loss": 0.2}),
      dict(sim_config={"actuation_delay_s": 0.2, "shield": {"actuation_delay_s": 0.1}})],
 )  # fmt: skip
 def test_settings_the_compiled_period_does_not_cover_step_in_numpy(kwargs):
-    """(The realistic world runs compiled, its shield's sensing and its delay where it is the world's included,
-    tests/test_env_realworld.py; a shield's delay other than the world's and a connected own lane do not.)"""
+    """(The realistic world runs compiled, its shield's sensing and its delay where it is the world's included, and a
+    connected own lane, tests/test_env_realworld.py; a shield's delay other than the world's does not.)"""
     env = LaneChangeEnv(**kwargs)
     env.reset(seed=0)
     env.step(np.zeros(2))

@@ -155,7 +155,6 @@ def test_the_fused_loop_covers_the_default_settings_from_its_threshold_on(monkey
 
 
 UNCOVERED = {
-    "a connected own lane": dict(cfg=SimConfig(own_lane=True, own_lane_connected=1)),
     "a shield's actuation delay other than the world's": dict(
         cfg=SimConfig(actuation_delay_s=0.2, shield={"actuation_delay_s": 0.1})
     ),

@@ -50,8 +50,8 @@ class StepState:
 
     @property
     def l0(self):
-        rf = self.rows.rf
-        return (rf[:, 10:11], rf[:, 11:12]) if np.isfinite(rf[:, 10]).any() else None
+        rows = self.rows
+        return (rows.own_x, rows.own_v) if np.isfinite(rows.own_x[:, 0]).any() else None
 
 
 class Stepper:
@@ -100,8 +100,8 @@ class Stepper:
             collided=rows.rb[:, 0], violated=rows.rb[:, 1], leader_collided=rows.rb[:, 2],
             leader_violated=rows.rb[:, 3], aggressive=rows.sk[:, 2], counts=rows.ri[:, :3], n_invalid=rows.ri[:, 3],
             breach_flags=rows.sk[:, 5:10], initial_safe=self.initial_safe, slow_delay_s=rows.st[:, 7],
-            slow_missed=rows.sk[:, 10], slow_aggressive=rows.sk[:, 11], min_gap_l0=rows.rf[:, 9], l0_x=rows.rf[:, 10],
-            l0_v=rows.rf[:, 11], l0_collided=rows.rb[:, 5], l0_violated=rows.rb[:, 6],
+            slow_missed=rows.sk[:, 10], slow_aggressive=rows.sk[:, 11], min_gap_l0=rows.rf[:, 9], own_x=rows.own_x,
+            own_v=rows.own_v, l0_collided=rows.rb[:, 5], l0_violated=rows.rb[:, 6], own_pair_collided=rows.rb[:, 8],
         ), _slow(self.sim), _own(self.sim))  # fmt: skip
 
     def step(self, s: StepState):
@@ -181,10 +181,11 @@ class Stepper:
         if any(getattr(b, name).shape[0] for name in BY_ID for b in (self.batch, part.batch)) or (
                 part.batch.profile_t.shape[1] != self.batch.profile_t.shape[1]
                 or part.batch.l0_profile_t.shape[1] != self.batch.l0_profile_t.shape[1]
-                or part.batch.err_own.shape[1] != self.batch.err_own.shape[1]):  # fmt: skip
+                or part.batch.err_own.shape[1] != self.batch.err_own.shape[1]
+                or part.batch.own_v_desired.shape[1] != self.batch.own_v_desired.shape[1]):  # fmt: skip
             raise ValueError("Stepper.splice: traffic hooks as data (WaveHooks, by scenario id), or L(N+1)'s or L0's "
-                             "profiles or the own lane's sensing bounds of another length: such batches are not "
-                             "spliced")  # fmt: skip
+                             "profiles, the own lane's sensing bounds or its slots of another length: such batches are "
+                             "not spliced")  # fmt: skip
         if not self.spliced:  # (kernel_inputs may hand over the ClosedLoop's own arrays: from now on, ours)
             self.batch = type(self.batch)(*[a.copy() for a in self.batch])
         self.spliced = True
