@@ -68,6 +68,18 @@ CASES = {
         lambda: _mixed(3, 9.0, seed=3),
         dict(params=Params(a_o_d=9.5)),
     ),
+    # the chain analysis runs before the shield and is given to it (sim/_fast_loop._period): links exactly at
+    # their margin (human-driven leaders 10 m apart, p_m_human = 10) and inside it (unsafe from the start), beside
+    # a batch of the paper's gaps (completions, assessments)
+    "chains at and inside their links' margins (the chain given to the shield)": (
+        lambda: concat([
+            paper_scenarios(v, 3, 6.0, 40, np.random.default_rng(70 + k), ScenarioConfig(
+                follower_connected_share=0.5, human_share=0.6, gap=(10.0, 10.0) if k % 2 else (9.6, 10.4)),
+                first_id=1000 * k + 500)
+            for k, v in enumerate(VARIANTS)
+        ] + [_mixed(3, 6.0, per_variant=40, seed=7)]),
+        {},
+    ),
     "other parameters, settings and planner": (
         lambda: _mixed(2, 6.0, seed=2),
         dict(

@@ -373,6 +373,14 @@ def _period(prm, batch, b, w, den, ax_n, ay_n):
                                                                          ex, ey, evx, evy)  # fmt: skip
     completed = rb[0, 7]  # the world's (with an actuation delay the command acting completes it, not the one issued)
     active = not completed
+    # F's acceleration (behaviours.follower_accel) reads the period's start only, not the shield's decision: computed
+    # before the shield, so that its arithmetic can overlap the shield's in the processor (stored in acc after the
+    # leaders, as before)
+    sid = batch.scenario_id[b]
+    waves = batch.task_period.shape[0] > 0  # the leaders' and F's wishes from WaveHooks
+    f_wish = _wave_follower(batch, sid, t, a_a, a_d) if waves else 0.0
+    a_f = _follower_row(x[0], v[0], x[1], v[1], ex, evx, f_aggressive[b], completed, gap0[b], waves, f_wish,
+                        prm[22] > 0.0, p_m, a_a, a_o, open_decel, open_gap, dt)  # fmt: skip
     behaviour = period_row(0, pp, times, den, sf, sb, batch.rule[b : b + 1], chain_x, chain_v, link_promise,
                            link_margin, own_x, own_v, own_promise, own_nc, history, count, st, sk, plan, rb[0, 4],
                            snap_x, snap_v, snap_b, snap_nc, bounds_out, no_chain, of, ob, knots, px2, pv2, pb2,
@@ -409,8 +417,6 @@ def _period(prm, batch, b, w, den, ax_n, ay_n):
         a_last, sw_t, sw_a = _profile_row(batch.profile_t, batch.profile_a, b, t, dt)
     else:
         a_last = last_accel(SCALAR, t, brake_start, decel_last[b])
-    sid = batch.scenario_id[b]
-    waves = batch.task_period.shape[0] > 0  # the leaders' and F's wishes from WaveHooks
     if batch.lane_sample.shape[0] > 0:  # (WaveHooks' sample of the lane gaps, before the leaders' wishes)
         _sample_lanes(batch, sid, x)
     p_v, step = batch.p_v[b], ri[0, 4]
@@ -444,9 +450,7 @@ def _period(prm, batch, b, w, den, ax_n, ay_n):
             if is_last[b, i]:
                 a_i = a_last
             acc[i] = a_i
-    f_wish = _wave_follower(batch, sid, t, a_a, a_d) if waves else 0.0
-    acc[0] = _follower_row(x[0], v[0], x[1], v[1], ex, evx, f_aggressive[b], completed, gap0[b], waves, f_wish,
-                           prm[22] > 0.0, p_m, a_a, a_o, open_decel, open_gap, dt)  # fmt: skip
+    acc[0] = a_f
     row_acc = 0.0
     for i in range(k):
         f_acc[i], f_ts[i], f_xe[i], f_ve[i] = constant_segment(SCALAR, x[i], v[i], acc[i], dt)
