@@ -296,10 +296,26 @@ def test_rss_rows_and_situations_refuse():
     assert fast_step.situation_refusals(s, ShieldConfig(sensing=False), None) == []
 
 
+def test_a_delay_without_commands_in_flight_is_a_clear_error(monkeypatch):
+    """A state without commands in flight (``init`` without a delay) stepped with an actuation delay: the compiled
+    period refuses it, and the stages say what is wrong (the state was made with another config)."""
+    params = Params()
+    rng = np.random.default_rng(41)
+    s = situation_of(random_world(rng, 12, 3, stale=False), 0.0, params)
+    state = shield_core.init(s, params, ShieldConfig(), "CV_all")
+    assert state.pending is None
+    cfg = ShieldConfig(actuation_delay_s=0.2)
+    assert fast_step.situation_refusals(s, cfg, state) == ["an actuation delay without commands in flight"]
+    prop = proposals(rng, 12)
+    monkeypatch.setattr(fast_step, "step", lambda *a, **k: pytest.fail("the compiled period ran"))
+    with pytest.raises(ValueError, match=r"no commands in flight, but the config has an actuation delay of 0\.2 s"):
+        shield_core.step(state, s, prop, params, cfg, "CV_all")
+
+
 def test_world_model_is_folded_before_the_compiled_period():
     """With the world model's other vehicles (far-lane and other-side entrants, straddlers, a connected one that
-    announces), Shield.step folds them and runs compiled; the decisions and states are the stages' (which fold them
-    in their observe stage) over 40 periods."""
+    announces), Shield.step and shield.core.step fold them and run compiled; the decisions and states are the
+    stages' (which fold them in their observe stage) over 40 periods."""
     from safelane.shield.world import Others, roles
 
     params = Params()
@@ -329,15 +345,35 @@ def test_world_model_is_folded_before_the_compiled_period():
     assert changed.sum() >= n // 4, changed.sum()
     shield.reset(start)
     state = shield_core.init(start, params, ShieldConfig(), "CV_all")
+    functional_state = state  # shield.core.step, the functional API, folds the others itself, then runs compiled too
+
+    def compiled_step(*args):
+        calls = []
+
+        def counted(*a, _step=fast_step.step, **kw):
+            calls.append(1)
+            return _step(*a, **kw)
+
+        saved, fast_step.step = fast_step.step, counted
+        try:
+            out = shield_core.step(*args)
+        finally:
+            fast_step.step = saved
+        assert calls, "shield.core.step took the stages where the compiled period runs"
+        return out
+
     for step in range(40):
         t = step * params.dt
         s = with_others(situation_of(world, t, params), t)
         prop = proposals(rng, n)
         fast = shield.step(s, prop)
         assert shield.last_path == "compiled"
+        functional_state, functional = compiled_step(functional_state, s, prop, params)
         state, ref = shield_core.stages_step(state, s, prop, params)
         same(fast, ref, f"period {step}")
         same(shield.state, state, f"period {step}: state")
+        same(functional, ref, f"period {step}: shield.core.step")
+        same(functional_state, state, f"period {step}: shield.core.step's state")
         advance(world, ref, rng, params.dt)
 
 

@@ -193,6 +193,9 @@ def frame(state, obs: Observed, worst: WorstCase, prm: Params, cfg: ShieldConfig
     l1, f, own = (e.chain_x[:, 0], e.chain_v[:, 0]), (e.f_x, e.f_v), worst.own
     delay = delay_periods(cfg, prm) * prm.dt
     if delay > 0.0:
+        if state.pending is None:
+            raise ValueError(f"the shield's state holds no commands in flight, but the config has an actuation delay "
+                             f"of {cfg.actuation_delay_s} s: make the state with init(..., config) of the same config")
         ego = state.pending.carry(*ego, prm.dt)
         with np.errstate(over="ignore"):  # (as _motion.advance)
             l1x, l1v, fx, fv = carried_others(ARRAY, *l1, worst.l1_decel, *f, worst.f_aggr, prm.a_x_a, prm.a_x_d,
