@@ -77,11 +77,13 @@ def test_single_env_compiled_is_the_numpy_env_bit_for_bit(seed, settings, varian
     assert sum(isinstance(step, np.ndarray) for step in compiled) >= 4  # several episodes
 
 
-@pytest.mark.parametrize(("n", "steps", "seed"), [(6, 150, 5), (24, 150, 17)])
+@pytest.mark.parametrize(("n", "steps", "seed"), [(6, 150, 5), (24, 150, 17), (8, 320, 3)])
 def test_vector_env_sub_envs_are_single_envs_exactly(n, steps, seed):
     """Each sub-env keeps its own clock in the compiled loop: every episode, not only the first, is the single env's
     bit for bit (the NumPy vector env shares one clock: later episodes agree to its rounding, test_envs.py); the
-    restarted rows are spliced into the running batch (Stepper.splice), several in one step in the larger case."""
+    restarted rows are spliced into the running batch (Stepper.splice), several in one step in the larger case, from
+    the episodes the reserve prepared ahead (envs/reserve.py: prepared again as sub-envs run out, the same scenarios);
+    the task's batch holds each sub-env's running scenario."""
     acts = actions(steps, n, seed)
     venv = LaneChangeVectorEnv(n, **KW)
     assert type(venv.task.loop) is not ClosedLoop
@@ -109,6 +111,8 @@ def test_vector_env_sub_envs_are_single_envs_exactly(n, steps, seed):
                 single.append(obs)
                 resets += 1
         assert len(single) == len(rows[i])
+        for field in ("scenario_id", "decel_last", "x", "n_connected"):
+            np.testing.assert_array_equal(getattr(venv.task.batch, field)[i], getattr(env.task.batch, field)[0])
         for x, y in zip(rows[i], single, strict=True):
             if isinstance(y, np.ndarray):
                 np.testing.assert_array_equal(x, y)
@@ -116,17 +120,18 @@ def test_vector_env_sub_envs_are_single_envs_exactly(n, steps, seed):
                 np.testing.assert_array_equal(x[0], y[0])
                 assert x[1:] == y[1:]
     assert resets >= n  # later episodes are compared too
+    # over 300 steps (3 horizons) every sub-env runs out of prepared episodes: the reserve is prepared again
+    assert venv.task._reserve.preparations >= (2 if steps > 300 else 1)
 
 
 @pytest.mark.parametrize(
     "kwargs",
-    [dict(shield=False), dict(sim_config={"sensor_noise_std": 0.1}),
-     dict(sim_config={"own_lane": True, "own_lane_connected": 1}), dict(sim_config={"v2x_loss": 0.2}),
+    [dict(shield=False), dict(sim_config={"sensor_noise_std": 0.1}), dict(sim_config={"v2x_loss": 0.2}),
      dict(sim_config={"actuation_delay_s": 0.2, "shield": {"actuation_delay_s": 0.1}})],
 )  # fmt: skip
 def test_settings_the_compiled_period_does_not_cover_step_in_numpy(kwargs):
-    """(The realistic world runs compiled, its shield's sensing and its delay where it is the world's included,
-    tests/test_env_realworld.py; a shield's delay other than the world's and a connected own lane do not.)"""
+    """(The realistic world runs compiled, its shield's sensing and its delay where it is the world's included, and a
+    connected own lane, tests/test_env_realworld.py; a shield's delay other than the world's does not.)"""
     env = LaneChangeEnv(**kwargs)
     env.reset(seed=0)
     env.step(np.zeros(2))
@@ -153,7 +158,7 @@ def test_a_spliced_stepper_refuses_what_reads_its_closed_loop():
     venv = LaneChangeVectorEnv(4, **KW)
     venv.reset(seed=1)
     task = venv.task
-    task.restart(np.array([2]), [np.random.default_rng(9)])
+    task.restart(np.array([2]))
     loop = task.loop
     assert loop.spliced
     for call in (lambda: loop.observe(task.state), lambda: loop.finish(task.state), loop.initial_state):

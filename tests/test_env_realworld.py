@@ -4,8 +4,9 @@ sensing error and the actuation delay — the world's side, and the shield's (it
 its delay where it is the world's). Observations, rewards, flags and every info key bit for bit over many steps
 with resets, for the single env and for the vector env's sub-envs (each against the NumPy single env on its seed,
 every episode: the compiled rows keep their own clocks, and the spliced rows carry their own ``L0`` profile, world
-key and sensing bounds); and the settings matter there: collisions and costs with ``L0``, a delayed command, a
-completion the world reaches periods after the shield's flag, the shield's box and delay."""
+key and sensing bounds), an own lane of three (``L0`` connected) among them; and the settings matter there:
+collisions and costs with ``L0``, a delayed command, a completion the world reaches periods after the shield's flag,
+the shield's box and delay."""
 
 from __future__ import annotations
 
@@ -39,9 +40,11 @@ CASES = {
     "the shield's sensing and delay on, with L0, sensing error, delay": SHIELD_SIDES,
     "wide sensing error, the shield's sensing on": WIDE,
     "delay alone, the shield's delay on": dict(actuation_delay_s=0.3),
+    "a connected own lane (L0 and two vehicles ahead of it), the shield's sensing and delay on": dict(
+        SHIELD_SIDES, own_lane_connected=2),
 }
 #: Each case's seed.
-SEEDS = (6, 2, 13, 6, 2, 13)
+SEEDS = (6, 2, 13, 6, 2, 13, 6)
 
 
 def lane_changes(steps: int, rows: int, seed: int) -> np.ndarray:
@@ -122,12 +125,15 @@ def test_sensing_error_changes_the_episodes():
         assert_same(plain, sensed)
 
 
-@pytest.mark.parametrize(("n", "steps", "seed", "shield_sides"), [(12, 150, 3, False), (12, 150, 5, True)])
-def test_vector_env_sub_envs_are_numpy_single_envs_in_the_realistic_world(n, steps, seed, shield_sides, monkeypatch):
+@pytest.mark.parametrize(("n", "steps", "seed", "world"), [(12, 150, 3, "world"), (12, 150, 5, "shield sides"),
+                                                           (12, 150, 4, "chain")])
+def test_vector_env_sub_envs_are_numpy_single_envs_in_the_realistic_world(n, steps, seed, world, monkeypatch):
     """Every episode of each compiled sub-env, resets spliced into the running batch, is the NumPy single env's on its
-    seed bit for bit: observation, reward, flags and every info key; the world's side alone, and with the shield's
-    sensing box and delay (each row's anchor and commands in flight its own across the splices)."""
-    cfg = SHIELD_SIDES if shield_sides else dict(NEAR_L0, **SENSING, **DELAY)
+    seed bit for bit: observation, reward, flags and every info key; the world's side alone, with the shield's
+    sensing box and delay (each row's anchor and commands in flight its own across the splices), and with an own lane
+    of three (``L0`` connected, each row's chain its own across the splices)."""
+    cfg = {"world": dict(NEAR_L0, **SENSING, **DELAY), "shield sides": SHIELD_SIDES,
+           "chain": dict(SHIELD_SIDES, own_lane_connected=2)}[world]  # fmt: skip
     acts = lane_changes(steps, n, seed)
     venv = LaneChangeVectorEnv(n, **dict(KW, sim_config=cfg))
     vobs, _ = venv.reset(seed=seed)

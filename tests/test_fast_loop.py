@@ -68,6 +68,18 @@ CASES = {
         lambda: _mixed(3, 9.0, seed=3),
         dict(params=Params(a_o_d=9.5)),
     ),
+    # the chain analysis runs before the shield and is given to it (sim/_fast_loop._period): links exactly at
+    # their margin (human-driven leaders 10 m apart, p_m_human = 10) and inside it (unsafe from the start), beside
+    # a batch of the paper's gaps (completions, assessments)
+    "chains at and inside their links' margins (the chain given to the shield)": (
+        lambda: concat([
+            paper_scenarios(v, 3, 6.0, 40, np.random.default_rng(70 + k), ScenarioConfig(
+                follower_connected_share=0.5, human_share=0.6, gap=(10.0, 10.0) if k % 2 else (9.6, 10.4)),
+                first_id=1000 * k + 500)
+            for k, v in enumerate(VARIANTS)
+        ] + [_mixed(3, 6.0, per_variant=40, seed=7)]),
+        {},
+    ),
     "other parameters, settings and planner": (
         lambda: _mixed(2, 6.0, seed=2),
         dict(
@@ -155,7 +167,6 @@ def test_the_fused_loop_covers_the_default_settings_from_its_threshold_on(monkey
 
 
 UNCOVERED = {
-    "a connected own lane": dict(cfg=SimConfig(own_lane=True, own_lane_connected=1)),
     "a shield's actuation delay other than the world's": dict(
         cfg=SimConfig(actuation_delay_s=0.2, shield={"actuation_delay_s": 0.1})
     ),

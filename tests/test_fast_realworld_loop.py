@@ -4,8 +4,9 @@ column for column and bit for bit, with the own lane's leader ``L0`` (its profil
 against it, the shield's own lane on and off), with sensing error (the measurement draws, with and without the edge
 share; the shield's sensing off: it takes the measurements as exact) and both together — each on a batch where the
 feature changes the outcome, so that the comparison can fail. And the dispatch: what the loop does not run yet (a
-connected own lane, a shield's delay other than the world's) runs period by period, saying why. The shield's sensing
-and delay in the loop: ``tests/test_fast_realistic_loop.py``."""
+shield's delay other than the world's) runs period by period, saying why. The shield's sensing and delay in the loop:
+``tests/test_fast_realistic_loop.py``; a connected own lane (a chain ahead of ``L0``):
+``tests/test_fast_own_chain_loop.py``."""
 
 from __future__ import annotations
 
@@ -168,7 +169,6 @@ def test_the_numpy_path_gives_the_same_table_with_the_own_lane_and_sensing(monke
 
 
 REFUSED = {
-    "a connected own lane": (SimConfig(own_lane=True, own_lane_connected=1), "config.own_lane_connected=1"),
     "the shield's delay other than the world's": (
         SimConfig(actuation_delay_s=0.2, shield={"actuation_delay_s": 0.1}),
         "config.shield.actuation_delay_s=0.1",
@@ -250,16 +250,6 @@ def test_rows_without_l0_a_world_key_and_chunks_give_the_period_by_period_table(
     assert np.isnan(gap[::3]).all() and np.isfinite(gap[1::3]).all()
     other_key = simulate_batch(replace(batch, world_key=None), seed=4, params=REALISTIC, config=cfg).table
     assert not other_key.equals(periods.table)  # the key reaches the draws
-
-
-def test_a_batch_with_an_own_lane_chain_runs_period_by_period_and_says_why(monkeypatch):
-    from safelane.sim.realworld import with_own_lane
-
-    monkeypatch.delenv("SAFELANE_NO_FUSED", raising=False)
-    chained = with_own_lane(_mixed(1, 5.0, per_variant=20), 4, SimConfig(own_lane=True, own_lane_connected=1),
-                            REALISTIC)  # fmt: skip
-    why = _fused.reasons(chained, SimConfig(own_lane=True), ExpertPlanner(), None, False, False)
-    assert any("own_ahead_x" in r for r in why), why
 
 
 #: Sensing error with the shield's sensing off over three periods: the monitor's view after the last period

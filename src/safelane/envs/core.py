@@ -9,7 +9,8 @@ into observations, rewards, costs and flags. :class:`~safelane.envs.LaneChangeEn
 Resets (the vector env's auto-reset): the rows that finished get fresh scenarios, sampled row by row from their own
 generators exactly as a single env samples them, and a ``ClosedLoop`` over those rows alone gives their initial
 state and first observation. On the compiled loop (:class:`~safelane.sim._stepper.Stepper`) the fresh rows' kernel
-inputs and state are spliced into the running batch's arrays (:meth:`~safelane.sim._stepper.Stepper.splice`); each row
+inputs and state are spliced into the running batch's arrays (:meth:`~safelane.sim._stepper.Stepper.splice`) from
+episodes prepared ahead, each row's next ones drawn from its generator in their order (:mod:`.reserve`); each row
 keeps its own clock, so a restarted row runs exactly the single env's episode. Period by period in NumPy a new
 ``ClosedLoop`` is built for the whole batch (its constant arrays), and the finished rows of the state are overwritten
 by the initial state of their new scenarios (where the initial state has no record at all — the shield's memory of
@@ -31,15 +32,15 @@ from pydantic import BaseModel, ConfigDict, Field
 from ..params import Params
 from ..planners.base import Observation
 from ..planners.features import FEATURE_NAMES, features, plan_steps
-from ..planners.variants import VARIANT_NAMES, get_variant
 from ..safety._backend import ARRAY, jitable
 from ..sim._fused import sense_scratch
 from ..sim._stepper import Stepper, steps_compiled
 from ..sim.config import SimConfig
-from ..sim.scenario import ScenarioBatch, ScenarioConfig, paper_scenarios
+from ..sim.scenario import ScenarioBatch
 from ..sim.step import ClosedLoop
 from ..sim.traffic import TrafficHooks
-from .rows import pad_vehicles, replace_rows, shift_plan_clock
+from .rows import replace_rows, shift_plan_clock
+from .sampler import ScenarioSampler
 
 #: The supervisor's behaviour codes (``info["behaviour"]``) and their names.
 PROCEED, HESITATE, ABORT, COMPLETED = 0, 1, 2, -1
@@ -115,125 +116,6 @@ class ActionPlanner:
         return self.a_x, self.a_y
 
 
-#: The bit generators whose raw words (``random_raw``) are the 64-bit draws their ``Generator`` builds on (all of
-#: NumPy's but ``MT19937``, whose raw words have 32 bits): for them ``Generator.random()`` is ``(word >> 11)·2⁻⁵³``
-#: and ``Generator.integers(0, 2**62)`` is ``word >> 2`` (Lemire's bounded draw with a power-of-two range: one word,
-#: never rejected), so :meth:`ScenarioSampler.draw_many` takes a row's draws in one call
-#: (``tests/test_envs.py`` checks the scenarios against :meth:`ScenarioSampler.draw` for each generator).
-_WORD_GENERATORS = (np.random.PCG64, np.random.PCG64DXSM, np.random.Philox, np.random.SFC64)
-_DOUBLE_UNIT = 1.0 / 9007199254740992.0  # 2⁻⁵³
-
-
-@dataclasses.dataclass(frozen=True)
-class ScenarioSampler:
-    """Draws one scenario from a generator: the paper's sampler with ``N`` drawn from ``n_leaders`` and
-    ``a_x_N+1_d`` from ``decel`` (a number, or ``(lo, hi)`` for ``U[lo, hi]``), padded to ``max(n_leaders) + 2``
-    vehicles so that every episode fits one batch."""
-
-    variant: str = "CV_all"
-    n_leaders: tuple[int, ...] = (3,)
-    decel: tuple[float, float] = (5.0, 5.0)
-    scenario: ScenarioConfig = dataclasses.field(default_factory=ScenarioConfig)
-    p_v: float = 0.0
-
-    @classmethod
-    def build(cls, variant="CV_all", n_leaders=3, decel=5.0, scenario=None, p_v=0.0) -> ScenarioSampler:
-        get_variant(variant)
-        leaders = (n_leaders,) if np.isscalar(n_leaders) else tuple(n_leaders)
-        if not leaders or any(int(n) != n or n < 0 for n in leaders):
-            raise ValueError(f"n_leaders must be a non-negative integer or a sequence of them; got {n_leaders!r}")
-        span = (float(decel), float(decel)) if np.isscalar(decel) else tuple(float(d) for d in decel)
-        if len(span) != 2 or not 0.0 < span[0] <= span[1]:
-            raise ValueError(f"decel must be a positive number or a range (lo, hi) with 0 < lo <= hi; got {decel!r}")
-        if isinstance(scenario, dict):
-            scenario = ScenarioConfig(**scenario)
-        return cls(variant, tuple(int(n) for n in leaders), span, scenario or ScenarioConfig(), float(p_v))
-
-    @property
-    def width(self) -> int:
-        return max(self.n_leaders) + 2
-
-    def _settings(self, rng: np.random.Generator) -> tuple[int, float]:
-        n = self.n_leaders[rng.integers(len(self.n_leaders))] if len(self.n_leaders) > 1 else self.n_leaders[0]
-        lo, hi = self.decel
-        return n, (rng.uniform(lo, hi) if hi > lo else lo)
-
-    def draw(self, rng: np.random.Generator) -> ScenarioBatch:
-        """One scenario through :func:`~safelane.sim.paper_scenarios` itself (the reference :meth:`draw_many`
-        is tested against)."""
-        n, decel = self._settings(rng)
-        row = paper_scenarios(self.variant, n, decel, 1, rng, self.scenario, p_v=self.p_v)
-        # A fresh id per episode keys the simulator's counter-based draws (promise violations, sensor noise).
-        row = dataclasses.replace(row, scenario_id=rng.integers(0, 2**62, size=1))
-        return pad_vehicles(row, self.width)
-
-    def draw_many(self, rngs: Sequence[np.random.Generator]) -> ScenarioBatch:
-        """One scenario from each generator, as one batch: the same draws in the same order as :meth:`draw`, hence
-        the same scenarios, but the arrays are built once for all rows (``paper_scenarios`` per row costs ~0.1 ms,
-        a third of a vector step at 1,024 envs)."""
-        cfg, k = self.scenario, self.width
-        m = len(rngs)
-        n = np.full(m, self.n_leaders[0], np.int64)
-        lo, hi = self.decel
-        first = 0 if hi > lo else 1  # a fixed decel draws no uniform: u's first column stays 0.0
-        several = len(self.n_leaders) > 1
-        # Per row, the draws of _settings and paper_scenarios(samples=1) in their order: N (where several), the
-        # uniforms (decel, gap, ego_vx, F connected, F aggressive, one per leader; uniform(a, b) is a + (b - a)·random()
-        # on the same stream) and the id. Each row's uniforms land in a row of u; past a row's own leaders u is masked.
-        if all(type(getattr(rng, "bit_generator", None)) in _WORD_GENERATORS for rng in rngs):
-            # The same draws as words: one call per row (see _WORD_GENERATORS)
-            words = np.zeros((m, 6 + max(self.n_leaders)), np.uint64)
-            if several:
-                for i, rng in enumerate(rngs):
-                    n[i] = self.n_leaders[rng.integers(len(self.n_leaders))]
-                    words[i, first : 6 + n[i]] = rng.bit_generator.random_raw(6 + n[i] - first)
-            elif m:
-                words[:, first:] = [rng.bit_generator.random_raw(words.shape[1] - first) for rng in rngs]
-            u = (words >> np.uint64(11)) * _DOUBLE_UNIT
-            sid = (words[np.arange(m), 5 + n] >> np.uint64(2)).astype(np.int64)
-        else:
-            u, sid = np.ones((m, 5 + max(self.n_leaders))), np.zeros(m, np.int64)
-            for i, rng in enumerate(rngs):
-                if several:
-                    n[i] = self.n_leaders[rng.integers(len(self.n_leaders))]
-                rng.random(out=u[i, first : 5 + n[i]])
-                sid[i] = rng.integers(0, 2**62)
-        if first:
-            u[:, 0] = 0.0
-        decel, gap, ego_vx, f_conn_u, f_aggr_u = u[:, :5].T
-        leaders = max(self.n_leaders)
-        human = np.zeros((m, k), bool)
-        human[:, 1 : leaders + 1] = (u[:, 5 : 5 + leaders] < cfg.human_share) & (np.arange(leaders) < n[:, None])
-        decel = lo + (hi - lo) * decel if hi > lo else np.full(m, lo)
-        gap = cfg.gap[0] + (cfg.gap[1] - cfg.gap[0]) * gap
-        ego_vx = cfg.ego_speed[0] + (cfg.ego_speed[1] - cfg.ego_speed[0]) * ego_vx
-        f_connected = f_conn_u < cfg.follower_connected_share
-        slots = np.arange(k)[None, :]
-        last = n[:, None] + 1  # L(N+1)'s slot; beyond it: padding
-        x = np.where(slots == 0, -1.0, np.minimum(slots, last)) * gap[:, None] + 1e6 * np.maximum(slots - last, 0)
-        connected = (slots >= 1) & (slots <= n[:, None])
-        connected[:, 0] = f_connected
-        return ScenarioBatch(
-            ego_x=np.zeros(m),
-            ego_y=np.zeros(m),
-            ego_vx=ego_vx,
-            ego_vy=np.zeros(m),
-            x=x,
-            v=np.full((m, k), cfg.traffic_speed),
-            valid=slots <= last,
-            connected=connected,
-            human=human,
-            promise_decel=np.full((m, k), cfg.promise_decel),
-            promise_accel=np.full((m, k), cfg.promise_accel),
-            n_connected=n,
-            follower_aggressive=~f_connected & (f_aggr_u < cfg.follower_aggressive_share),
-            decel_last=decel,
-            p_v=np.full(m, self.p_v),
-            variant=np.full(m, VARIANT_NAMES.index(self.variant)),
-            scenario_id=sid,
-        )
-
-
 @dataclasses.dataclass
 class StepOutcome:
     """What one period gives, per row."""
@@ -303,7 +185,9 @@ class LaneChangeTask:
         # (drawn from the episode's generator), so one fixed seed serves every episode.
         self.seed = 0
         self.loop: ClosedLoop | None = None
-        self.batch: ScenarioBatch | None = None
+        self._batch: ScenarioBatch | None = None
+        self._rngs: list[np.random.Generator] = []  # each row's generator (start)
+        self._reserve = None  # the rows' next episodes on the compiled loop (reserve.Reserve; made at the first reset)
         self.state = None
         self.steps = np.zeros(batch, np.int64)
         self._bounds = tuple(bound[:, None] for bound in self.action_bounds())  # (per action column, see step)
@@ -317,33 +201,49 @@ class LaneChangeTask:
         p = self.params
         return np.array([-p.a_x_d, -p.a_y_m]), np.array([p.a_x_a, p.a_y_m])
 
+    @property
+    def batch(self) -> ScenarioBatch | None:
+        """The running episodes' scenarios (the vector env's resets on the compiled loop put in when this is read:
+        nothing in a step reads it)."""
+        if self._reserve is not None:
+            self._batch = self._reserve.scenarios(self._batch)
+        return self._batch
+
     def start(self, rngs: Sequence[np.random.Generator]) -> np.ndarray:
-        """Every row starts a fresh episode (row ``i`` drawn from ``rngs[i]``); the observations ``(B, F)``."""
-        self.batch = self.sampler.draw_many(rngs)
-        self.loop = self._loop(self.batch)
+        """Every row starts a fresh episode (row ``i`` drawn from ``rngs[i]``, and its later episodes too: see
+        :meth:`restart`); the observations ``(B, F)``."""
+        self._rngs, self._reserve = list(rngs), None
+        self._batch = self.sampler.draw_many(self._rngs)
+        self.loop = self._loop(self._batch)
         self.state = self.loop.initial_state()
         self.steps[:] = 0
         return self.observe()
 
-    def restart(self, rows: np.ndarray, rngs: Sequence[np.random.Generator]) -> np.ndarray:
-        """Rows ``rows`` start fresh episodes (each drawn from its generator), the others go on (see the module
-        docstring for how the shared clock is handled); the fresh rows' first observations ``(len(rows), F)``."""
-        fresh = self.sampler.draw_many(rngs)
-        self.batch = replace_rows(self.batch, fresh, rows, self.n)
-        first = ClosedLoop(fresh, self.seed, self.params, self.config, self.planner, self.traffic)
-        start = first.initial_state()
-        obs = features(first.observe(start), self.params).astype(np.float32)  # (the clock is not a feature)
+    def restart(self, rows: np.ndarray) -> np.ndarray:
+        """Rows ``rows`` start fresh episodes (each drawn from its row's generator), the others go on (see the module
+        docstring for how the shared clock is handled); the fresh rows' first observations ``(len(rows), F)``. On the
+        compiled loop the rows' next episodes are prepared ahead, in batches (:mod:`.reserve`: the same scenarios)."""
         if isinstance(self.loop, Stepper):  # the fresh rows' inputs and state spliced in; each row its own clock
-            self.loop.splice(rows, Stepper(first))
-            shares_plan, f_connected = self._view[:2]
-            shares_plan[rows], f_connected[rows] = first.shares_plan, first.b.connected[:, 0]
-            for into, new in zip(self.state.rows, self.loop.state_of(start).rows, strict=True):
-                into[rows] = new
+            from .reserve import Reserve
+
+            if self._reserve is None:
+                self._reserve = Reserve(self, self._rngs)
+            obs = self._reserve.restart(rows)
         else:
-            self.loop = self._loop(self.batch)
+            fresh = self.sampler.draw_many([self._rngs[i] for i in rows.tolist()])
+            _, start, obs = self.first_states(fresh)
+            self._batch = replace_rows(self.batch, fresh, rows, self.n)
+            self.loop = self._loop(self._batch)
             self.state = replace_rows(self.state, shift_plan_clock(start, self.state.t), rows, self.n)
         self.steps[rows] = 0
         return obs
+
+    def first_states(self, fresh: ScenarioBatch):
+        """The closed loop over the scenarios ``fresh`` (the task's settings), its initial state and the first
+        observations ``(len(fresh), F)``."""
+        first = ClosedLoop(fresh, self.seed, self.params, self.config, self.planner, self.traffic)
+        start = first.initial_state()
+        return first, start, features(first.observe(start), self.params).astype(np.float32)  # (the clock: no feature)
 
     def _step_compiled(self, proposal: np.ndarray) -> StepOutcome:
         """:meth:`step` on the compiled loop: the period, the observation and the outcome in one compiled call

@@ -23,7 +23,7 @@ from ..params import Params
 from ..safety import _compile
 from ..safety._backend import INF, SCALAR
 from ..safety._fast_base import _min, announce_compiles, kernel, row_function
-from ._fast_general import _general
+from ._fast_general import _general, _general_pair
 from .checks import (
     apply_pairs,
     ego_pair_kind,
@@ -200,6 +200,27 @@ def _lane_row(valid, margin, pb, x, v, acc, t_stop, x_end, v_end, r, row_acc, dt
         hit, close = hit or pair_hit, close or pair_close
         ratio = _min(ratio, pair_ratio)
     return hit, close, ratio
+
+
+@row_function
+def _switch_pair(x, v, f_acc, f_ts, f_xe, f_ve, c, sw, o_t, o_x, o_v, o_a, m, row_acc, dt, length, scratch):
+    """:func:`~.checks.lane_checks`' pair of vehicle ``c`` (one segment: ``f_*[c]`` as ``constant_segment`` gives it,
+    from ``x[c]``, ``v[c]``) behind vehicle ``c + 1``, whose acceleration switches inside the period (its knots in
+    ``sw``, ``_fast_rows.Switched``, from ``_fast_world._switched``; its end state in ``f_xe``, ``f_ve``): near, the
+    exact minimum of the gap over both motions (``gap_extrema``: the general path's, ``_general_pair``, over a lateral
+    motion above the level all period, ``sw``'s ``lat_*``; ``c``'s knots into ``o_*``); far, the ratio at the period's
+    ends. Returns ``(collided, violated, ratio)``."""
+    a = c + 1
+    if not lane_near(SCALAR, True, x[c], v[c], f_xe[c], f_ve[c], x[a], v[a], f_xe[a], f_ve[a], m, row_acc, dt):
+        return False, False, lane_far_ratio(SCALAR, True, x[a] - x[c], f_xe[a] - f_xe[c], m)
+    o_t[0], o_t[1], o_t[2] = 0.0, f_ts[c], dt
+    o_x[0], o_x[1], o_x[2] = x[c], f_xe[c], f_xe[c]
+    o_v[0], o_v[1], o_v[2] = v[c], f_ve[c], f_ve[c]
+    o_a[0], o_a[1] = f_acc[c], 0.0
+    sw.lat_t[1] = dt  # (a lateral motion above the level all period: the gap's extrema, unwindowed)
+    low = _general_pair(o_t, o_x, o_v, o_a, sw.t, sw.x, sw.v, sw.a, sw.lat_t, sw.lat_x, sw.lat_v, sw.lat_a, 0.0,
+                        scratch)[0]  # fmt: skip
+    return lane_verdict(SCALAR, low, m, length)
 
 
 @kernel(_LANE_SIGNATURE)

@@ -6,8 +6,9 @@ small per-scenario arrays — no per-period NumPy arrays, no Python between the 
 planner, the chain analysis, **the shield** (:func:`safelane.shield.core.step`: the observed assessment, the
 assumption monitor, proceed / hesitate / abort with the commit guard, the held plan, the responsible follow after
 completion), the paper's traffic with the worst-case leader rule, the exact motion and the continuous-time checks
-— and the realistic world's side (``_fast_world.py``: the own lane's leader ``L0``, its motion and the ego's checks
-against it; the measurement noise of sensing error, the situation the shield sees).
+— and the realistic world's side (``_fast_world.py``: the own lane, ``L0`` and any vehicles ahead of it, their
+motion, the ego's checks against ``L0`` and their pairs'; the measurement noise of sensing error, the situation the
+shield sees).
 The shield's period is :func:`safelane.shield._fast_period.period_row` itself — the one glue of a period, the one
 ``Shield.step`` runs compiled — on one row whose situation, state and outputs are ``(1, .)`` arrays; the rest is
 built from the row functions of the part kernels (``_leader_row``, ``_follower_row``, ``_ego_row``,
@@ -42,7 +43,7 @@ from ..safety._fast_base import _max, _min, announce_compiles, row_function
 from ..shield._fast_period import _PRM_DELAY, _SF_CARRIED, carried_ego, observe_row, period_row, push_row
 from ..shield.decide import ABORT, HESITATE, PROCEED
 from ..tolerances import DIST_TOL_M
-from ._fast_checks import _ego_row, _lane_row
+from ._fast_checks import _ego_row, _lane_row, _switch_pair
 from ._fast_general import _general_pair
 from ._fast_held import _motion_max
 from ._fast_rows import _load, _scratch, _store, _window
@@ -55,9 +56,9 @@ from ._fast_traffic import (
     _wave_follower,
     _wave_task,
 )
-from ._fast_world import _switched, executed_plan, measure_row, own_checks, own_motion
+from ._fast_world import _switched, executed_plan, measure_row, own_advance, own_checks, own_lane_motion, own_pairs
 from .behaviours import hold_speed, last_accel, link_decel, reactive_core, task_core, violation_accel
-from .checks import far_gap, lane_far_ratio, lane_near, lane_verdict, lateral_extent, near_pair, near_threshold
+from .checks import far_gap, lateral_extent, near_pair, near_threshold
 from .kinematics import constant_segment, piece_acc
 
 _compile.register_rows()
@@ -82,8 +83,8 @@ LoopBatch = collections.namedtuple("LoopBatch", (
     "is_last", "acts", "v_desired", "promise_decel", "promise_accel", "decel_last", "gap0", "lane_valid", "lane_margin",
     "p_v", "scenario_id", "key", "rule",
     "profile_t", "profile_a", "task_wave", "task_period", "f_wave", "wave_lane_valid", "wave_lane_margin",
-    "lane_sample", "l0_profile_t", "l0_profile_a", "world_key", "err_f", "err_chain", "err_own", "planner_kind",
-    "planner_q",
+    "lane_sample", "l0_profile_t", "l0_profile_a", "world_key", "err_f", "err_chain", "err_own", "own_nc",
+    "own_promise", "own_brake_t", "own_v_desired", "planner_kind", "planner_q",
 ))  # fmt: skip
 #: ``LoopBatch``'s last fields: ``L(N+1)``'s profile ``profile_t``, ``profile_a`` ``(B, P)`` (``P = 0``: none, the
 #: sudden braking); :class:`~.traffic.WaveHooks` by scenario id (none: no rows) — ``task_wave`` ``(S, K, 5)`` (low,
@@ -92,18 +93,23 @@ LoopBatch = collections.namedtuple("LoopBatch", (
 #: none: no rows); the own lane's leader ``L0``'s profile ``l0_profile_t``, ``l0_profile_a`` ``(B, P0)`` (``P0 = 0``:
 #: no own lane); the key of the world's draws ``world_key`` ``(B,)`` (``ScenarioBatch.world_key``, else the scenario
 #: id) and the sensing-error bounds (``Situation.err_f`` ``(B, 2)``, ``err_chain`` ``(B, N + 1, 2)``, ``err_own``
-#: ``(B, K0, 2)``: position, speed; zeros where ``prm``'s ``sensing`` is off); the nominal planner as data,
+#: ``(B, K0, 2)``: position, speed; zeros where ``prm``'s ``sensing`` is off); the own lane's chain
+#: (:class:`~.own_chain.OwnLane`: ``own_nc`` ``(B,)`` its connected vehicles from ``L0`` on, ``own_promise``,
+#: ``own_brake_t`` ``(B, K0 − 1)`` their promises and the instants they brake at them, ``own_v_desired`` ``(B, K0)``
+#: every slot's initial speed; ``K0 = 1``: ``L0`` alone or no own lane); the nominal planner as data,
 #: ``planner_kind`` ``(B,)`` and ``planner_q`` ``(B, 7)`` (:func:`~safelane.planners.adversarial.adversary_table`; no
 #: rows: the expert planner).
 #: What :func:`loop_kernel` writes: :data:`OUT_F`, :data:`OUT_B` per scenario, ``counts (B, 3)``, ``n_invalid``,
-#: ``breach_flags (B, 5)`` and ``bad_step`` (the first period whose state is not finite, ``-1`` if none).
-LoopOut = collections.namedtuple("LoopOut", ("f", "b", "counts", "n_invalid", "breach_flags", "bad_step"))
+#: ``breach_flags (B, 5)``, ``bad_step`` (the first period whose state is not finite, ``-1`` if none) and the own
+#: lane's final state ``own_x``, ``own_v`` ``(B, K0)``.
+LoopOut = collections.namedtuple("LoopOut", ("f", "b", "counts", "n_invalid", "breach_flags", "bad_step", "own_x",
+                                             "own_v"))  # fmt: skip
 #: Float outputs per scenario.
 OUT_F = ("t_complete", "min_gap_f", "min_gap_l1", "min_lane_ratio", "first_collaborative_s", "breach_first_s",
-         "slow_delay_s", "min_gap_l0", "l0_x", "l0_v")  # fmt: skip
+         "slow_delay_s", "min_gap_l0")  # fmt: skip
 #: Bool outputs per scenario.
 OUT_B = ("completed", "collided", "violated", "leader_collided", "leader_violated", "aggressive", "slow_missed",
-         "slow_aggressive", "l0_collided", "l0_violated")  # fmt: skip
+         "slow_aggressive", "l0_collided", "l0_violated", "own_pair_collided")  # fmt: skip
 
 
 @numba.njit(cache=True, nogil=True, error_model="numpy")
@@ -143,13 +149,18 @@ def _finish_rows(prm, batch, rows, w):
 
 
 @row_function
-def _own_seen(prm, w):
-    """The own lane's leader ``L0`` where the shield keeps ``p_m`` to it (``ShieldConfig.own_lane``) into the
-    period's ``own_x``, ``own_v`` (``+inf``: none) and returned."""
-    w.own_x[0, 0], w.own_v[0, 0] = _INF, 0.0
-    if prm[24] > 0.0:
-        w.own_x[0, 0], w.own_v[0, 0] = w.rf[0, 10], w.rf[0, 11]
-    return w.own_x[0, 0], w.own_v[0, 0]
+def _own_seen(prm, batch, b, w):
+    """The own lane of row ``b`` where the shield keeps ``p_m`` to it (``ShieldConfig.own_lane``) into the period's
+    ``own_x``, ``own_v`` (its true states; ``+inf``: none, and everywhere where the shield ignores the lane), with
+    its chain's promises and connected count (``Situation.own_promise``, ``own_n_connected``)."""
+    o = w.own
+    on = prm[24] > 0.0
+    for i in range(w.own_x.shape[1]):
+        w.own_x[0, i], w.own_v[0, i] = (o.x[0, i], o.v[0, i]) if on else (_INF, 0.0)
+    if on:
+        for i in range(w.own_promise.shape[1]):
+            w.own_promise[0, i] = batch.own_promise[b, i]
+        w.own_nc[0] = batch.own_nc[b]
 
 
 @row_function
@@ -161,10 +172,10 @@ def _seen(prm, batch, b, w):
     if not w.rb[0, 4]:
         return
     x, v, chain_x, chain_v = w.x2[0], w.v2[0], w.chain_x, w.chain_v
-    l0x, l0v = _own_seen(prm, w)
+    _own_seen(prm, batch, b, w)
     fx, fv = x[0], v[0]
     if prm[25] > 0.0:
-        fx, fv = measure_row(batch, b, w.ri[0, 4], prm[26], x, v, chain_x, chain_v, l0x, l0v, w.own_x, w.own_v)
+        fx, fv = measure_row(batch, b, w.ri[0, 4], prm[26], x, v, chain_x, chain_v, w.own_x, w.own_v)
     else:
         for i in range(chain_x.shape[1]):
             chain_x[0, i], chain_v[0, i] = x[i + 1], v[i + 1]
@@ -227,7 +238,7 @@ def _loop_rows(n_steps, prm, batch, start, out, w):
     a_a, a_d, a_ym, y_safe = prm[1], prm[2], prm[3], prm[4]
     gains = ExpertGains(prm[14], prm[15], prm[16], prm[17], prm[18], prm[19])
     lim = Limits(a_a, a_d, a_ym, y_safe)
-    out_f, out_b, counts, n_invalid, breach_flags, bad_step = out
+    out_f, out_b, counts, n_invalid, breach_flags, bad_step, own_x, own_v = out
     x2, v2, st, sk, rf, rb, ri = w.x2, w.v2, w.st, w.sk, w.rf, w.rb, w.ri
     x, v = x2[0], v2[0]
     den = _window(w.times, dt)
@@ -252,11 +263,13 @@ def _loop_rows(n_steps, prm, batch, start, out, w):
                 break
         out_f[b, 0], out_f[b, 1], out_f[b, 2], out_f[b, 3] = rf[0, 5], rf[0, 6], rf[0, 7], rf[0, 8]
         out_f[b, 4], out_f[b, 5], out_f[b, 6] = st[0, 1], st[0, 2], st[0, 7]
-        out_f[b, 7], out_f[b, 8], out_f[b, 9] = rf[0, 9], rf[0, 10], rf[0, 11]
+        out_f[b, 7] = rf[0, 9]
         out_b[b, 0], out_b[b, 1], out_b[b, 2] = rb[0, 7], rb[0, 0], rb[0, 1]
         out_b[b, 3], out_b[b, 4], out_b[b, 5] = rb[0, 2], rb[0, 3], sk[0, 2]
         out_b[b, 6], out_b[b, 7] = sk[0, 10], sk[0, 11]
-        out_b[b, 8], out_b[b, 9] = rb[0, 5], rb[0, 6]
+        out_b[b, 8], out_b[b, 9], out_b[b, 10] = rb[0, 5], rb[0, 6], rb[0, 8]
+        for i in range(own_x.shape[1]):
+            own_x[b, i], own_v[b, i] = w.own.x[0, i], w.own.v[0, i]
         counts[b, 0], counts[b, 1], counts[b, 2] = ri[0, 0], ri[0, 1], ri[0, 2]
         n_invalid[b] = ri[0, 3]
         for j in range(breach_flags.shape[1]):
@@ -340,14 +353,12 @@ def _period(prm, batch, b, w, den, ax_n, ay_n):
     gap_f, gap_l1 = rf[0, 6], rf[0, 7]
     # --- the shield (core.step): one period of shield/_fast_period.period_row ---
     # the situation: the true states, or as measured (sensing error: realworld.measure); F's observed speed is its
-    # true one (ClosedLoop.step); the own lane's leader L0 where the shield keeps p_m to it (+inf: none)
-    l0x, l0v = rf[0, 10], rf[0, 11]
+    # true one (ClosedLoop.step); the own lane where the shield keeps p_m to it (+inf: none)
     sensing = prm[25] > 0.0
-    l0x_seen, l0v_seen = _own_seen(prm, w)
+    _own_seen(prm, batch, b, w)
     fx_seen, fv_seen = x[0], v[0]
     if sensing:
-        fx_seen, fv_seen = measure_row(batch, b, ri[0, 4], prm[26], x, v, chain_x, chain_v, l0x_seen, l0v_seen, own_x,
-                                       own_v)  # fmt: skip
+        fx_seen, fv_seen = measure_row(batch, b, ri[0, 4], prm[26], x, v, chain_x, chain_v, own_x, own_v)
     else:
         for i in range(m):
             chain_x[0, i], chain_v[0, i] = x[i + 1], v[i + 1]
@@ -362,6 +373,14 @@ def _period(prm, batch, b, w, den, ax_n, ay_n):
                                                                          ex, ey, evx, evy)  # fmt: skip
     completed = rb[0, 7]  # the world's (with an actuation delay the command acting completes it, not the one issued)
     active = not completed
+    # F's acceleration (behaviours.follower_accel) reads the period's start only, not the shield's decision: computed
+    # before the shield, so that its arithmetic can overlap the shield's in the processor (stored in acc after the
+    # leaders, as before)
+    sid = batch.scenario_id[b]
+    waves = batch.task_period.shape[0] > 0  # the leaders' and F's wishes from WaveHooks
+    f_wish = _wave_follower(batch, sid, t, a_a, a_d) if waves else 0.0
+    a_f = _follower_row(x[0], v[0], x[1], v[1], ex, evx, f_aggressive[b], completed, gap0[b], waves, f_wish,
+                        prm[22] > 0.0, p_m, a_a, a_o, open_decel, open_gap, dt)  # fmt: skip
     behaviour = period_row(0, pp, times, den, sf, sb, batch.rule[b : b + 1], chain_x, chain_v, link_promise,
                            link_margin, own_x, own_v, own_promise, own_nc, history, count, st, sk, plan, rb[0, 4],
                            snap_x, snap_v, snap_b, snap_nc, bounds_out, no_chain, of, ob, knots, px2, pv2, pb2,
@@ -398,8 +417,6 @@ def _period(prm, batch, b, w, den, ax_n, ay_n):
         a_last, sw_t, sw_a = _profile_row(batch.profile_t, batch.profile_a, b, t, dt)
     else:
         a_last = last_accel(SCALAR, t, brake_start, decel_last[b])
-    sid = batch.scenario_id[b]
-    waves = batch.task_period.shape[0] > 0  # the leaders' and F's wishes from WaveHooks
     if batch.lane_sample.shape[0] > 0:  # (WaveHooks' sample of the lane gaps, before the leaders' wishes)
         _sample_lanes(batch, sid, x)
     p_v, step = batch.p_v[b], ri[0, 4]
@@ -433,9 +450,7 @@ def _period(prm, batch, b, w, den, ax_n, ay_n):
             if is_last[b, i]:
                 a_i = a_last
             acc[i] = a_i
-    f_wish = _wave_follower(batch, sid, t, a_a, a_d) if waves else 0.0
-    acc[0] = _follower_row(x[0], v[0], x[1], v[1], ex, evx, f_aggressive[b], completed, gap0[b], waves, f_wish,
-                           prm[22] > 0.0, p_m, a_a, a_o, open_decel, open_gap, dt)  # fmt: skip
+    acc[0] = a_f
     row_acc = 0.0
     for i in range(k):
         f_acc[i], f_ts[i], f_xe[i], f_ve[i] = constant_segment(SCALAR, x[i], v[i], acc[i], dt)
@@ -505,36 +520,39 @@ def _period(prm, batch, b, w, den, ax_n, ay_n):
     l_hit, l_close, ratio = _lane_row(lane_valid, lane_margin, pb, x2, v2, f_acc2, f_ts2, f_xe2, f_ve2, 0,
                                       row_acc, dt, length)  # fmt: skip
     c = last - 1
-    if switching and batch.lane_valid[b, c]:  # as lane_checks takes a switching pair: near, its exact minimum
-        m = batch.lane_margin[b, c]
-        if lane_near(SCALAR, True, x[c], v[c], f_xe[c], f_ve[c], x[last], v[last], f_xe[last], f_ve[last], m, row_acc,
-                     dt):  # fmt: skip
-            o_t[0], o_t[1], o_t[2] = 0.0, f_ts[c], dt
-            o_x[0], o_x[1], o_x[2] = x[c], f_xe[c], f_xe[c]
-            o_v[0], o_v[1], o_v[2] = v[c], f_ve[c], f_ve[c]
-            o_a[0], o_a[1] = f_acc[c], 0.0
-            sw.lat_t[1] = dt  # (a lateral motion above the level all period: the gap's extrema, unwindowed)
-            low = _general_pair(o_t, o_x, o_v, o_a, sw.t, sw.x, sw.v, sw.a, sw.lat_t, sw.lat_x, sw.lat_v, sw.lat_a,
-                                0.0, scratch)[0]  # fmt: skip
-            pair_hit, pair_close, pair_ratio = lane_verdict(SCALAR, low, m, length)
-            l_hit, l_close, ratio = l_hit or pair_hit, l_close or pair_close, _min(ratio, pair_ratio)
-        else:
-            ratio = _min(ratio, lane_far_ratio(SCALAR, True, x[last] - x[c], f_xe[last] - f_xe[c], m))
-    # --- the own lane (ClosedLoop._own_lane): L0's profile motion, the ego's checks against it ---
-    if l0x < _INF:
-        n_o = own_motion(batch, b, own, t, dt, l0x, l0v)
+    if switching and batch.lane_valid[b, c]:  # as lane_checks takes a switching pair (near: its exact minimum)
+        pair_hit, pair_close, pair_ratio = _switch_pair(x, v, f_acc, f_ts, f_xe, f_ve, c, sw, o_t, o_x, o_v, o_a,
+                                                        batch.lane_margin[b, c], row_acc, dt, length, scratch)
+        l_hit, l_close, ratio = l_hit or pair_hit, l_close or pair_close, _min(ratio, pair_ratio)
+    # --- the own lane (ClosedLoop._own_lane): its motion (own_chain.OwnLane.period), its vehicles' pairs, the ego's
+    # checks against L0 (an own lane without L0 has no vehicle: own_chain.check_chain) ---
+    ox = own.x[0]
+    if ox[0] < _INF:
+        o_switch, o_acc = own_lane_motion(batch, b, own, t, dt, a_a, a_o, p_m)
+        head = batch.own_nc[b]
+        if ox.shape[0] > 1:
+            rb[0, 8] = own_pairs(own, head, o_switch, o_acc, p_m, dt, length, o_t, o_x, o_v, o_a, scratch) or rb[0, 8]
+        m_t, m_x, m_v, m_a = own.sw.t, own.sw.x, own.sw.v, own.sw.a  # L0's motion: the head's, switching
+        if not (o_switch and head == 0):
+            m_t, m_x, m_v, m_a = o_t, o_x, o_v, o_a
+            o_t[0], o_t[1], o_t[2] = 0.0, own.ts[0, 0], dt
+            o_x[0], o_x[1], o_x[2] = own.fx[0, 0], own.xe[0, 0], own.xe[0, 0]
+            o_v[0], o_v[1], o_v[2] = own.fv[0, 0], own.ve[0, 0], own.ve[0, 0]
+            o_a[0], o_a[1] = own.acc[0, 0], 0.0
         if on_plan:
-            o_hit, o_close, o_low = own_checks(own, n_o, (kt, kx, kv, kax[:7]), (kt, ky, kvy, kay[:7]), prm[23],
-                                               length, p_m, scratch)  # fmt: skip
+            o_hit, o_close, o_low = own_checks(m_t, m_x, m_v, m_a, (kt, kx, kv, kax[:7]), (kt, ky, kvy, kay[:7]),
+                                               prm[23], length, p_m, own, scratch)  # fmt: skip
         else:
             _ego_pieces(lon_t, lon_x, lon_v, lon_a, lat_t, lat_x, lat_v, lat_a, dt, ex, evx, l_ts, l_xe, l_ve, l_acc,
                         ey, ey1, evy, evy1, ay_cmd)  # fmt: skip
-            o_hit, o_close, o_low = own_checks(own, n_o, (lon_t, lon_x, lon_v, lon_a), (lat_t, lat_x, lat_v, lat_a),
-                                               prm[23], length, p_m, scratch)  # fmt: skip
+            o_hit, o_close, o_low = own_checks(m_t, m_x, m_v, m_a, (lon_t, lon_x, lon_v, lon_a),
+                                               (lat_t, lat_x, lat_v, lat_a), prm[23], length, p_m, own,
+                                               scratch)  # fmt: skip
         o_close = o_close and not completed
         hit, close = hit or o_hit, close or o_close
         rb[0, 5], rb[0, 6] = rb[0, 5] or o_hit, rb[0, 6] or o_close
-        rf[0, 9], rf[0, 10], rf[0, 11] = _min(rf[0, 9], o_low), own.xe[0], own.ve[0]
+        rf[0, 9] = _min(rf[0, 9], o_low)
+        own_advance(own)
     # --- advance (ClosedLoop.check_and_advance) ---
     if on_plan:
         ex, evx, ey, evy = kx[7], kv[7], ky[7], kvy[7]

@@ -27,20 +27,23 @@ _INF = np.inf
 #: completing, aborting; ``D = 0``: none; pushed by ``_fast_period.push_row``) — the shield's own where its delay is
 #: the world's — and the monitor's cumulative anchor held with the shield's sensing on (``anc_f``
 #: ``(B, len(ANCHOR_F))``, ``anc_x``, ``anc_v``, ``anc_b`` ``(B, M)``, ``anc_nc`` ``(B,)``: ``Packed.anchor``; held
-#: where ``has_last``, made anew every period).
+#: where ``has_last``, made anew every period) — and the own lane (``sim/own_chain.py``, ``L0`` first: ``own_x``,
+#: ``own_v`` and the running minimum of its chain bounds ``own_cap`` ``(B, K0)``, ``own_x = +inf``: no vehicle in that
+#: slot; ``K0 = 1`` with ``L0`` alone or no own lane).
 Rows = collections.namedtuple("Rows", (
     "x", "v", "acc", "cap", "rf", "rb", "ri", "plan", "history", "count", "st", "sk", "snap_x", "snap_v", "snap_b",
-    "snap_nc", "q_knots", "q_seg", "q_acc", "q_flag", "anc_f", "anc_x", "anc_v", "anc_b", "anc_nc",
+    "snap_nc", "q_knots", "q_seg", "q_acc", "q_flag", "anc_f", "anc_x", "anc_v", "anc_b", "anc_nc", "own_x", "own_v",
+    "own_cap",
 ))  # fmt: skip
-#: A row's running floats: the ego's state, the row's clock, the results' times and smallest gaps, and the own lane's
-#: leader ``L0``'s state (``l0_x = +inf``: none).
+#: A row's running floats: the ego's state, the row's clock, the results' times and smallest gaps.
 RF = ("ego_x", "ego_y", "ego_vx", "ego_vy", "t", "t_complete", "min_gap_f", "min_gap_l1", "min_lane_ratio",
-      "min_gap_l0", "l0_x", "l0_v")  # fmt: skip
+      "min_gap_l0")  # fmt: skip
 #: A row's running flags (``has_last``: the monitor has a snapshot of a last period; the ego's collisions and
 #: ``p_m`` violations against ``L0``, also counted in ``collided``, ``violated``; the world's completion: the shield's
-#: but under an actuation delay, where the command acting completes the lane change).
+#: but under an actuation delay, where the command acting completes the lane change; the own lane's vehicles ran into
+#: each other: ``SimState.own_pair_collided``, the traffic's own soundness).
 RB = ("collided", "violated", "leader_collided", "leader_violated", "has_last", "l0_collided", "l0_violated",
-      "completed")  # fmt: skip
+      "completed", "own_pair_collided")  # fmt: skip
 #: A row's counts: periods that proceeded, hesitated, aborted; invalid proposals; periods run (the draws' counter).
 RI = ("proceed", "hesitate", "abort", "invalid", "step")
 #: The scratch arrays of one row's period (:func:`_scratch`), by name (the row's commands in flight ``q_*`` as
@@ -68,11 +71,18 @@ Sense = collections.namedtuple("Sense", (
 Switched = collections.namedtuple("Switched", (
     "valid", "lane_valid", "lane_margin", "t", "x", "v", "a", "lat_t", "lat_x", "lat_v", "lat_a",
 ))  # fmt: skip
-#: The scratch of the own lane's leader ``L0`` in a period (``Scratch.own``; ``sim/_fast_world.py``): its first
-#: segment as ``constant_segment`` gives it (``acc``, ``ts``, ``xe``, ``ve``: one entry each), its motion's knots
-#: (``t``, ``x``, ``v``, ``a``: 5, 5, 5, 4; 3 of them used where it does not switch) and the ego's lateral motion
-#: mirrored (``lat_*``: up to the held plan's 8 knots).
-Own = collections.namedtuple("Own", ("acc", "ts", "xe", "ve", "t", "x", "v", "a", "lat_t", "lat_x", "lat_v", "lat_a"))
+#: The scratch of the own lane in a period (``Scratch.own``; ``sim/_fast_world.py``), ``K0`` slots, ``L0`` first: the
+#: row's state (``x``, ``v``, ``cap``: :data:`Rows`' ``own_*``, ``(1, K0)``), each slot's acceleration this period
+#: (``want`` ``(K0,)``), its motion as :class:`~.kinematics.Fleet` holds it (``fx``, ``fv``: the start, an empty slot
+#: at 0; ``acc``, ``ts``, ``xe``, ``ve``: the first segment as ``constant_segment`` gives it; ``(1, K0)``), the chain
+#: scan's lane laid out as the target lane (``lane_x``, ``lane_v``, its bounds ``lane_b`` ``(1, K0 + 1)``; its links'
+#: ``promise`` and ``margin`` ``(K0 − 1, 1)``), the head's switch (``sw``: :data:`Switched`, its knots and, in
+#: ``lane_valid``/``lane_margin``, the pairs the lane checks take) and the ego's lateral motion mirrored (``lat_*``:
+#: up to the held plan's 8 knots).
+Own = collections.namedtuple("Own", (
+    "x", "v", "cap", "want", "fx", "fv", "acc", "ts", "xe", "ve", "lane_x", "lane_v", "lane_b", "promise", "margin",
+    "sw", "lat_t", "lat_x", "lat_v", "lat_a",
+))  # fmt: skip
 
 
 @numba.njit(cache=True, nogil=True, error_model="numpy")
@@ -83,13 +93,14 @@ def _scratch(rows, period_prm, sense):
     sensing is off (the kernel is then compiled without the box, ``period_row``'s ``sense=None``: nothing to pay)."""
     k = rows.x.shape[1]
     m = k - 1
+    k0 = rows.own_x.shape[1]  # own-lane slots
     window = rows.history.shape[1]
     d = rows.q_knots.shape[1]  # commands in flight
     return Scratch(
         np.empty((1, k)), np.empty((1, k)), np.empty((1, k)), np.empty((1, k)), np.empty((1, k)), np.empty((1, k)),
         np.empty(k), np.empty(k), np.zeros((1, k), np.bool_), period_prm.copy(), np.empty((1, len(SIT_F))),
-        np.zeros((1, 6), np.bool_), np.empty((1, m)), np.empty((1, m)), np.full((1, 1), _INF), np.zeros((1, 1)),
-        np.empty((1, 0)), np.zeros(1, np.int64), np.empty((1, window)), np.empty(1, np.int64),
+        np.zeros((1, 6), np.bool_), np.empty((1, m)), np.empty((1, m)), np.full((1, k0), _INF), np.zeros((1, k0)),
+        np.zeros((1, k0 - 1)), np.zeros(1, np.int64), np.empty((1, window)), np.empty(1, np.int64),
         np.empty((1, rows.st.shape[1])), np.empty((1, rows.sk.shape[1]), np.bool_),
         np.empty((1, rows.plan.shape[1])), np.empty((1, m)), np.empty((1, m)), np.empty((1, m)), np.empty(1, np.int64),
         np.empty((1, m)), np.zeros(0, np.bool_), np.empty((1, 5)), np.empty((1, len(OUT_B)), np.bool_),
@@ -100,7 +111,13 @@ def _scratch(rows, period_prm, sense):
         np.empty((1, len(RF))), np.empty((1, len(RB)), np.bool_), np.empty((1, len(RI)), np.int64),
         Switched(np.empty((1, k), np.bool_), np.empty((1, m), np.bool_), np.empty((1, m)), np.empty(5), np.empty(5),
                  np.empty(5), np.empty(4), np.zeros(2), np.ones(2), np.zeros(2), np.zeros(1)),
-        Own(np.empty(1), np.empty(1), np.empty(1), np.empty(1), np.empty(5), np.empty(5), np.empty(5), np.empty(4),
+        Own(np.full((1, k0), _INF), np.zeros((1, k0)), np.full((1, k0), _INF), np.zeros(k0), np.empty((1, k0)),
+            np.empty((1, k0)), np.empty((1, k0)), np.empty((1, k0)), np.empty((1, k0)), np.empty((1, k0)),
+            np.empty((1, k0 + 1)), np.empty((1, k0 + 1)), np.empty((1, k0 + 1)), np.empty((k0 - 1, 1)),
+            np.empty((k0 - 1, 1)),
+            Switched(np.empty((1, k0), np.bool_), np.empty((1, k0 - 1), np.bool_), np.empty((1, k0 - 1)),
+                     np.empty(5), np.empty(5), np.empty(5), np.empty(4), np.zeros(2), np.ones(2), np.zeros(2),
+                     np.zeros(1)),
             np.empty(8), np.empty(8), np.empty(8), np.empty(7)),
         np.empty((1, d, rows.q_knots.shape[2])), np.empty((1, d, 2, rows.q_seg.shape[3])), np.empty((1, d, 2)),
         np.empty((1, d, 2), np.bool_), np.empty(d, np.int64),
@@ -136,6 +153,9 @@ def _load(rows, b, batch, w):
     snap_nc[0] = rows.snap_nc[b]
     _move_queue(rows.q_knots, rows.q_seg, rows.q_acc, rows.q_flag, b, w.q_knots, w.q_seg, w.q_acc, w.q_flag, 0)
     _load_anchor(rows, b, w.sense)
+    o = w.own
+    for i in range(o.x.shape[1]):
+        o.x[0, i], o.v[0, i], o.cap[0, i] = rows.own_x[b, i], rows.own_v[b, i], rows.own_cap[b, i]
     sb[0, 0] = batch.f_connected[b]  # F trusted where the variant listens: connected (it declares itself collaborative)
     sb[0, 2], sb[0, 3], sb[0, 4] = batch.uses[b, 0], batch.uses[b, 1], batch.uses[b, 2]
     sb[0, 5] = batch.f_aggressive[b]  # F's true type (read by the 'truth' assessment only)
@@ -169,6 +189,9 @@ def _store(rows, b, w):
     rows.snap_nc[b] = snap_nc[0]
     _move_queue(w.q_knots, w.q_seg, w.q_acc, w.q_flag, 0, rows.q_knots, rows.q_seg, rows.q_acc, rows.q_flag, b)
     _store_anchor(rows, b, w.sense)
+    o = w.own
+    for i in range(o.x.shape[1]):
+        rows.own_x[b, i], rows.own_v[b, i], rows.own_cap[b, i] = o.x[0, i], o.v[0, i], o.cap[0, i]
 
 
 @row_function

@@ -7,10 +7,10 @@ any gains) or the adversarial planners (:func:`~safelane.planners.adversarial.ad
 profiles, with or without :class:`~.traffic.WaveHooks`: hooks as data), the paper's
 four variants and the RSS variants (their rule: ``shield/_fast_rules.py``), the settings of the default and paper
 presets (any assessment, the commit guard or the paper's completion rule, the monitor on or off, either leader rule,
-supervised), the realistic world (the ``realistic`` preset: the own lane's leader ``L0`` alone, sensing error with the
-shield's sensing on or off, the actuation delay with the shield's delay off or the world's: :data:`WITH`) and an F
-that ignores the ego, without a trace or recorded observations
-(those, and other planners, run its period: :class:`~._stepper.Stepper`).
+supervised), the realistic world (the ``realistic`` preset: the own lane's leader ``L0``, alone or the first of a
+connected chain, ``sim/own_chain.py``; sensing error with the shield's sensing on or off, the actuation delay with the
+shield's delay off or the world's: :data:`WITH`) and an F that ignores the ego, without a trace or recorded
+observations (those, and other planners, run its period: :class:`~._stepper.Stepper`).
 Everything else — and everything with ``SAFELANE_NO_FUSED=1`` or without numba — runs period by period
 (:mod:`.step`), whose parts are compiled where they have kernels. Importing this module does not import numba.
 """
@@ -62,7 +62,6 @@ SAME = "the same value"
 #: values (and are refused, naming the field, where they are not); a :data:`READ` field away from its default refuses
 #: where they are not. :data:`SAME` for the values: the other field at this field's value.
 WITH = {
-    "own_lane": {"own_lane_connected": (0,)},  # L0 alone (a connected own lane's traffic: period by period)
     # the shield's delay where it is the world's (its commands in flight: the world's queue, _fast_period.carried_ego)
     "shield.actuation_delay_s": {"actuation_delay_s": SAME},
 }
@@ -146,8 +145,6 @@ def reasons(batch, cfg, nominal, traffic, trace: bool, record_observations: bool
         out.append(f"the nominal planner {type(nominal).__name__} (the loop runs ExpertPlanner and the adversarial "
                    "planners only)")  # fmt: skip
     out.extend(config_reasons(cfg))
-    if batch.own_ahead_x is not None:
-        out.append("an own lane of several vehicles in the batch (ScenarioBatch.own_ahead_x; the loop runs L0 alone)")
     if batch.l0_x is not None and batch.l0_profile_t is None:
         out.append("own-lane leaders without a profile (ScenarioBatch.l0_profile_t)")
     other = uncompiled_rules(rule_rows(batch.variant, len(batch)))
@@ -223,17 +220,20 @@ def run_chunk(sim, n_steps: int) -> dict:
     start = sim.initial_state()
     prm_vec, period_prm, batch = kernel_inputs(sim, planner=True)
     n = len(sim.b)
+    rows = rows_of(start)
     out_f, out_b = np.empty((n, len(OUT_F))), np.empty((n, len(OUT_B)), np.bool_)
     counts, n_invalid = np.empty((n, 3), np.int64), np.empty(n, np.int64)
     flags, bad = np.empty((n, len(BREACH_KINDS)), np.bool_), np.empty(n, np.int64)
-    loop_kernel(n_steps, prm_vec, period_prm, batch, rows_of(start), LoopOut(out_f, out_b, counts, n_invalid, flags,
-                                                                              bad),
+    own_x, own_v = np.empty_like(rows.own_x), np.empty_like(rows.own_v)
+    loop_kernel(n_steps, prm_vec, period_prm, batch, rows, LoopOut(out_f, out_b, counts, n_invalid, flags, bad,
+                                                                    own_x, own_v),
                 sense_scratch(prm_vec, batch.x.shape[1]))  # fmt: skip
     if (bad >= 0).any():
         step = int(bad[bad >= 0].min())
         _non_finite(sim.b.scenario_id, np.flatnonzero(bad == step), (step + 1) * sim.prm.dt)
     return dict(zip(OUT_F, out_f.T, strict=True), **dict(zip(OUT_B, out_b.T, strict=True)), counts=counts,
-                n_invalid=n_invalid, breach_flags=flags, initial_safe=start.initial_safe)  # fmt: skip
+                n_invalid=n_invalid, breach_flags=flags, initial_safe=start.initial_safe, own_x=own_x,
+                own_v=own_v)  # fmt: skip
 
 
 def kernel_inputs(sim, planner: bool = False):
@@ -269,7 +269,7 @@ def kernel_inputs(sim, planner: bool = False):
         c(b.decel_last.astype(np.float64)), c(traffic.gap0), c(sim.lane_pairs[0]), c(sim.lane_pairs[1]),
         c(b.p_v.astype(np.float64)), c(b.scenario_id.astype(np.int64)), np.array([sim.seed % 2**64], np.uint64),
         rule_table(rule_rows(b.variant, len(b)), len(b), prm), *_profile(b), *_waves(traffic.hooks, b),
-        *_own_profile(b), c(_world_key(b).astype(np.int64)), *_sensing(sim),
+        *_own_profile(b), c(_world_key(b).astype(np.int64)), *_sensing(sim), *_own_chain(sim),
         *_planner(nominal if planner else None, len(b)),
     )  # fmt: skip
     return np.array([float(values[name]) for name in PRM]), period_constants(prm, cfg.shield), batch
@@ -309,6 +309,17 @@ def _own_profile(b) -> tuple:
     if b.l0_x is None:
         return np.zeros((len(b), 0)), np.zeros((len(b), 0))
     return np.ascontiguousarray(b.l0_profile_t, np.float64), np.ascontiguousarray(b.l0_profile_a, np.float64)
+
+
+def _own_chain(sim) -> tuple:
+    """``LoopBatch``'s ``own_nc``, ``own_promise``, ``own_brake_t``, ``own_v_desired``: the own lane's chain
+    (:class:`~.own_chain.OwnLane`; without an own lane, one empty slot)."""
+    c = np.ascontiguousarray
+    own, n = sim.own, len(sim.b)
+    if own is None:
+        return np.zeros(n, np.int64), np.zeros((n, 0)), np.zeros((n, 0)), np.zeros((n, 1))
+    return (c(own.n_connected, np.int64), c(own.promise, np.float64), c(own.brake_t, np.float64),
+            c(own.v_desired, np.float64))  # fmt: skip
 
 
 def _sensing(sim) -> tuple:
@@ -375,13 +386,15 @@ def rows_of(start):
     rf = np.empty((n, len(RF)))
     rf[:, :4] = np.stack(start.ego, 1)
     rf[:, 4], rf[:, 5], rf[:, 6:] = start.t, np.nan, np.inf
-    if start.l0 is not None:  # the own lane's leader L0 (one slot: _fused.reasons)
-        rf[:, 10], rf[:, 11] = start.l0[0][:, 0], start.l0[1][:, 0]
+    if start.l0 is not None:  # the own lane, L0 first (sim/own_chain.py)
+        own = (c(start.l0[0], np.float64), c(start.l0[1], np.float64), c(start.own_cap, np.float64))
     else:
-        rf[:, 11] = 0.0
+        own = (np.full((n, 1), np.inf), np.zeros((n, 1)), np.full((n, 1), np.inf))
     snap = np.zeros((n, k - 1))
     rb = np.zeros((n, len(RB)), bool)
     rb[:, 7] = start.completed
+    if start.own_pair_collided is not None:
+        rb[:, 8] = start.own_pair_collided
     # the actuation delay's commands in flight: the idle ones the run starts with (InFlight.idle: cruise)
     if start.in_flight is not None and any(cmd.rows.size or cmd.a_x.any() or cmd.a_y.any() or cmd.completing.any()
                                            for cmd in start.in_flight.commands):  # fmt: skip
@@ -392,7 +405,7 @@ def rows_of(start):
     anchor = (np.zeros((n, len(ANCHOR_F))), snap.copy(), snap.copy(), snap.copy(), np.zeros(n, np.int64))
     return Rows(c(start.x), c(start.v), np.zeros((n, k)), np.full((n, k), np.inf), rf, rb,
                 np.zeros((n, len(RI)), np.int64), c(packed.plan), c(packed.history), c(packed.count), c(packed.st),
-                c(packed.sk), snap, snap.copy(), snap.copy(), np.zeros(n, np.int64), *queue, *anchor)  # fmt: skip
+                c(packed.sk), snap, snap.copy(), snap.copy(), np.zeros(n, np.int64), *queue, *anchor, *own)  # fmt: skip
 
 
 def _slow(sim) -> bool:
@@ -414,7 +427,7 @@ def _non_finite(scenario_id: np.ndarray, rows: np.ndarray, t: float):
 def _state(f: dict, slow: bool, own: bool = False):
     """The fields :func:`~.results.results_table` reads (a :class:`~.step.SimState`'s), from :func:`run_chunk`'s
     arrays; ``slow``: the belief is the 'slow' assessment's (``policies.SlowState``, which derives what it reports);
-    ``own``: with the own lane's leader ``L0`` (its columns)."""
+    ``own``: with the own lane (its columns; a chain's pairs where it has several slots)."""
     belief = SimpleNamespace(aggressive=f["aggressive"], first_collaborative_s=f["first_collaborative_s"])
     if slow:
         belief = SlowState(belief, f["slow_delay_s"], f["slow_missed"], f["slow_aggressive"])
@@ -424,5 +437,6 @@ def _state(f: dict, slow: bool, own: bool = False):
     if not own:
         return SimpleNamespace(**{name: f[name] for name in names}, belief=belief, breach=breach, l0=None)
     return SimpleNamespace(**{name: f[name] for name in names}, belief=belief, breach=breach,
-                           l0=(f["l0_x"][:, None], f["l0_v"][:, None]), l0_collided=f["l0_collided"],
-                           l0_violated=f["l0_violated"], min_gap_l0=f["min_gap_l0"])  # fmt: skip
+                           l0=(f["own_x"], f["own_v"]), own_pair_collided=f["own_pair_collided"],
+                           l0_collided=f["l0_collided"], l0_violated=f["l0_violated"],
+                           min_gap_l0=f["min_gap_l0"])  # fmt: skip

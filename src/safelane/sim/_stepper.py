@@ -50,8 +50,8 @@ class StepState:
 
     @property
     def l0(self):
-        rf = self.rows.rf
-        return (rf[:, 10:11], rf[:, 11:12]) if np.isfinite(rf[:, 10]).any() else None
+        rows = self.rows
+        return (rows.own_x, rows.own_v) if np.isfinite(rows.own_x[:, 0]).any() else None
 
 
 class Stepper:
@@ -100,8 +100,8 @@ class Stepper:
             collided=rows.rb[:, 0], violated=rows.rb[:, 1], leader_collided=rows.rb[:, 2],
             leader_violated=rows.rb[:, 3], aggressive=rows.sk[:, 2], counts=rows.ri[:, :3], n_invalid=rows.ri[:, 3],
             breach_flags=rows.sk[:, 5:10], initial_safe=self.initial_safe, slow_delay_s=rows.st[:, 7],
-            slow_missed=rows.sk[:, 10], slow_aggressive=rows.sk[:, 11], min_gap_l0=rows.rf[:, 9], l0_x=rows.rf[:, 10],
-            l0_v=rows.rf[:, 11], l0_collided=rows.rb[:, 5], l0_violated=rows.rb[:, 6],
+            slow_missed=rows.sk[:, 10], slow_aggressive=rows.sk[:, 11], min_gap_l0=rows.rf[:, 9], own_x=rows.own_x,
+            own_v=rows.own_v, l0_collided=rows.rb[:, 5], l0_violated=rows.rb[:, 6], own_pair_collided=rows.rb[:, 8],
         ), _slow(self.sim), _own(self.sim))  # fmt: skip
 
     def step(self, s: StepState):
@@ -155,14 +155,24 @@ class Stepper:
         self.check_finite(rows, finite)
         return behaviour
 
-    def splice(self, rows: np.ndarray, part: Stepper) -> None:
+    def splice(self, rows: np.ndarray, part: Stepper, at: np.ndarray | None = None) -> None:
         """Rows ``rows`` of the batch become ``part``'s rows, in place: ``part`` steps ``len(rows)`` other scenarios
         (same settings and seed) and its kernel inputs replace those rows' (:func:`kernel_inputs` per row, so the
         rows' inputs are what a :class:`Stepper` over the spliced batch would hold: ``L0``'s profile, the world's key
         and the sensing bounds are the row's own, like the rest); the envs' resets, which would
-        otherwise rebuild the whole batch's inputs for a few rows. ``sim`` then describes the batch before the
+        otherwise rebuild the whole batch's inputs for a few rows; ``at``: ``part``'s rows to take, in ``rows``'
+        order (default: all of them, the vector env's resets take theirs from episodes prepared ahead,
+        ``envs/reserve.py``). ``sim`` then describes the batch before the
         splice: :meth:`observe`, :meth:`step` and :meth:`finish`, which read it, refuse (the envs step with
         :meth:`step_with` and the kernels; :meth:`check_finite` reads the spliced scenario ids)."""
+        for into, new in self.splice_pairs(part):
+            into[rows] = new if at is None else new[at]
+
+    def splice_pairs(self, part: Stepper) -> list[tuple[np.ndarray, np.ndarray]]:
+        """What :meth:`splice` copies: ``(into, new)`` for each array of the batch's kernel inputs that has rows, row
+        ``i`` of ``new`` (``part``'s) into row ``r`` of ``into`` (ours, in place: this batch counts as spliced from
+        now on); the arrays whose batch axis is last (``BATCH_LAST``) transposed. ``part`` is checked as
+        :meth:`splice` says."""
         same = (part.sim.seed == self.sim.seed and part.batch.x.shape[1] == self.batch.x.shape[1]
                 and np.array_equal(part.prm_vec, self.prm_vec) and np.array_equal(part.period_prm, self.period_prm))
         if not same:
@@ -171,18 +181,17 @@ class Stepper:
         if any(getattr(b, name).shape[0] for name in BY_ID for b in (self.batch, part.batch)) or (
                 part.batch.profile_t.shape[1] != self.batch.profile_t.shape[1]
                 or part.batch.l0_profile_t.shape[1] != self.batch.l0_profile_t.shape[1]
-                or part.batch.err_own.shape[1] != self.batch.err_own.shape[1]):  # fmt: skip
+                or part.batch.err_own.shape[1] != self.batch.err_own.shape[1]
+                or part.batch.own_v_desired.shape[1] != self.batch.own_v_desired.shape[1]):  # fmt: skip
             raise ValueError("Stepper.splice: traffic hooks as data (WaveHooks, by scenario id), or L(N+1)'s or L0's "
-                             "profiles or the own lane's sensing bounds of another length: such batches are not "
-                             "spliced")  # fmt: skip
+                             "profiles, the own lane's sensing bounds or its slots of another length: such batches are "
+                             "not spliced")  # fmt: skip
         if not self.spliced:  # (kernel_inputs may hand over the ClosedLoop's own arrays: from now on, ours)
             self.batch = type(self.batch)(*[a.copy() for a in self.batch])
-        for name, into, new in zip(self.batch._fields, self.batch, part.batch, strict=True):
-            if name in BATCH_LAST:
-                into[:, rows] = new
-            elif name not in BATCH_SHARED and name not in BY_ID and name not in LOOP_ONLY:
-                into[rows] = new
         self.spliced = True
+        return [(into.T, new.T) if name in BATCH_LAST else (into, new)
+                for name, into, new in zip(self.batch._fields, self.batch, part.batch, strict=True)
+                if name not in BATCH_SHARED and name not in BY_ID and name not in LOOP_ONLY]
 
     def _whole(self, what: str) -> None:
         if self.spliced:

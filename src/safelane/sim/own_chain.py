@@ -10,6 +10,13 @@ from an instant of their own (``own_brake_t``), brake at their full promise — 
 behind the vehicle ahead's worst case from the chain analysis on the true states, never beyond their own bound (its
 running minimum). That is the worst case the shield's own-lane analysis assumes (Eqs. 1–3 on the own lane): they
 brake as hard and as early as their promise lets them, and beyond it only as far as the vehicle ahead forces.
+
+**One source.** A connected one's task is :func:`own_task` (over :func:`~.behaviours.hold_speed` and
+:func:`~.behaviours.task_core`), backend-generic like the rules it calls; :meth:`OwnLane.period` evaluates the lane on
+arrays (``ARRAY``), and the compiled closed loop (``sim/_fast_world.own_lane_motion``) calls the same closed forms row
+by row (the chain scan ``_fast_traffic._chain_row``, the leaders' rule ``_fast_traffic._leader_row``, the motion
+:func:`~.kinematics.constant_segment` and ``_fast_world._switched``): the same bits
+(``tests/test_fast_own_chain_loop.py``).
 """
 
 from __future__ import annotations
@@ -19,7 +26,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..params import Params
-from ..safety._backend import ARRAY
+from ..safety._backend import ARRAY, jitable
 from ..tolerances import TIME_TOL_S
 from .behaviours import hold_speed, lane_bounds, leader_accels, leader_roles, task_core
 from .checks import lane_checks
@@ -89,9 +96,7 @@ class OwnLane:
         lx, lv = lane(xs, 0.0), lane(vs, 0.0)
         bounds, _ = lane_bounds(lx, lv, promise_vm, margin_vm, prm)
         cap = np.minimum(cap, bounds[:, 1:])
-        hold = hold_speed(ARRAY, v[:, :-1], self.v_desired[:, :-1])
-        wanted = np.where(t + TIME_TOL_S >= self.brake_t, -self.promise, hold)
-        task = task_core(ARRAY, wanted, self.promise, prm.a_x_a)
+        task = own_task(ARRAY, t, self.brake_t, v[:, :-1], self.v_desired[:, :-1], self.promise, prm.a_x_a)
         valid = np.column_stack([np.zeros(n, bool), present])
         connected = np.column_stack([np.zeros(n, bool), in_chain, np.zeros(n, bool)])
         roles = leader_roles(valid, connected, self.n_connected)
@@ -106,6 +111,15 @@ class OwnLane:
         valid = present[:, 1:] & present[:, :-1]
         collided, violated, _ = lane_checks(None, prm, fleet, (valid, np.full(valid.shape, prm.p_m)))
         return collided, violated
+
+
+def own_task(xp, t, brake_t, v, v_desired, promise, a_x_a):
+    """A connected own-lane vehicle's task at ``t``: hold its initial speed ``v_desired`` (:func:`~.behaviours.
+    hold_speed`) until its own instant ``brake_t`` (one that falls within ``TIME_TOL_S`` after ``t`` counts: round-off
+    in the period count), then brake at its full ``promise``; inside ``[−promise, a_x_a]``
+    (:func:`~.behaviours.task_core`). Backend-generic."""
+    wanted = xp.where(t + TIME_TOL_S >= brake_t, -promise, hold_speed(xp, v, v_desired))
+    return task_core(xp, wanted, promise, a_x_a)
 
 
 _FIELDS = ("own_ahead_x", "own_ahead_v", "own_promise", "own_n_connected", "own_brake_t")
@@ -152,3 +166,7 @@ def start(batch):
     x = np.column_stack([batch.l0_x, batch.own_ahead_x]).astype(float)
     v = np.column_stack([batch.l0_v, batch.own_ahead_v]).astype(float)
     return np.asfortranarray(x), np.asfortranarray(np.where(np.isfinite(x), v, 0.0))
+
+
+# The connected one's task, compiled into the closed loop's rows (sim/_fast_world.py).
+jitable(own_task)
