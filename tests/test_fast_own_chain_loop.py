@@ -21,6 +21,7 @@ from safelane.sim._stepper import steps_compiled
 from safelane.sim.preset import load_preset
 from safelane.sim.realworld import with_own_lane
 from test_fast_core import needs_numba
+from test_fast_realistic_loop import compiled_and_numpy
 
 pytestmark = [pytest.mark.compiled, needs_numba, pytest.mark.filterwarnings("ignore:a_x_N\\+1_d")]
 
@@ -132,11 +133,7 @@ def test_the_numpy_path_gives_the_same_table_with_a_chain(monkeypatch):
     cfg = _preset(**NEAR, own_lane_connected=3, sensing_edge_share=0.3)
     batch = _overlapping(with_own_lane(_mixed(2, 8.0, per_variant=20, seed=5), 4, cfg, REALISTIC), every=4)
     kwargs = dict(params=REALISTIC, config=cfg, nominal=PRESET.expert())
-    _clear(monkeypatch)
-    fused = simulate_batch(batch, seed=4, **kwargs)
-    assert fused.engine == "compiled loop", fused.engine_reasons
-    monkeypatch.setenv("SAFELANE_NO_NUMBA", "1")
-    reference = simulate_batch(batch, seed=4, **kwargs).table
+    fused, reference = compiled_and_numpy(monkeypatch, batch, **kwargs)
     assert fused.table.equals(reference)
     assert reference["own_lane_leader_collision"].any() and (reference["min_gap_own_lane_m"] < REALISTIC.p_m).any()
 

@@ -41,6 +41,16 @@ def _clear(monkeypatch):
         monkeypatch.delenv(name, raising=False)
 
 
+def compiled_and_numpy(monkeypatch, batch, **kwargs):
+    """``(the compiled loop's result, the NumPy path's table)`` of ``simulate_batch(batch, seed=4, **kwargs)``: the
+    loop asserted to have run, the NumPy path the one source's array functions (``SAFELANE_NO_NUMBA=1``)."""
+    _clear(monkeypatch)
+    fused = simulate_batch(batch, seed=4, **kwargs)
+    assert fused.engine == "compiled loop", fused.engine_reasons
+    monkeypatch.setenv("SAFELANE_NO_NUMBA", "1")
+    return fused, simulate_batch(batch, seed=4, **kwargs).table
+
+
 def _two_paths(monkeypatch, batch, **kwargs):
     """``(compiled loop, period by period)`` tables."""
     _clear(monkeypatch)
@@ -146,11 +156,7 @@ def test_the_monitors_anchor_breaches_in_some_rows(monkeypatch):
 
     batch = _mixed(3, 10.0, per_variant=25, seed=8)
     kwargs = dict(params=REALISTIC, config=_preset(**NEAR_L0, **WIDE), nominal=PRESET.expert())
-    _clear(monkeypatch)
-    fused = simulate_batch(batch, seed=4, **kwargs)
-    assert fused.engine == "compiled loop", fused.engine_reasons
-    monkeypatch.setenv("SAFELANE_NO_NUMBA", "1")
-    numpy_table = simulate_batch(batch, seed=4, **kwargs).table
+    fused, numpy_table = compiled_and_numpy(monkeypatch, batch, **kwargs)
     assert fused.table.equals(numpy_table)
     monkeypatch.setattr(monitor, "anchor_flags", lambda anchor, active, *a, **k: np.zeros((len(active), 5), bool))
     no_anchor = simulate_batch(batch, seed=4, **kwargs).table
