@@ -321,6 +321,21 @@ def test_the_feasibility_tolerance_is_inclusive(xp):
     assert core(0.0, 20.0, 12.0, 20.0, 4.0, 2.0) == (True, 1.0, 0.0)
 
 
+@BACKENDS
+def test_the_default_tolerance_keeps_gaps_down_to_minus_one_nanometre(xp):
+    # With the default tol (FEASIBILITY_TOL_M, 1 nm): an ego exactly at the margin behind L1, both at the same speed
+    # and braking alike, keeps a gap of exactly 0 (feasible); 0.5 nm inside the margin is still kept, 2 nm is not.
+    def feasible(inside_m, v):
+        args = (0.0, v, DEFAULT.p_m - inside_m, v, DEFAULT.a_x_d, 1.0)
+        args = args if xp is SCALAR else tuple(np.array([x]) for x in args)
+        ok, *_ = longitudinal_core(xp, *args, DEFAULT.p_m, DEFAULT)
+        return bool(np.all(ok))
+
+    for v in (0.0, 20.0):
+        assert feasible(0.0, v) and feasible(0.5 * FEASIBILITY_TOL_M, v)
+        assert not feasible(2.0 * FEASIBILITY_TOL_M, v)
+
+
 def test_a_batch_whose_horizons_are_all_equal_is_solved_in_full():
     # Every row with t_y_f = 1 s (not 0: no shortcut applies) gets the optimum its scalar evaluation gets.
     rng = np.random.default_rng(4)
